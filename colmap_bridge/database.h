@@ -1,0 +1,85 @@
+// Reading and writing COLMAP databases (SQLite), for databases created by
+// COLMAP 3.8 and by COLMAP 4.x: the schema is detected when opening.
+#pragma once
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+#include "cashash/two_view_geometry.h"
+#include "cashash/types.h"
+
+struct sqlite3;
+
+namespace cashash {
+namespace colmap {
+
+// Every error names the table, image or file at fault.
+class DatabaseError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct SchemaInfo {
+  int user_version = 0;            // PRAGMA user_version
+  bool descriptors_have_type = false;    // COLMAP >= 4.0
+  bool two_view_has_camera_columns = false;  // unreleased main: camera1, camera2
+  bool has_frames = false;         // COLMAP >= 3.12 (rigs/frames tables)
+  // "3.8-style" or "4.x-style", for messages.
+  std::string Describe() const;
+};
+
+class Database {
+ public:
+  // Opens an existing COLMAP database; throws DatabaseError if the file does
+  // not exist, is not SQLite, or lacks a required table.
+  explicit Database(const std::string& path, bool read_only = false);
+  ~Database();
+  Database(const Database&) = delete;
+  Database& operator=(const Database&) = delete;
+
+  const SchemaInfo& schema() const;
+  const std::string& path() const;
+
+  std::vector<Camera> ReadAllCameras() const;
+  std::vector<Image> ReadAllImages() const;  // ordered by image_id
+
+  // Keypoints with 2, 4 or 6 columns, converted to the 6-column form.
+  Keypoints ReadKeypoints(image_t image_id) const;
+  // uint8 x 128 SIFT descriptors; throws naming the image when the blob is
+  // not that (float, other width, size mismatch, ALIKED type).
+  FeatureDescriptors ReadDescriptors(image_t image_id) const;
+  // Rows of the keypoints / descriptors tables for an image (0 if no row).
+  size_t NumKeypoints(image_t image_id) const;
+  size_t NumDescriptors(image_t image_id) const;
+
+  // Pairs that already have both a matches and a two_view_geometries row
+  // (these are skipped on resume).
+  std::unordered_set<pair_t> ReadCompletedPairIds() const;
+
+  FeatureMatches ReadMatches(image_t image_id1, image_t image_id2) const;
+  TwoViewGeometry ReadTwoViewGeometry(image_t image_id1, image_t image_id2) const;
+
+  // Writes with COLMAP's conventions: keyed by pair_id, match columns swapped
+  // and the geometry inverted when image_id1 > image_id2. Replaces an
+  // existing row of the same pair.
+  void WriteMatches(image_t image_id1, image_t image_id2, const FeatureMatches& matches);
+  void WriteTwoViewGeometry(image_t image_id1, image_t image_id2, const TwoViewGeometry& geometry);
+
+  // Removes every row of matches and two_view_geometries (--overwrite of an
+  // exhaustive run).
+  void ClearMatchesAndGeometries();
+
+  void BeginTransaction();
+  void Commit();
+  void Rollback();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace colmap
+}  // namespace cashash

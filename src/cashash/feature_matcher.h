@@ -1,0 +1,45 @@
+// The interface every matching backend (CPU cascade, CPU brute force, GPU
+// cascade, GPU brute force) implements. The pipeline adds the images of the
+// current block once, so per-image work (hash codes, bucket tables, device
+// uploads) is done once per image and reused for all of its pairs.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cashash/matching_options.h"
+#include "cashash/types.h"
+
+namespace cashash {
+
+// The global mean descriptor subtracted before hashing (zero-mean hashing, as
+// the original CasHash). Computed once per run over the images to match.
+using MeanDescriptor = std::array<float, kDescriptorDim>;
+
+class FeatureMatcher {
+ public:
+  virtual ~FeatureMatcher() = default;
+
+  // Makes an image available to MatchPairs. Descriptors beyond
+  // max_num_matches rows are ignored. Adding an id twice replaces it.
+  virtual void AddImage(image_t image_id, const FeatureDescriptors& descriptors) = 0;
+  // Frees what AddImage holds for this image.
+  virtual void RemoveImage(image_t image_id) = 0;
+  // Matches each pair (both images added before); result i belongs to pair i
+  // and indexes (first image, second image) of that pair.
+  virtual std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) = 0;
+  // A short name for logs: "cpu-cascade", "gpu-bruteforce", ...
+  virtual std::string Name() const = 0;
+};
+
+// CPU backends (multi-threaded over pairs).
+std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean);
+
+// Mean of all descriptor rows of the given sets (uint8 -> float).
+MeanDescriptor ComputeMeanDescriptor(const std::vector<const FeatureDescriptors*>& descriptors);
+
+}  // namespace cashash
