@@ -1,0 +1,137 @@
+#include "colmap_bridge/command_options.h"
+
+#include <iostream>
+#include <sstream>
+
+#include <boost/program_options.hpp>
+
+namespace po = boost::program_options;
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+template <typename T>
+std::string DefaultText(const T& value) {
+  std::ostringstream out;
+  out << std::boolalpha << value;
+  return out.str();
+}
+
+// Binds one variable to several option names (COLMAP 3.8 and 4.x spell the
+// same setting differently). No boost default is registered: a default would
+// be "given" under every name and could override the name the user typed.
+class OptionTable {
+ public:
+  explicit OptionTable(po::options_description* description) : description_(description) {}
+
+  template <typename T>
+  void Add(const std::vector<std::string>& names, T* value, const std::string& help) {
+    const std::string text = help + " (=" + DefaultText(*value) + ")";
+    for (size_t i = 0; i < names.size(); ++i) {
+      const std::string alias_note = i == 0 ? "" : " [alias of --" + names[0] + "]";
+      description_->add_options()(names[i].c_str(), po::value<T>(value), (text + alias_note).c_str());
+    }
+  }
+
+ private:
+  po::options_description* description_;
+};
+
+}  // namespace
+
+ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
+                                        MatcherCommandOptions* options) {
+  po::options_description description("cashash " + command + " options");
+  description.add_options()("help,h", "Print this help");
+  OptionTable table(&description);
+  MatcherCommandOptions& o = *options;
+  table.Add({"database_path"}, &o.database_path, "COLMAP database to read features from and write matches to");
+  if (command == "matches_importer") {
+    table.Add({"match_list_path"}, &o.match_list_path, "Text file with one 'name1 name2' pair per line");
+    table.Add({"match_type"}, &o.match_type, "Only 'pairs' is supported: match and verify the listed pairs");
+  }
+  table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
+  table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
+
+  table.Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o.sift.num_threads,
+            "CPU threads, -1 for all cores");
+  table.Add({"FeatureMatching.use_gpu", "SiftMatching.use_gpu"}, &o.use_gpu,
+            "Match on the GPU (falls back to the CPU with a warning where there is none)");
+  table.Add({"FeatureMatching.gpu_index", "SiftMatching.gpu_index"}, &o.gpu_index,
+            "CUDA device index, -1 for the first device");
+  table.Add({"FeatureMatching.max_num_matches", "SiftMatching.max_num_matches"}, &o.sift.max_num_matches,
+            "Features per image considered (first rows)");
+  table.Add({"FeatureMatching.guided_matching", "SiftMatching.guided_matching"}, &o.guided_matching,
+            "COLMAP's guided matching (not supported)");
+  table.Add({"FeatureMatching.skip_geometric_verification"}, &o.skip_geometric_verification,
+            "Write raw matches only, no two_view_geometries");
+  table.Add({"SiftMatching.max_ratio"}, &o.sift.max_ratio, "Lowe's ratio test on descriptor angles");
+  table.Add({"SiftMatching.max_distance"}, &o.sift.max_distance, "Largest descriptor angle (radians) accepted");
+  table.Add({"SiftMatching.cross_check"}, &o.sift.cross_check, "Keep mutual best matches only");
+
+  table.Add({"TwoViewGeometry.min_num_inliers", "SiftMatching.min_num_inliers"}, &o.two_view.min_num_inliers,
+            "Fewest inliers of a verified pair");
+  table.Add({"TwoViewGeometry.max_error", "SiftMatching.max_error"}, &o.two_view.max_error,
+            "RANSAC threshold in pixels");
+  table.Add({"TwoViewGeometry.confidence", "SiftMatching.confidence"}, &o.two_view.confidence,
+            "RANSAC confidence");
+  table.Add({"TwoViewGeometry.min_num_trials"}, &o.two_view.min_num_trials, "RANSAC minimum trials");
+  table.Add({"TwoViewGeometry.max_num_trials", "SiftMatching.max_num_trials"}, &o.two_view.max_num_trials,
+            "RANSAC maximum trials");
+  table.Add({"TwoViewGeometry.min_inlier_ratio", "SiftMatching.min_inlier_ratio"}, &o.two_view.min_inlier_ratio,
+            "RANSAC minimum inlier ratio");
+  table.Add({"TwoViewGeometry.min_E_F_inlier_ratio"}, &o.two_view.min_E_F_inlier_ratio,
+            "E inliers / F inliers above which a calibrated pair keeps E");
+  table.Add({"TwoViewGeometry.max_H_inlier_ratio"}, &o.two_view.max_H_inlier_ratio,
+            "H inliers / F inliers above which a pair is planar or panoramic");
+  table.Add({"TwoViewGeometry.watermark_min_inlier_ratio"}, &o.two_view.watermark_min_inlier_ratio,
+            "Share of border inliers explained by a translation that marks a watermark");
+  table.Add({"TwoViewGeometry.watermark_border_size"}, &o.two_view.watermark_border_size,
+            "Border band for the watermark test, relative to the image diagonal");
+  table.Add({"TwoViewGeometry.detect_watermark"}, &o.two_view.detect_watermark, "Run the watermark test");
+
+  table.Add({"ExhaustiveMatching.block_size"}, &o.block_size, "Images per block");
+
+  std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
+  table.Add({"CasHash.matcher"}, &matcher_name, "cascade | bruteforce (exact reference)");
+  table.Add({"CasHash.num_tables"}, &o.cashash.num_tables, "First-level hash tables");
+  table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table, "Bits per first-level table");
+  table.Add({"CasHash.tau"}, &o.cashash.tau, "Largest 128-bit remap Hamming distance ranked");
+  table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
+
+  po::variables_map vm;
+  try {
+    po::store(po::command_line_parser(argc, argv).options(description).run(), vm);
+    po::notify(vm);
+  } catch (const po::error& e) {
+    std::cerr << "ERROR: " << e.what() << " (see cashash " << command << " --help)" << std::endl;
+    return ParseOutcome::kError;
+  }
+  if (vm.count("help")) {
+    std::cout << description << std::endl;
+    return ParseOutcome::kHelpShown;
+  }
+  if (!MatcherTypeFromString(matcher_name, &o.cashash.matcher)) {
+    std::cerr << "ERROR: --CasHash.matcher must be 'cascade' or 'bruteforce', got '" << matcher_name << "'"
+              << std::endl;
+    return ParseOutcome::kError;
+  }
+  o.cashash.random_seed = o.random_seed;
+  o.two_view.random_seed = o.random_seed;
+  return ParseOutcome::kRun;
+}
+
+std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
+  if (o.database_path.empty()) return "--database_path is required";
+  if (o.block_size < 2) return "--ExhaustiveMatching.block_size must be >= 2";
+  if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
+  std::string message = o.sift.Check();
+  if (!message.empty()) return message;
+  message = o.cashash.Check();
+  if (!message.empty()) return message;
+  return o.two_view.Check();
+}
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,44 @@
+// Command-line options of the cashash commands, under COLMAP's names of both
+// 3.8 (SiftMatching.*) and 4.x (FeatureMatching.*, SiftMatching.*,
+// TwoViewGeometry.*), plus our own CasHash.* options.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "cashash/matching_options.h"
+#include "cashash/two_view_geometry.h"
+
+namespace cashash {
+namespace colmap {
+
+struct MatcherCommandOptions {
+  std::string database_path;
+  SiftMatchingOptions sift;
+  CasHashOptions cashash;
+  TwoViewGeometryOptions two_view;
+  int block_size = 50;  // ExhaustiveMatching.block_size
+  bool use_gpu = true;  // COLMAP's default; falls back to the CPU with a warning
+  std::string gpu_index = "-1";
+  bool skip_geometric_verification = false;
+  bool guided_matching = false;  // COLMAP's guided matching: not supported
+  bool overwrite = false;        // re-match pairs already in the database
+  uint64_t random_seed = 0;
+  // matches_importer only.
+  std::string match_list_path;
+  std::string match_type = "pairs";
+};
+
+enum class ParseOutcome { kRun, kHelpShown, kError };
+
+// Parses argv (after the command name). On error prints one line naming the
+// option to stderr. `command` is "exhaustive_matcher" or "matches_importer".
+ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
+                                        MatcherCommandOptions* options);
+
+// Checks every option's range; returns "" or a message naming the option.
+std::string CheckMatcherCommandOptions(const MatcherCommandOptions& options);
+
+}  // namespace colmap
+}  // namespace cashash

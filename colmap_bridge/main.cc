@@ -1,0 +1,34 @@
+// cashash: Cascade Hashing feature matching for COLMAP databases.
+#include <cstdlib>
+#include <iostream>
+#include <string>
+
+#include "colmap_bridge/matching_commands.h"
+
+namespace {
+
+void PrintUsage() {
+  std::cout << "cashash -- Cascade Hashing feature matching for COLMAP databases\n\n"
+               "Usage:\n"
+               "  cashash exhaustive_matcher --database_path DB [options]\n"
+               "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n\n"
+               "Run 'cashash COMMAND --help' for the options of a command (COLMAP's option names\n"
+               "of 3.8 and 4.x are accepted, plus --CasHash.*)."
+            << std::endl;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help" ||
+      std::string(argv[1]) == "help") {
+    PrintUsage();
+    return argc < 2 ? EXIT_FAILURE : EXIT_SUCCESS;
+  }
+  const std::string command = argv[1];
+  if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
+  if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
+  std::cerr << "ERROR: unknown command '" << command << "'" << std::endl;
+  PrintUsage();
+  return EXIT_FAILURE;
+}

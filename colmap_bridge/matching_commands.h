@@ -1,0 +1,12 @@
+// The cashash commands that stand in for COLMAP's: exhaustive_matcher and
+// matches_importer. Each returns the process exit code.
+#pragma once
+
+namespace cashash {
+namespace colmap {
+
+int RunExhaustiveMatcher(int argc, const char* const* argv);
+int RunMatchesImporter(int argc, const char* const* argv);
+
+}  // namespace colmap
+}  // namespace cashash

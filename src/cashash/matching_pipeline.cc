@@ -1,0 +1,229 @@
+#include "cashash/matching_pipeline.h"
+
+#include <chrono>
+#include <exception>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "cashash/blocking_queue.h"
+#include "cashash/pair_id.h"
+#include "cashash/thread_pool.h"
+
+namespace cashash {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Mixes the base seed with the pair so that each pair's RANSAC is repeatable
+// whatever thread verifies it and whatever else is in the run.
+uint64_t PairSeed(uint64_t base_seed, const ImagePair& pair) {
+  uint64_t z = base_seed ^ (ImagePairToPairId(pair.first, pair.second) * 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+std::vector<Eigen::Vector2d> KeypointPositions(const Keypoints& keypoints) {
+  std::vector<Eigen::Vector2d> points(keypoints.size());
+  for (size_t i = 0; i < keypoints.size(); ++i) points[i] = Eigen::Vector2d(keypoints[i].x, keypoints[i].y);
+  return points;
+}
+
+using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
+
+// What travels from the matching stage to the verification stage.
+struct MatchedChunk {
+  const PairChunk* chunk = nullptr;
+  std::unordered_map<image_t, FeaturesPtr> features;
+  std::vector<FeatureMatches> matches;
+  Clock::time_point started;
+};
+
+struct VerifiedChunk {
+  const PairChunk* chunk = nullptr;
+  std::vector<PairResult> results;
+  Clock::time_point started;
+};
+
+// Remembers the first exception thrown by any stage and makes all stages stop.
+class FirstError {
+ public:
+  void Set(std::exception_ptr error) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!error_) error_ = error;
+    failed_ = true;
+  }
+  bool failed() const { return failed_; }
+  void RethrowIfAny() {
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  std::mutex mutex_;
+  std::exception_ptr error_;
+  std::atomic<bool> failed_{false};
+};
+
+}  // namespace
+
+TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
+                           const ImageFeatures& image2, const FeatureMatches& matches,
+                           const TwoViewGeometryOptions& options) {
+  return EstimateTwoViewGeometry(camera1, KeypointPositions(image1.keypoints), camera2,
+                                 KeypointPositions(image2.keypoints), matches, options);
+}
+
+MatchingPipeline::MatchingPipeline(const PipelineOptions& options, FeatureSource* source,
+                                   FeatureMatcher* matcher, ResultSink* sink)
+    : options_(options), source_(source), matcher_(matcher), sink_(sink) {}
+
+void MatchingPipeline::SetProgressCallback(std::function<void(const PipelineProgress&)> callback) {
+  progress_ = std::move(callback);
+}
+
+void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop; }
+
+PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
+  PipelineStats stats;
+  for (const PairChunk& chunk : chunks) stats.pairs_total += chunk.pairs.size();
+  const Clock::time_point run_start = Clock::now();
+
+  // Two chunks in flight between stages: enough to overlap the stages while
+  // bounding memory to a few chunks' matches.
+  BlockingQueue<MatchedChunk> to_verify(2);
+  BlockingQueue<VerifiedChunk> to_write(2);
+  FirstError error;
+  std::mutex stats_mutex;
+
+  // Stage 3: the single writer.
+  std::thread writer([&]() {
+    try {
+      while (std::optional<VerifiedChunk> item = to_write.Pop()) {
+        const Clock::time_point t0 = Clock::now();
+        sink_->WriteChunk(item->results);
+        PipelineProgress progress;
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_writing += SecondsSince(t0);
+          stats.pairs_done += item->results.size();
+          for (const PairResult& r : item->results) {
+            stats.raw_matches += r.matches.size();
+            if (r.geometry.config >= kCalibrated) {
+              ++stats.verified_pairs;
+              stats.inlier_matches += r.geometry.inlier_matches.size();
+            }
+          }
+          progress.pairs_done = stats.pairs_done;
+        }
+        progress.pairs_total = stats.pairs_total;
+        progress.elapsed_seconds = SecondsSince(run_start);
+        progress.chunk = item->chunk;
+        progress.chunk_seconds = SecondsSince(item->started);
+        if (progress_) progress_(progress);
+      }
+    } catch (...) {
+      error.Set(std::current_exception());
+      to_verify.Close();
+      to_write.Close();
+    }
+  });
+
+  // Stage 2: verification, parallel over the pairs of a chunk.
+  std::thread verifier([&]() {
+    try {
+      while (std::optional<MatchedChunk> item = to_verify.Pop()) {
+        const Clock::time_point t0 = Clock::now();
+        VerifiedChunk out;
+        out.chunk = item->chunk;
+        out.started = item->started;
+        const std::vector<ImagePair>& pairs = item->chunk->pairs;
+        out.results.resize(pairs.size());
+        ParallelFor(pairs.size(), options_.num_threads, [&](size_t k) {
+          PairResult& result = out.results[k];
+          result.pair = pairs[k];
+          result.matches = std::move(item->matches[k]);
+          if (options_.skip_geometric_verification) return;
+          TwoViewGeometryOptions two_view = options_.two_view;
+          two_view.random_seed = PairSeed(options_.two_view.random_seed, pairs[k]);
+          const ImageFeatures& f1 = *item->features.at(pairs[k].first);
+          const ImageFeatures& f2 = *item->features.at(pairs[k].second);
+          result.geometry = VerifyPair(source_->CameraOfImage(pairs[k].first), f1,
+                                       source_->CameraOfImage(pairs[k].second), f2, result.matches, two_view);
+        });
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_verification += SecondsSince(t0);
+        }
+        item->features.clear();
+        if (!to_write.Push(std::move(out))) break;
+      }
+    } catch (...) {
+      error.Set(std::current_exception());
+      to_verify.Close();
+    }
+    to_write.Close();
+  });
+
+  // Stage 1 (this thread): load what the chunk needs, match.
+  try {
+    std::unordered_map<image_t, FeaturesPtr> loaded;
+    for (size_t c = 0; c < chunks.size(); ++c) {
+      if (error.failed() || (stop_ && stop_->load())) {
+        stats.stopped = !error.failed();
+        break;
+      }
+      const PairChunk& chunk = chunks[c];
+      const Clock::time_point chunk_start = Clock::now();
+
+      // Drop images that neither this chunk nor the next one needs.
+      std::unordered_set<image_t> keep(chunk.images.begin(), chunk.images.end());
+      if (c + 1 < chunks.size()) keep.insert(chunks[c + 1].images.begin(), chunks[c + 1].images.end());
+      for (auto it = loaded.begin(); it != loaded.end();) {
+        if (keep.count(it->first)) {
+          ++it;
+        } else {
+          matcher_->RemoveImage(it->first);
+          it = loaded.erase(it);
+        }
+      }
+      const Clock::time_point t_load = Clock::now();
+      for (image_t image_id : chunk.images) {
+        if (loaded.count(image_id)) continue;
+        auto features = std::make_shared<ImageFeatures>(source_->LoadFeatures(image_id));
+        matcher_->AddImage(image_id, features->descriptors);
+        loaded.emplace(image_id, std::move(features));
+      }
+      const double load_seconds = SecondsSince(t_load);
+
+      const Clock::time_point t_match = Clock::now();
+      MatchedChunk item;
+      item.chunk = &chunk;
+      item.started = chunk_start;
+      item.matches = matcher_->MatchPairs(chunk.pairs);
+      {
+        std::lock_guard<std::mutex> lock(stats_mutex);
+        stats.seconds_loading += load_seconds;
+        stats.seconds_matching += SecondsSince(t_match);
+      }
+      for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
+      if (!to_verify.Push(std::move(item))) break;
+    }
+  } catch (...) {
+    error.Set(std::current_exception());
+  }
+  to_verify.Close();
+  verifier.join();
+  writer.join();
+  error.RethrowIfAny();
+  if (stop_ && stop_->load() && stats.pairs_done < stats.pairs_total) stats.stopped = true;
+  stats.seconds_total = SecondsSince(run_start);
+  return stats;
+}
+
+}  // namespace cashash

@@ -1,0 +1,101 @@
+// The matching pipeline: load features of a chunk of pairs, match them with a
+// FeatureMatcher backend, verify each pair geometrically, hand the results to
+// a writer. The three stages run on their own threads with bounded queues, so
+// the GPU matches chunk k+1 while the CPU verifies chunk k and the database
+// commits chunk k-1.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cashash/feature_matcher.h"
+#include "cashash/pair_generation.h"
+#include "cashash/two_view_geometry.h"
+#include "cashash/types.h"
+
+namespace cashash {
+
+// Where features come from (a COLMAP database in practice).
+class FeatureSource {
+ public:
+  virtual ~FeatureSource() = default;
+  // Keypoints and descriptors of one image; throws with a message naming the
+  // image when its data is unusable.
+  virtual ImageFeatures LoadFeatures(image_t image_id) = 0;
+  virtual const Camera& CameraOfImage(image_t image_id) const = 0;
+};
+
+struct PairResult {
+  ImagePair pair;
+  FeatureMatches matches;
+  TwoViewGeometry geometry;
+};
+
+// Where results go. WriteChunk persists a chunk atomically (one
+// transaction), so a stopped run leaves only whole chunks behind.
+class ResultSink {
+ public:
+  virtual ~ResultSink() = default;
+  virtual void WriteChunk(const std::vector<PairResult>& results) = 0;
+};
+
+struct PipelineOptions {
+  int num_threads = -1;
+  // Write raw matches only; two_view_geometries rows are not written.
+  bool skip_geometric_verification = false;
+  TwoViewGeometryOptions two_view;
+};
+
+struct PipelineProgress {
+  size_t pairs_done = 0;
+  size_t pairs_total = 0;
+  double elapsed_seconds = 0;
+  const PairChunk* chunk = nullptr;
+  double chunk_seconds = 0;
+};
+
+struct PipelineStats {
+  size_t pairs_total = 0;
+  size_t pairs_done = 0;
+  size_t raw_matches = 0;
+  size_t verified_pairs = 0;  // config >= CALIBRATED
+  size_t inlier_matches = 0;
+  double seconds_total = 0;
+  double seconds_loading = 0;
+  double seconds_matching = 0;
+  double seconds_verification = 0;  // summed wall time of verification stage
+  double seconds_writing = 0;
+  bool stopped = false;  // the stop flag was raised before the end
+};
+
+class MatchingPipeline {
+ public:
+  MatchingPipeline(const PipelineOptions& options, FeatureSource* source, FeatureMatcher* matcher,
+                   ResultSink* sink);
+
+  // Called from the writer thread after each chunk is committed.
+  void SetProgressCallback(std::function<void(const PipelineProgress&)> callback);
+  // When the flag becomes true the pipeline finishes the chunks in flight,
+  // commits them, and returns with stats.stopped set.
+  void SetStopFlag(const std::atomic<bool>* stop);
+
+  PipelineStats Run(const std::vector<PairChunk>& chunks);
+
+ private:
+  PipelineOptions options_;
+  FeatureSource* source_;
+  FeatureMatcher* matcher_;
+  ResultSink* sink_;
+  std::function<void(const PipelineProgress&)> progress_;
+  const std::atomic<bool>* stop_ = nullptr;
+};
+
+// Verifies one pair (exposed for tests and for the verify-only mode).
+TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
+                           const ImageFeatures& image2, const FeatureMatches& matches,
+                           const TwoViewGeometryOptions& options);
+
+}  // namespace cashash

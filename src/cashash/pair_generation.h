@@ -1,0 +1,69 @@
+// Which image pairs to match, and in what order. Exhaustive matching walks
+// blocks of images as COLMAP's ExhaustiveMatching.block_size does, so that
+// only two blocks of features need to be loaded at a time.
+#pragma once
+
+#include <vector>
+
+#include "cashash/types.h"
+
+namespace cashash {
+
+// A chunk of pairs matched together; images() are the images they touch.
+struct PairChunk {
+  std::vector<ImagePair> pairs;
+  std::vector<image_t> images;  // sorted, unique
+  int block_i = 0;              // for progress messages: block indices
+  int block_j = 0;
+  int num_blocks = 0;
+};
+
+// Every unordered pair of `image_ids` once, as (smaller position, larger
+// position) in the given order, grouped by block pairs (i <= j).
+std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_ids, int block_size);
+
+// Splits an arbitrary pair list into chunks of at most max_pairs_per_chunk
+// pairs (in the given order), each touching at most max_images_per_chunk
+// images where possible.
+std::vector<PairChunk> ListPairChunks(const std::vector<ImagePair>& pairs, size_t max_pairs_per_chunk,
+                                      size_t max_images_per_chunk);
+
+}  // namespace cashash
+
+namespace cashash {
+
+// Removes the pairs for which skip(pair) is true (e.g. pairs already in the
+// database when resuming), dropping chunks left empty and recomputing the
+// images each chunk touches.
+template <typename SkipPredicate>
+std::vector<PairChunk> RemovePairs(std::vector<PairChunk> chunks, SkipPredicate skip);
+
+}  // namespace cashash
+
+#include <algorithm>
+
+namespace cashash {
+
+template <typename SkipPredicate>
+std::vector<PairChunk> RemovePairs(std::vector<PairChunk> chunks, SkipPredicate skip) {
+  std::vector<PairChunk> kept;
+  for (PairChunk& chunk : chunks) {
+    std::vector<ImagePair> pairs;
+    std::vector<image_t> images;
+    for (const ImagePair& pair : chunk.pairs) {
+      if (skip(pair)) continue;
+      pairs.push_back(pair);
+      images.push_back(pair.first);
+      images.push_back(pair.second);
+    }
+    if (pairs.empty()) continue;
+    std::sort(images.begin(), images.end());
+    images.erase(std::unique(images.begin(), images.end()), images.end());
+    chunk.pairs = std::move(pairs);
+    chunk.images = std::move(images);
+    kept.push_back(std::move(chunk));
+  }
+  return kept;
+}
+
+}  // namespace cashash
