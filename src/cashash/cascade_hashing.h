@@ -3,10 +3,16 @@
 // paths give the same matches for the same --CasHash.random_seed.
 //
 // Definition (all backends):
-//  1. x = descriptor (uint8 -> float) - global mean descriptor.
+//  1. x = descriptor (uint8) - round(global mean descriptor), rounding half
+//     away from zero (ComputeMeanDescriptor already returns integers).
 //  2. Projection rows are drawn on the host from the seed: first
 //     num_tables * bits_per_table rows for the bucket hashes, then 128 rows
-//     for the remap code. Bit j of a feature is (dot(row_j, x) > 0).
+//     for the remap code. Bit j of a feature is (dot(row_j, x) > 0); a dot of
+//     exactly 0 gives bit 0. Every entry is an integer in [-255, 255] (stored
+//     as float) and every x_d an integer in [-255, 255], so each dot is an
+//     integer below 2^24 in magnitude: float32, TF32 or bf16 inputs with
+//     float32 accumulation in any order, or int32 arithmetic, all give the
+//     same bits.
 //  3. Bucket of table t = bits t*b .. t*b+b-1, bit i of the bucket id being
 //     row t*b+i. Remap code bit i (0..127) goes to word i/64, bit i%64.
 //  4. For a query q of image A against image B: candidates are the features
@@ -17,8 +23,14 @@
 //     best and second best by (dot descending, index ascending). The match is
 //     then accepted with COLMAP's rule (see descriptor_distance.h): angle of
 //     best <= max_distance and angle(best) < max_ratio * angle(second), the
-//     second best defaulting to dot 0 (angle pi/2) when there is none.
+//     second best defaulting to dot 0 (angle pi/2) when there is none. A best
+//     dot of 0 is never a match (COLMAP's brute force keeps no best then).
 //  6. Cross check keeps i->j only if j->i is the result of B against A.
+//
+// Projection entries: clamp(round(64 * g), -255, 255) with g an approximate
+// standard normal, (sum of 12 uniform 32-bit integers) / 2^32 - 6, the
+// integers drawn in row-major order from splitmix64 started at random_seed.
+// Integer arithmetic only, so the matrix is the same on every platform.
 #pragma once
 
 #include <cstdint>
@@ -40,8 +52,9 @@ struct CascadeProjections {
   int num_rows() const { return num_bucket_rows() + CasHashOptions::kRemapBits; }
 };
 
-// Deterministic for a given seed on every platform (own normal sampler, not
-// std::normal_distribution whose output is implementation-defined).
+// Deterministic for a given seed on every platform (own integer normal
+// sampler, not std::normal_distribution whose output is
+// implementation-defined); see the definition above.
 CascadeProjections GenerateCascadeProjections(const CasHashOptions& options);
 
 // Hash codes of one image.

@@ -39,7 +39,9 @@ std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOption
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean);
 
-// Mean of all descriptor rows of the given sets (uint8 -> float).
+// Mean of all descriptor rows of the given sets (uint8 -> float), rounded to
+// the nearest integer so that hashing stays exact integer arithmetic in every
+// backend (cascade_hashing.h, step 1).
 MeanDescriptor ComputeMeanDescriptor(const std::vector<const FeatureDescriptors*>& descriptors);
 
 }  // namespace cashash

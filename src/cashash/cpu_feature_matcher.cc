@@ -1,0 +1,102 @@
+// The CPU FeatureMatcher: Cascade Hashing or exact brute force, parallel over
+// image pairs. Each pair is matched by one thread from per-image data built
+// once in AddImage, so results do not depend on the number of threads.
+#include <algorithm>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "cashash/brute_force_matcher.h"
+#include "cashash/cascade_hashing.h"
+#include "cashash/cascade_matcher.h"
+#include "cashash/feature_matcher.h"
+#include "cashash/thread_pool.h"
+
+namespace cashash {
+namespace {
+
+// What AddImage keeps for one image; only the member of the chosen matcher
+// type is filled.
+struct CpuImage {
+  CascadeImage cascade;
+  WideDescriptors wide;
+};
+
+class CpuFeatureMatcher : public FeatureMatcher {
+ public:
+  CpuFeatureMatcher(const SiftMatchingOptions& sift_options, const CasHashOptions& options,
+                    const MeanDescriptor& mean)
+      : sift_options_(sift_options), options_(options), mean_(mean) {
+    std::string error = sift_options.Check();
+    if (error.empty()) error = options.Check();
+    if (!error.empty()) throw std::invalid_argument(error);
+    if (options_.matcher == MatcherType::kCascade) {
+      projections_ = GenerateCascadeProjections(options_);
+    }
+  }
+
+  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override {
+    const size_t num_rows =
+        std::min(descriptors.rows(), static_cast<size_t>(sift_options_.max_num_matches));
+    auto image = std::make_shared<CpuImage>();
+    if (options_.matcher == MatcherType::kCascade) {
+      image->cascade = BuildCascadeImage(descriptors, num_rows, projections_, mean_);
+    } else {
+      image->wide = WidenDescriptors(descriptors, num_rows);
+    }
+    images_[image_id] = std::move(image);
+  }
+
+  void RemoveImage(image_t image_id) override { images_.erase(image_id); }
+
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    std::vector<const CpuImage*> firsts(pairs.size()), seconds(pairs.size());
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      firsts[i] = Find(pairs[i].first);
+      seconds[i] = Find(pairs[i].second);
+    }
+    std::vector<FeatureMatches> results(pairs.size());
+    const size_t num_workers = NumParallelWorkers(pairs.size(), sift_options_.num_threads);
+    std::vector<CascadeScratch> scratch(num_workers);
+    ParallelForWorkers(pairs.size(), sift_options_.num_threads, [&](size_t i, size_t worker) {
+      if (options_.matcher == MatcherType::kCascade) {
+        results[i] = CascadeMatchPair(firsts[i]->cascade, seconds[i]->cascade, sift_options_,
+                                      options_, &scratch[worker]);
+      } else {
+        results[i] = BruteForceMatchPair(firsts[i]->wide, seconds[i]->wide, sift_options_);
+      }
+    });
+    return results;
+  }
+
+  std::string Name() const override {
+    return options_.matcher == MatcherType::kCascade ? "cpu-cascade" : "cpu-bruteforce";
+  }
+
+ private:
+  const CpuImage* Find(image_t image_id) const {
+    const auto it = images_.find(image_id);
+    if (it == images_.end()) {
+      throw std::out_of_range("MatchPairs: image " + std::to_string(image_id) +
+                              " was not added to the " + Name() + " matcher");
+    }
+    return it->second.get();
+  }
+
+  const SiftMatchingOptions sift_options_;
+  const CasHashOptions options_;
+  const MeanDescriptor mean_;
+  CascadeProjections projections_;
+  std::map<image_t, std::shared_ptr<const CpuImage>> images_;
+};
+
+}  // namespace
+
+std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean) {
+  return std::make_unique<CpuFeatureMatcher>(sift_options, cashash_options, mean);
+}
+
+}  // namespace cashash
