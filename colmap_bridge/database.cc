@@ -1,0 +1,429 @@
+// COLMAP database access. What COLMAP itself stores was checked against
+// databases written by COLMAP 3.8 (exhaustive_matcher) and pycolmap 4.2.1
+// (Database.write_*), see tests/database_test.cc:
+// - F, E, H are 9 float64 row-major; qvec is [w, x, y, z].
+// - Empty match sets: rows = 0, cols = 2, data NULL (both versions).
+// - 3.8, pair with inliers: F, E, H, qvec, tvec are all written, unset
+//   matrices as 72 zero bytes. 3.8, pair without inliers (config 0): F, E, H,
+//   qvec, tvec are NULL.
+// - 4.x: every unset optional is NULL: a matrix the estimator did not set,
+//   the pose when it was not computed, and camera1 / camera2. The latter (a
+//   serialized Camera, not an id) hold cameras *estimated* by focal-solving
+//   configurations; geometries verified with the database intrinsics leave
+//   them NULL, and so do we.
+#include "colmap_bridge/database.h"
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <sqlite3.h>
+
+#include "cashash/pair_id.h"
+#include "colmap_bridge/blob_codec.h"
+#include "colmap_bridge/sqlite_statement.h"
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+// A concurrent COLMAP process (GUI, another matcher) holding the lock makes
+// us wait this long before giving up.
+constexpr int kBusyTimeoutMs = 60000;
+
+// COLMAP 4.x numbers user_version as major * 1000000 + minor * 10000 + ...
+// (4.2.1 -> 4020100); 3.x used major * 1000 + minor * 100 (3.8 -> 3800).
+constexpr int kFirstUserVersion4x = 4000000;
+
+bool IsZero(const Eigen::Matrix3d& m) { return (m.array() == 0.0).all(); }
+
+bool PoseIsUnset(const TwoViewGeometry& g) {
+  return g.qvec == Eigen::Vector4d(1, 0, 0, 0) && (g.tvec.array() == 0.0).all();
+}
+
+MatrixBlob MatrixBlobAt(const SqliteStatement& s, int first_col) {
+  MatrixBlob blob;
+  blob.rows = s.ColumnInt64(first_col);
+  blob.cols = s.ColumnInt64(first_col + 1);
+  blob.data = s.ColumnBlob(first_col + 2);
+  blob.num_bytes = s.ColumnBytes(first_col + 2);
+  return blob;
+}
+
+}  // namespace
+
+std::string SchemaInfo::Describe() const {
+  const bool is_4x = descriptors_have_type || user_version >= kFirstUserVersion4x;
+  return std::string(is_4x ? "4.x-style" : "3.8-style") + " (user_version " +
+         std::to_string(user_version) + ")";
+}
+
+struct Database::Impl {
+  std::string path;
+  bool read_only = false;
+  sqlite3* db = nullptr;
+  SchemaInfo schema;
+  bool write_nulls_for_unset = false;  // 4.x convention
+  bool in_transaction = false;
+
+  // Prepared on first use, then reused.
+  std::unique_ptr<SqliteStatement> image_name, keypoints, descriptors, num_keypoints,
+      num_descriptors, matches, geometry, write_matches, write_geometry;
+
+  ~Impl() {
+    if (db == nullptr) return;
+    if (in_transaction) sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
+    // close_v2 waits for the statements finalized right after this body.
+    sqlite3_close_v2(db);
+  }
+
+  SqliteStatement& Prepared(std::unique_ptr<SqliteStatement>& slot, const std::string& sql) {
+    if (!slot) slot = std::make_unique<SqliteStatement>(db, sql);
+    return *slot;
+  }
+
+  void RequireWritable() const {
+    if (read_only) throw DatabaseError("database opened read-only: " + path);
+  }
+
+  // "image 3 (a.jpg)" for messages.
+  std::string ImageLabel(image_t image_id) {
+    StatementScope s(Prepared(image_name, "SELECT name FROM images WHERE image_id = ?"));
+    s->BindInt64(1, image_id);
+    const std::string name = s->Step() ? s->ColumnText(0) : std::string("not in table images");
+    return "image " + std::to_string(image_id) + " (" + name + ")";
+  }
+
+  std::vector<std::string> TableNames() {
+    // The first read of the file: a non-SQLite file is reported here.
+    sqlite3_stmt* raw = nullptr;
+    int rc = sqlite3_prepare_v2(db, "SELECT name FROM sqlite_master WHERE type = 'table'", -1,
+                                &raw, nullptr);
+    std::vector<std::string> names;
+    while (rc == SQLITE_OK || rc == SQLITE_ROW) {
+      rc = sqlite3_step(raw);
+      if (rc == SQLITE_ROW) {
+        names.emplace_back(reinterpret_cast<const char*>(sqlite3_column_text(raw, 0)));
+      }
+    }
+    const int code = sqlite3_errcode(db);
+    const std::string message = sqlite3_errmsg(db);
+    sqlite3_finalize(raw);
+    if (rc == SQLITE_DONE) return names;
+    if (code == SQLITE_NOTADB) throw DatabaseError("not a SQLite database: " + path);
+    throw DatabaseError("cannot read database " + path + ": " + message);
+  }
+
+  bool TableHasColumn(const std::string& table, const std::string& column) {
+    SqliteStatement s(db, "PRAGMA table_info(" + table + ")");
+    while (s.Step()) {
+      if (s.ColumnText(1) == column) return true;
+    }
+    return false;
+  }
+
+  void Open() {
+    std::error_code error;
+    if (!std::filesystem::exists(path, error)) {
+      throw DatabaseError("database file not found: " + path);
+    }
+    if (std::filesystem::is_directory(path, error)) {
+      throw DatabaseError("not a SQLite database: " + path + " is a directory");
+    }
+    const int flags = read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE;
+    if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
+      const std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
+      throw DatabaseError("cannot open database " + path + ": " + message);
+    }
+    sqlite3_busy_timeout(db, kBusyTimeoutMs);
+
+    const std::vector<std::string> tables = TableNames();
+    auto has_table = [&](const std::string& name) {
+      for (const std::string& t : tables) {
+        if (t == name) return true;
+      }
+      return false;
+    };
+    std::vector<std::string> required = {"cameras", "images", "keypoints", "descriptors"};
+    if (!read_only) {
+      required.push_back("matches");
+      required.push_back("two_view_geometries");
+    }
+    for (const std::string& table : required) {
+      if (!has_table(table)) {
+        throw DatabaseError("database " + path + " has no table '" + table +
+                            "' (is it a COLMAP database with extracted features?)");
+      }
+    }
+
+    {
+      SqliteStatement version(db, "PRAGMA user_version");
+      schema.user_version = version.Step() ? static_cast<int>(version.ColumnInt64(0)) : 0;
+    }
+    schema.descriptors_have_type = TableHasColumn("descriptors", "type");
+    schema.two_view_has_camera_columns =
+        has_table("two_view_geometries") && TableHasColumn("two_view_geometries", "camera1") &&
+        TableHasColumn("two_view_geometries", "camera2");
+    schema.has_frames = has_table("frames");
+    write_nulls_for_unset =
+        schema.descriptors_have_type || schema.user_version >= kFirstUserVersion4x;
+
+    if (!read_only) {
+      // A per-connection setting, not the schema nor the journal mode (COLMAP's
+      // WAL stays). With WAL a commit then needs no fsync; a crash can lose
+      // the last commits, never corrupt the file.
+      ExecuteSql(db, "PRAGMA synchronous = NORMAL");
+    }
+  }
+
+  void BindGeometry(SqliteStatement& s, pair_t pair_id, const TwoViewGeometry& stored,
+                    bool F_set, bool E_set, bool H_set, bool pose_set,
+                    const std::vector<uint32_t>& inliers,
+                    std::array<std::array<double, 9>, 3>& matrices) {
+    s.BindInt64(1, static_cast<int64_t>(pair_id));
+    s.BindInt64(2, static_cast<int64_t>(stored.inlier_matches.size()));
+    s.BindInt64(3, 2);
+    s.BindBlob(4, inliers.data(), inliers.size() * sizeof(uint32_t));
+    s.BindInt64(5, stored.config);
+
+    // 3.8 writes no geometry at all for pairs without inliers.
+    const bool legacy_empty = !write_nulls_for_unset && stored.inlier_matches.empty();
+    const Eigen::Matrix3d* sources[3] = {&stored.F, &stored.E, &stored.H};
+    const bool set[3] = {F_set, E_set, H_set};
+    for (int i = 0; i < 3; ++i) {
+      const bool write_null = legacy_empty || (write_nulls_for_unset && !set[i]);
+      if (write_null) {
+        s.BindNull(6 + i);
+        continue;
+      }
+      matrices[i] = set[i] ? EncodeMatrix3d(*sources[i]) : std::array<double, 9>{};
+      s.BindBlob(6 + i, matrices[i].data(), sizeof(matrices[i]));
+    }
+    if (legacy_empty || (write_nulls_for_unset && !pose_set)) {
+      s.BindNull(9);
+      s.BindNull(10);
+    } else {
+      s.BindBlob(9, stored.qvec.data(), 4 * sizeof(double));
+      s.BindBlob(10, stored.tvec.data(), 3 * sizeof(double));
+    }
+  }
+};
+
+Database::Database(const std::string& path, bool read_only) : impl_(std::make_unique<Impl>()) {
+  impl_->path = path;
+  impl_->read_only = read_only;
+  impl_->Open();
+}
+
+Database::~Database() = default;
+
+const SchemaInfo& Database::schema() const { return impl_->schema; }
+const std::string& Database::path() const { return impl_->path; }
+
+std::vector<Camera> Database::ReadAllCameras() const {
+  SqliteStatement s(impl_->db,
+                    "SELECT camera_id, model, width, height, params, prior_focal_length "
+                    "FROM cameras ORDER BY camera_id");
+  std::vector<Camera> cameras;
+  while (s.Step()) {
+    Camera camera;
+    camera.camera_id = static_cast<camera_t>(s.ColumnInt64(0));
+    camera.model_id = static_cast<int>(s.ColumnInt64(1));
+    camera.width = static_cast<uint64_t>(s.ColumnInt64(2));
+    camera.height = static_cast<uint64_t>(s.ColumnInt64(3));
+    const size_t num_bytes = s.ColumnBytes(4);
+    if (num_bytes % sizeof(double) != 0) {
+      throw DatabaseError("params of camera " + std::to_string(camera.camera_id) +
+                          ": blob size " + std::to_string(num_bytes) +
+                          " is not a multiple of 8 (float64 values)");
+    }
+    camera.params.resize(num_bytes / sizeof(double));
+    if (num_bytes > 0) std::memcpy(camera.params.data(), s.ColumnBlob(4), num_bytes);
+    camera.has_prior_focal_length = s.ColumnInt64(5) != 0;
+    cameras.push_back(std::move(camera));
+  }
+  return cameras;
+}
+
+std::vector<Image> Database::ReadAllImages() const {
+  SqliteStatement s(impl_->db, "SELECT image_id, name, camera_id FROM images ORDER BY image_id");
+  std::vector<Image> images;
+  while (s.Step()) {
+    Image image;
+    image.image_id = static_cast<image_t>(s.ColumnInt64(0));
+    image.name = s.ColumnText(1);
+    image.camera_id = static_cast<camera_t>(s.ColumnInt64(2));
+    images.push_back(std::move(image));
+  }
+  return images;
+}
+
+Keypoints Database::ReadKeypoints(image_t image_id) const {
+  StatementScope s(impl_->Prepared(impl_->keypoints,
+                                   "SELECT rows, cols, data FROM keypoints WHERE image_id = ?"));
+  s->BindInt64(1, image_id);
+  if (!s->Step()) return {};  // no row: an image without features
+  return DecodeKeypoints(MatrixBlobAt(*s, 0), "keypoints of " + impl_->ImageLabel(image_id));
+}
+
+FeatureDescriptors Database::ReadDescriptors(image_t image_id) const {
+  const bool typed = impl_->schema.descriptors_have_type;
+  StatementScope s(impl_->Prepared(
+      impl_->descriptors,
+      typed ? "SELECT rows, cols, data, type FROM descriptors WHERE image_id = ?"
+            : "SELECT rows, cols, data FROM descriptors WHERE image_id = ?"));
+  s->BindInt64(1, image_id);
+  if (!s->Step()) return {};
+  if (typed) {
+    const int64_t type = s->ColumnInt64(3);
+    if (type != kSiftDescriptorType) {
+      throw DatabaseError("descriptors of " + impl_->ImageLabel(image_id) +
+                          ": descriptor type " + DescriptorTypeName(type) + " (" +
+                          std::to_string(type) + ") is not supported; extract SIFT features");
+    }
+  }
+  return DecodeSiftDescriptors(MatrixBlobAt(*s, 0),
+                               "descriptors of " + impl_->ImageLabel(image_id));
+}
+
+size_t Database::NumKeypoints(image_t image_id) const {
+  StatementScope s(
+      impl_->Prepared(impl_->num_keypoints, "SELECT rows FROM keypoints WHERE image_id = ?"));
+  s->BindInt64(1, image_id);
+  return s->Step() ? static_cast<size_t>(std::max<int64_t>(s->ColumnInt64(0), 0)) : 0;
+}
+
+size_t Database::NumDescriptors(image_t image_id) const {
+  StatementScope s(
+      impl_->Prepared(impl_->num_descriptors, "SELECT rows FROM descriptors WHERE image_id = ?"));
+  s->BindInt64(1, image_id);
+  return s->Step() ? static_cast<size_t>(std::max<int64_t>(s->ColumnInt64(0), 0)) : 0;
+}
+
+std::unordered_set<pair_t> Database::ReadCompletedPairIds() const {
+  SqliteStatement s(impl_->db,
+                    "SELECT matches.pair_id FROM matches JOIN two_view_geometries "
+                    "ON matches.pair_id = two_view_geometries.pair_id");
+  std::unordered_set<pair_t> pair_ids;
+  while (s.Step()) pair_ids.insert(static_cast<pair_t>(s.ColumnInt64(0)));
+  return pair_ids;
+}
+
+FeatureMatches Database::ReadMatches(image_t image_id1, image_t image_id2) const {
+  const pair_t pair_id = ImagePairToPairId(image_id1, image_id2);
+  StatementScope s(impl_->Prepared(impl_->matches,
+                                   "SELECT rows, cols, data FROM matches WHERE pair_id = ?"));
+  s->BindInt64(1, static_cast<int64_t>(pair_id));
+  if (!s->Step()) return {};
+  return DecodeMatches(MatrixBlobAt(*s, 0), SwapImagePair(image_id1, image_id2),
+                       "matches of pair " + std::to_string(pair_id));
+}
+
+TwoViewGeometry Database::ReadTwoViewGeometry(image_t image_id1, image_t image_id2) const {
+  const pair_t pair_id = ImagePairToPairId(image_id1, image_id2);
+  StatementScope s(impl_->Prepared(
+      impl_->geometry,
+      "SELECT rows, cols, data, config, F, E, H, qvec, tvec FROM two_view_geometries "
+      "WHERE pair_id = ?"));
+  s->BindInt64(1, static_cast<int64_t>(pair_id));
+  TwoViewGeometry stored;
+  if (!s->Step()) return stored;
+  const std::string owner = "two_view_geometries of pair " + std::to_string(pair_id);
+  // Stored in the order of the smaller image id, hence no swap here.
+  stored.inlier_matches = DecodeMatches(MatrixBlobAt(*s, 0), false, owner);
+  stored.config = static_cast<int>(s->ColumnInt64(3));
+  stored.F = DecodeMatrix3d(s->ColumnBlob(4), s->ColumnBytes(4), owner + ", F");
+  stored.E = DecodeMatrix3d(s->ColumnBlob(5), s->ColumnBytes(5), owner + ", E");
+  stored.H = DecodeMatrix3d(s->ColumnBlob(6), s->ColumnBytes(6), owner + ", H");
+  stored.qvec = DecodeVector<4>(s->ColumnBlob(7), s->ColumnBytes(7),
+                                Eigen::Vector4d(1, 0, 0, 0), owner + ", qvec");
+  stored.tvec = DecodeVector<3>(s->ColumnBlob(8), s->ColumnBytes(8), Eigen::Vector3d::Zero(),
+                                owner + ", tvec");
+  if (!SwapImagePair(image_id1, image_id2)) return stored;
+  TwoViewGeometry inverted = stored.Inverted();
+  // Unset (zero) matrices stay unset whatever inverting a zero H yields.
+  if (IsZero(stored.F)) inverted.F.setZero();
+  if (IsZero(stored.E)) inverted.E.setZero();
+  if (IsZero(stored.H)) inverted.H.setZero();
+  return inverted;
+}
+
+void Database::WriteMatches(image_t image_id1, image_t image_id2, const FeatureMatches& matches) {
+  impl_->RequireWritable();
+  const std::vector<uint32_t> values =
+      EncodeMatches(matches, SwapImagePair(image_id1, image_id2));
+  StatementScope s(impl_->Prepared(
+      impl_->write_matches,
+      "INSERT OR REPLACE INTO matches(pair_id, rows, cols, data) VALUES (?, ?, ?, ?)"));
+  s->BindInt64(1, static_cast<int64_t>(ImagePairToPairId(image_id1, image_id2)));
+  s->BindInt64(2, static_cast<int64_t>(matches.size()));
+  s->BindInt64(3, 2);
+  s->BindBlob(4, values.data(), values.size() * sizeof(uint32_t));
+  s->Execute();
+}
+
+void Database::WriteTwoViewGeometry(image_t image_id1, image_t image_id2,
+                                    const TwoViewGeometry& geometry) {
+  impl_->RequireWritable();
+  // What is unset is decided on the caller's geometry, before inverting.
+  const bool F_set = !IsZero(geometry.F);
+  const bool E_set = !IsZero(geometry.E);
+  const bool H_set = !IsZero(geometry.H);
+  const bool pose_set = !PoseIsUnset(geometry);
+  const bool swap = SwapImagePair(image_id1, image_id2);
+  const TwoViewGeometry stored = swap ? geometry.Inverted() : geometry;
+  const std::vector<uint32_t> inliers = EncodeMatches(stored.inlier_matches, false);
+
+  // camera1 / camera2 (4.x) are left out of the column list: INSERT OR
+  // REPLACE then stores NULL, as COLMAP does for fixed-intrinsics geometries.
+  StatementScope s(impl_->Prepared(
+      impl_->write_geometry,
+      "INSERT OR REPLACE INTO two_view_geometries(pair_id, rows, cols, data, config, F, E, H, "
+      "qvec, tvec) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"));
+  std::array<std::array<double, 9>, 3> matrices{};  // alive until Execute()
+  impl_->BindGeometry(*s, ImagePairToPairId(image_id1, image_id2), stored, F_set,
+                      E_set, H_set, pose_set, inliers, matrices);
+  s->Execute();
+}
+
+void Database::ClearMatchesAndGeometries() {
+  impl_->RequireWritable();
+  const bool own_transaction = !impl_->in_transaction;
+  if (own_transaction) BeginTransaction();
+  try {
+    ExecuteSql(impl_->db, "DELETE FROM matches");
+    ExecuteSql(impl_->db, "DELETE FROM two_view_geometries");
+  } catch (...) {
+    if (own_transaction) Rollback();
+    throw;
+  }
+  if (own_transaction) Commit();
+}
+
+void Database::BeginTransaction() {
+  if (impl_->in_transaction) {
+    throw DatabaseError("a transaction is already open on " + impl_->path);
+  }
+  // IMMEDIATE takes the write lock now (waiting up to the busy timeout), so a
+  // concurrent writer cannot make a later write fail halfway.
+  ExecuteSql(impl_->db, impl_->read_only ? "BEGIN" : "BEGIN IMMEDIATE");
+  impl_->in_transaction = true;
+}
+
+void Database::Commit() {
+  if (!impl_->in_transaction) {
+    throw DatabaseError("no transaction to commit on " + impl_->path);
+  }
+  ExecuteSql(impl_->db, "COMMIT");
+  impl_->in_transaction = false;
+}
+
+void Database::Rollback() {
+  if (!impl_->in_transaction) {
+    throw DatabaseError("no transaction to roll back on " + impl_->path);
+  }
+  impl_->in_transaction = false;
+  ExecuteSql(impl_->db, "ROLLBACK");
+}
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,93 @@
+#include "colmap_bridge/sqlite_statement.h"
+
+#include <sqlite3.h>
+
+namespace cashash {
+namespace colmap {
+
+SqliteStatement::SqliteStatement(sqlite3* db, const std::string& sql) : db_(db), sql_(sql) {
+  if (sqlite3_prepare_v2(db_, sql_.c_str(), -1, &stmt_, nullptr) != SQLITE_OK) {
+    Fail("preparing");
+  }
+}
+
+SqliteStatement::~SqliteStatement() { sqlite3_finalize(stmt_); }
+
+void SqliteStatement::Fail(const char* action) const {
+  throw DatabaseError(std::string("SQLite error ") + action + " \"" + sql_ +
+                      "\": " + sqlite3_errmsg(db_));
+}
+
+void SqliteStatement::BindInt64(int index, int64_t value) {
+  if (sqlite3_bind_int64(stmt_, index, value) != SQLITE_OK) Fail("binding");
+}
+
+void SqliteStatement::BindNull(int index) {
+  if (sqlite3_bind_null(stmt_, index) != SQLITE_OK) Fail("binding");
+}
+
+void SqliteStatement::BindBlob(int index, const void* data, size_t num_bytes) {
+  if (num_bytes == 0) {
+    BindNull(index);
+    return;
+  }
+  if (sqlite3_bind_blob64(stmt_, index, data, num_bytes, SQLITE_STATIC) != SQLITE_OK) {
+    Fail("binding");
+  }
+}
+
+void SqliteStatement::BindText(int index, const std::string& text) {
+  if (sqlite3_bind_text(stmt_, index, text.c_str(), static_cast<int>(text.size()),
+                        SQLITE_TRANSIENT) != SQLITE_OK) {
+    Fail("binding");
+  }
+}
+
+bool SqliteStatement::Step() {
+  const int rc = sqlite3_step(stmt_);
+  if (rc == SQLITE_ROW) return true;
+  if (rc == SQLITE_DONE) return false;
+  Fail("running");
+}
+
+void SqliteStatement::Execute() {
+  while (Step()) {
+  }
+}
+
+int64_t SqliteStatement::ColumnInt64(int col) const { return sqlite3_column_int64(stmt_, col); }
+
+bool SqliteStatement::ColumnIsNull(int col) const {
+  return sqlite3_column_type(stmt_, col) == SQLITE_NULL;
+}
+
+const void* SqliteStatement::ColumnBlob(int col) const { return sqlite3_column_blob(stmt_, col); }
+
+size_t SqliteStatement::ColumnBytes(int col) const {
+  return static_cast<size_t>(sqlite3_column_bytes(stmt_, col));
+}
+
+std::string SqliteStatement::ColumnText(int col) const {
+  const unsigned char* text = sqlite3_column_text(stmt_, col);
+  return text == nullptr ? std::string()
+                         : std::string(reinterpret_cast<const char*>(text),
+                                       static_cast<size_t>(sqlite3_column_bytes(stmt_, col)));
+}
+
+void SqliteStatement::Reset() {
+  // sqlite3_reset repeats the last step's error, which was already reported.
+  sqlite3_reset(stmt_);
+  sqlite3_clear_bindings(stmt_);
+}
+
+void ExecuteSql(sqlite3* db, const std::string& sql) {
+  char* message = nullptr;
+  if (sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message) != SQLITE_OK) {
+    const std::string text = message != nullptr ? message : sqlite3_errmsg(db);
+    sqlite3_free(message);
+    throw DatabaseError("SQLite error running \"" + sql + "\": " + text);
+  }
+}
+
+}  // namespace colmap
+}  // namespace cashash
