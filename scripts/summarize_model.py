@@ -13,6 +13,7 @@ model misses any of them, which is how the end-to-end tests assert.
 """
 
 import argparse
+import json
 import os
 import re
 import subprocess
@@ -123,15 +124,26 @@ def main():
     parser.add_argument("--expect_registered", type=int)
     parser.add_argument("--max_reprojection_error", type=float)
     parser.add_argument("--max_rotation_error_deg", type=float)
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object instead of the summary")
     args = parser.parse_args()
 
     models = model_dirs(args.sparse_dir)
     if not models:
+        if args.json:
+            print(json.dumps({"model": None, "num_models": 0, "registered": 0, "points": 0,
+                              "mean_track_length": None, "mean_reprojection_error": None}))
         print(f"FAIL: no reconstruction in {args.sparse_dir}")
         return 1
     analysed = [(analyze(args.colmap, m), m) for m in models]
     stats, best = max(analysed, key=lambda sm: sm[0].get("registered images", 0))
     registered = int(stats.get("registered images", 0))
+    if args.json:
+        print(json.dumps({"model": best, "num_models": len(models), "registered": registered,
+                          "points": int(stats.get("points", 0)),
+                          "mean_track_length": stats.get("mean track length"),
+                          "mean_reprojection_error": stats.get("mean reprojection error")}))
+        return 0
     total = f"/{args.num_images}" if args.num_images else ""
     print(f"Model:                     {best} ({len(models)} model(s) in all)")
     print(f"Registered images:         {registered}{total}")

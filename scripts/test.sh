@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Builds everything and runs the whole test suite: unit tests, the CUDA tests
+# when the CUDA backend is built (they skip themselves without a GPU), and the
+# end-to-end tests on the rendered scene and on real photographs.
+#
+# Usage: scripts/test.sh [extra ctest arguments, e.g. -R integration]
+# Environment:
+#   CASHASH_BUILD_DIR    build folder (default: build/ in the repo)
+#   CASHASH_SHARED_DATA  real data sets (default: ../shared/data beside the repo)
+#   CASHASH_SKIP_DEPS=1  do not call install_deps.sh
+set -euo pipefail
+
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+BUILD="${CASHASH_BUILD_DIR:-$REPO/build}"
+SHARED="${CASHASH_SHARED_DATA:-$REPO/../shared/data}"
+JOBS="$(nproc)"
+
+if [[ "${CASHASH_SKIP_DEPS:-0}" != 1 ]]; then
+  "$REPO/scripts/install_deps.sh"
+fi
+
+# The CUDA backend is compiled whenever nvcc exists (CMake's AUTO), so that
+# CUDA code is checked to build even on machines without a GPU.
+cmake -S "$REPO" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DCASHASH_SHARED_DATA="$SHARED"
+cmake --build "$BUILD" -j"$JOBS"
+
+cd "$BUILD"
+ctest --output-on-failure -j"$JOBS" "$@"
