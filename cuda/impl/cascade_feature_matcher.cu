@@ -1,0 +1,385 @@
+// The GPU Cascade Hashing FeatureMatcher.
+//
+// AddImage uploads descriptors into one allocation per image; the images
+// added since the last MatchPairs are hashed and bucketed together in one
+// launch sequence. MatchPairs cuts the pairs into batches, each matched by a
+// few launches over all of its pairs; two batches alternate on two streams so
+// that the host turns one batch's results into FeatureMatches while the next
+// runs. Results are written by the device straight into mapped pinned memory.
+#include "impl/cascade_feature_matcher.cuh"
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "cashash/cascade_hashing.h"
+#include "cashash_cuda/gpu_feature_matcher.h"
+#include "impl/cascade_hash_kernels.cuh"
+#include "impl/cascade_match_kernels.cuh"
+#include "impl/device_image.cuh"
+#include "impl/device_memory.cuh"
+#include "utils/cuda_check.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+// A batch holds at most this many query features (forward direction) ...
+constexpr size_t kMaxBatchQueries = size_t{1} << 22;
+// ... and at most this many pairs.
+constexpr size_t kMaxBatchPairs = 8192;
+
+std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
+  if (options.num_tables * options.bits_per_table > kMaxSignatureBits) {
+    return "the GPU cascade matcher needs CasHash.num_tables * CasHash.bits_per_table <= " +
+           std::to_string(kMaxSignatureBits) + ", got " +
+           std::to_string(options.num_tables * options.bits_per_table);
+  }
+  if (options.top_k > kMaxGpuTopK) {
+    return "the GPU cascade matcher needs CasHash.top_k <= " + std::to_string(kMaxGpuTopK) + ", got " +
+           std::to_string(options.top_k);
+  }
+  return "";
+}
+
+// Scratch and result buffers of one in-flight batch.
+struct BatchSlot {
+  cudaStream_t stream = nullptr;
+  cudaEvent_t done = nullptr;
+  DeviceBuffer tasks;       // PairTask[]
+  DeviceBuffer best;        // int32 per forward query
+  DeviceBuffer cursor;      // one uint32
+  PinnedBuffer host_tasks;  // staging of PairTask[]
+  PinnedBuffer out;         // mapped: uint2 matches
+  PinnedBuffer segments;    // mapped: MatchSegment per task
+  size_t task_capacity = 0, query_capacity = 0;
+  // What is in flight: the pair index of each task.
+  std::vector<size_t> pair_of_task;
+  bool busy = false;
+};
+
+class GpuCascadeMatcher : public FeatureMatcher {
+ public:
+  GpuCascadeMatcher(const SiftMatchingOptions& sift_options, const CasHashOptions& options,
+                    const MeanDescriptor& mean, int gpu_index)
+      : sift_options_(sift_options), options_(options), device_(gpu_index) {
+    std::string error = sift_options.Check();
+    if (error.empty()) error = options.Check();
+    if (error.empty()) error = CheckGpuCascadeOptions(options);
+    if (!error.empty()) throw std::invalid_argument(error);
+    std::string reason;
+    if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+    CUDA_CHECK(cudaSetDevice(device_));
+    budget_ = MemoryBudgetFromEnvironment();
+
+    const CascadeProjections projections = GenerateCascadeProjections(options_);
+    UploadProjections(projections, mean);
+    for (BatchSlot& slot : slots_) {
+      CUDA_CHECK(cudaStreamCreateWithFlags(&slot.stream, cudaStreamNonBlocking));
+      CUDA_CHECK(cudaEventCreateWithFlags(&slot.done, cudaEventDisableTiming));
+    }
+    grid_size_ = CascadeMatchGridSize(device_);
+  }
+
+  ~GpuCascadeMatcher() override {
+    cudaSetDevice(device_);
+    for (BatchSlot& slot : slots_) {
+      if (slot.stream != nullptr) {
+        cudaStreamSynchronize(slot.stream);
+        cudaStreamDestroy(slot.stream);
+      }
+      if (slot.done != nullptr) cudaEventDestroy(slot.done);
+    }
+  }
+
+  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override {
+    CUDA_CHECK(cudaSetDevice(device_));
+    RemoveImage(image_id);
+    const size_t n = std::min(descriptors.rows(), static_cast<size_t>(sift_options_.max_num_matches));
+    if (n >= kMaxGpuFeatures) {
+      throw std::runtime_error("image " + std::to_string(image_id) + " has " + std::to_string(n) +
+                               " features; the GPU matcher handles at most " +
+                               std::to_string(kMaxGpuFeatures - 1) + " per image");
+    }
+    Image image;
+    image.num_features = static_cast<uint32_t>(n);
+    if (n > 0) {
+      const DeviceImageLayout layout(n, options_.num_tables, options_.bits_per_table);
+      Reserve(layout.total, "image " + std::to_string(image_id));
+      image.memory.Allocate(layout.total, "image features");
+      image.bytes = layout.total;
+      image.parts = layout.Parts(image.memory.as<void>(), image.num_features);
+      CUDA_CHECK(cudaMemcpy(image.parts.descriptors, descriptors.data.data(), n * kDescriptorDim,
+                            cudaMemcpyHostToDevice));
+      CUDA_CHECK(cudaMemset(image.parts.offsets, 0, layout.offsets_bytes));
+      pending_.push_back(image_id);
+    }
+    images_.emplace(image_id, std::move(image));
+  }
+
+  void RemoveImage(image_t image_id) override {
+    const auto it = images_.find(image_id);
+    if (it == images_.end()) return;
+    used_ -= it->second.bytes;
+    images_.erase(it);
+    pending_.erase(std::remove(pending_.begin(), pending_.end(), image_id), pending_.end());
+  }
+
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    CUDA_CHECK(cudaSetDevice(device_));
+    HashPendingImages();
+    std::vector<FeatureMatches> results(pairs.size());
+
+    // Tasks in pair order, so that neighbouring warps share the target image.
+    std::vector<PairTask> tasks;
+    std::vector<size_t> pair_of_task;
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      const Image& a = Find(pairs[i].first);
+      const Image& b = Find(pairs[i].second);
+      if (a.num_features == 0 || b.num_features == 0) continue;
+      PairTask task;
+      task.a = a.parts.View();
+      task.b = b.parts.View();
+      tasks.push_back(task);
+      pair_of_task.push_back(i);
+    }
+
+    int next_slot = 0;
+    size_t start = 0;
+    while (start < tasks.size()) {
+      BatchSlot& slot = slots_[next_slot];
+      next_slot ^= 1;
+      if (slot.busy) Harvest(&slot, &results);
+      const size_t end = BatchEnd(tasks, start);
+      Launch(&slot, tasks, pair_of_task, start, end);
+      start = end;
+    }
+    for (int k = 0; k < 2; ++k) {
+      BatchSlot& slot = slots_[next_slot];
+      next_slot ^= 1;
+      if (slot.busy) Harvest(&slot, &results);
+    }
+    return results;
+  }
+
+  std::string Name() const override { return "gpu-cascade"; }
+
+ private:
+  struct Image {
+    DeviceBuffer memory;
+    DeviceImageParts parts;
+    uint32_t num_features = 0;
+    size_t bytes = 0;
+  };
+
+  const Image& Find(image_t image_id) const {
+    const auto it = images_.find(image_id);
+    if (it == images_.end()) {
+      throw std::invalid_argument("GPU matcher: image " + std::to_string(image_id) + " was not added");
+    }
+    return it->second;
+  }
+
+  // Accounts for `bytes` more device memory, or throws naming `what`.
+  void Reserve(size_t bytes, const std::string& what) {
+    if (bytes > budget_ || used_ > budget_ - bytes) {
+      throw std::runtime_error("GPU memory budget exceeded by " + what + ": it needs " + MiB(bytes) + ", " +
+                               MiB(used_) + " of " + MiB(budget_) +
+                               " are in use; match fewer or smaller images per block");
+    }
+    used_ += bytes;
+  }
+
+  void UploadProjections(const CascadeProjections& projections, const MeanDescriptor& mean) {
+    const int rows = projections.num_rows();
+    rows_padded_ = (rows + 31) / 32 * 32;
+    std::vector<float> transposed(size_t(kDescriptorDim) * rows_padded_, 0.f);
+    std::vector<float> offsets(rows_padded_, 0.f);
+    int64_t rounded_mean[kDescriptorDim];
+    for (int d = 0; d < kDescriptorDim; ++d) {
+      rounded_mean[d] = static_cast<int64_t>(std::clamp(std::round(mean[d]), -32768.f, 32767.f));
+    }
+    for (int r = 0; r < rows; ++r) {
+      int64_t offset = 0;
+      for (int d = 0; d < kDescriptorDim; ++d) {
+        const float v = projections.matrix[size_t(r) * kDescriptorDim + d];
+        if (!(v >= -255.f && v <= 255.f) || v != std::round(v)) {
+          throw std::runtime_error("GPU cascade matcher: projection entries must be integers in [-255, 255]");
+        }
+        transposed[size_t(d) * rows_padded_ + r] = v;
+        offset += static_cast<int64_t>(v) * rounded_mean[d];
+      }
+      // |offset| <= 128 * 255 * 32767 could exceed 2^24 only for a mean out
+      // of the descriptor range; then float rounding could flip a bit.
+      offsets[r] = static_cast<float>(offset);
+    }
+    projections_t_.Allocate(transposed.size() * sizeof(float), "projections");
+    row_offsets_.Allocate(offsets.size() * sizeof(float), "projection offsets");
+    CUDA_CHECK(cudaMemcpy(projections_t_.as<float>(), transposed.data(), transposed.size() * sizeof(float),
+                          cudaMemcpyHostToDevice));
+    CUDA_CHECK(cudaMemcpy(row_offsets_.as<float>(), offsets.data(), offsets.size() * sizeof(float),
+                          cudaMemcpyHostToDevice));
+  }
+
+  // Hashes and buckets every image added since the last call, in one launch.
+  void HashPendingImages() {
+    if (pending_.empty()) return;
+    std::vector<HashJob> jobs;
+    uint32_t blocks = 0;
+    for (const image_t id : pending_) {
+      const Image& image = Find(id);
+      HashJob job;
+      job.parts = image.parts;
+      job.block_begin = blocks;
+      blocks += (image.num_features + kHashFeaturesPerBlock - 1) / kHashFeaturesPerBlock;
+      jobs.push_back(job);
+    }
+    DeviceBuffer device_jobs(jobs.size() * sizeof(HashJob), "hash jobs");
+    CUDA_CHECK(cudaMemcpy(device_jobs.as<HashJob>(), jobs.data(), jobs.size() * sizeof(HashJob),
+                          cudaMemcpyHostToDevice));
+    HashParams params;
+    params.projections_t = projections_t_.as<float>();
+    params.row_offsets = row_offsets_.as<float>();
+    params.num_tables = options_.num_tables;
+    params.bits_per_table = options_.bits_per_table;
+    params.rows_padded = rows_padded_;
+    LaunchHashAndBucket(device_jobs.as<HashJob>(), static_cast<int>(jobs.size()), blocks, params,
+                        slots_[0].stream);
+    CUDA_CHECK(cudaStreamSynchronize(slots_[0].stream));
+    pending_.clear();
+  }
+
+  // Device bytes of a batch slot sized for `tasks` pairs and `queries`
+  // forward queries.
+  static size_t SlotBytes(size_t tasks, size_t queries) {
+    return tasks * sizeof(PairTask) + queries * sizeof(int32_t) + 256;
+  }
+
+  // End of the batch starting at `start`: bounded by kMaxBatch* and by the
+  // memory budget left for the two slots.
+  size_t BatchEnd(const std::vector<PairTask>& tasks, size_t start) const {
+    size_t free_for_slots = std::numeric_limits<size_t>::max();
+    if (budget_ != std::numeric_limits<size_t>::max()) {
+      size_t slots_now = 0;
+      for (const BatchSlot& s : slots_) slots_now += SlotBytes(s.task_capacity, s.query_capacity);
+      const size_t images = used_ - slots_now;
+      free_for_slots = budget_ > images ? (budget_ - images) / 2 : 0;
+    }
+    size_t end = start, queries = 0;
+    while (end < tasks.size() && end - start < kMaxBatchPairs) {
+      const size_t q = tasks[end].a.num_features;
+      if (end > start && (queries + q > kMaxBatchQueries || SlotBytes(end + 1 - start, queries + q) > free_for_slots)) {
+        break;
+      }
+      if (end == start && SlotBytes(1, q) > free_for_slots) {
+        throw std::runtime_error("GPU memory budget too small to match a pair of " + std::to_string(q) +
+                                 " features: " + MiB(SlotBytes(1, q)) + " of scratch needed, " +
+                                 MiB(free_for_slots) + " left");
+      }
+      queries += q;
+      ++end;
+    }
+    return end;
+  }
+
+  // Grows the slot's buffers to hold `num_tasks` pairs and `queries` queries.
+  void EnsureCapacity(BatchSlot* slot, size_t num_tasks, size_t queries) {
+    if (num_tasks <= slot->task_capacity && queries <= slot->query_capacity) return;
+    const size_t new_tasks = std::max(num_tasks, slot->task_capacity);
+    const size_t new_queries = std::max(queries, slot->query_capacity);
+    used_ -= SlotBytes(slot->task_capacity, slot->query_capacity);
+    slot->tasks.Release();
+    slot->best.Release();
+    slot->task_capacity = slot->query_capacity = 0;
+    Reserve(SlotBytes(new_tasks, new_queries), "matching scratch");
+    slot->tasks.Allocate(new_tasks * sizeof(PairTask), "pair tasks");
+    slot->best.Allocate(new_queries * sizeof(int32_t), "match results");
+    if (slot->cursor.bytes() == 0) slot->cursor.Allocate(256, "match cursor");
+    slot->host_tasks.Allocate(new_tasks * sizeof(PairTask), false, "pair tasks");
+    slot->segments.Allocate(new_tasks * sizeof(MatchSegment), true, "match segments");
+    slot->out.Allocate(new_queries * sizeof(uint2), true, "matches");
+    slot->task_capacity = new_tasks;
+    slot->query_capacity = new_queries;
+  }
+
+  void Launch(BatchSlot* slot, const std::vector<PairTask>& all_tasks, const std::vector<size_t>& pair_of_task,
+              size_t start, size_t end) {
+    const size_t num_tasks = end - start;
+    size_t queries = 0;
+    uint32_t items = 0;
+    for (size_t k = start; k < end; ++k) queries += all_tasks[k].a.num_features;
+    EnsureCapacity(slot, num_tasks, queries);
+    PairTask* staged = slot->host_tasks.host<PairTask>();
+    uint32_t offset = 0;
+    for (size_t k = 0; k < num_tasks; ++k) {
+      staged[k] = all_tasks[start + k];
+      staged[k].best_offset = offset;
+      staged[k].item_begin = items;
+      offset += staged[k].a.num_features;
+      items += (staged[k].a.num_features + kQueriesPerItem - 1) / kQueriesPerItem;
+    }
+    slot->pair_of_task.assign(pair_of_task.begin() + start, pair_of_task.begin() + end);
+    CUDA_CHECK(cudaMemcpyAsync(slot->tasks.as<PairTask>(), staged, num_tasks * sizeof(PairTask),
+                               cudaMemcpyHostToDevice, slot->stream));
+    CUDA_CHECK(cudaMemsetAsync(slot->cursor.as<uint32_t>(), 0, sizeof(uint32_t), slot->stream));
+    MatchParams params;
+    params.num_tables = options_.num_tables;
+    params.bits_per_table = options_.bits_per_table;
+    params.tau = options_.tau;
+    params.top_k = options_.top_k;
+    params.max_ratio = static_cast<float>(sift_options_.max_ratio);
+    params.max_distance = static_cast<float>(sift_options_.max_distance);
+    LaunchCascadeMatch(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params,
+                       sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+    LaunchCompactMatches(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), slot->best.as<int32_t>(),
+                         slot->out.device<uint2>(), slot->segments.device<MatchSegment>(),
+                         slot->cursor.as<uint32_t>(), slot->stream);
+    CUDA_CHECK(cudaEventRecord(slot->done, slot->stream));
+    slot->busy = true;
+  }
+
+  void Harvest(BatchSlot* slot, std::vector<FeatureMatches>* results) {
+    CUDA_CHECK(cudaEventSynchronize(slot->done));
+    const MatchSegment* segments = slot->segments.host<MatchSegment>();
+    const uint2* out = slot->out.host<uint2>();
+    for (size_t k = 0; k < slot->pair_of_task.size(); ++k) {
+      FeatureMatches& matches = (*results)[slot->pair_of_task[k]];
+      const uint2* first = out + segments[k].begin;
+      matches.resize(segments[k].count);
+      for (uint32_t m = 0; m < segments[k].count; ++m) matches[m] = FeatureMatch{first[m].x, first[m].y};
+    }
+    slot->busy = false;
+  }
+
+  const SiftMatchingOptions sift_options_;
+  const CasHashOptions options_;
+  const int device_;
+  size_t budget_ = 0;
+  size_t used_ = 0;
+  int rows_padded_ = 0;
+  int grid_size_ = 1;
+  DeviceBuffer projections_t_;
+  DeviceBuffer row_offsets_;
+  std::unordered_map<image_t, Image> images_;
+  std::vector<image_t> pending_;
+  BatchSlot slots_[2];
+};
+
+}  // namespace
+
+std::unique_ptr<FeatureMatcher> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean, int gpu_index) {
+  return std::make_unique<GpuCascadeMatcher>(sift_options, cashash_options, mean, gpu_index);
+}
+
+}  // namespace cuda
+}  // namespace cashash

@@ -1,0 +1,62 @@
+// Cascade matching of many image pairs per launch: a persistent grid of
+// warps walks a queue of (pair, chunk of query features) items; one warp
+// answers one query at a time (steps 4 and 5 of cascade_hashing.h), then a
+// reverse pass cross-checks and a compaction pass writes the matches.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "impl/device_image.cuh"
+
+namespace cashash {
+namespace cuda {
+
+// Query features per work item (one warp handles one item).
+constexpr int kQueriesPerItem = 16;
+// The warp keeps the ranked candidates in one register per lane.
+constexpr int kMaxGpuTopK = 32;
+// Feature rows share a 32-bit ranking key with the Hamming distance.
+constexpr uint32_t kMaxGpuFeatures = 1u << 24;
+
+struct PairTask {
+  DeviceImageView a;  // first image of the pair (queries of the forward pass)
+  DeviceImageView b;
+  uint32_t best_offset = 0;  // start of this pair's a.num_features results
+  uint32_t item_begin = 0;   // first work item (ceil(a.n / kQueriesPerItem) items)
+};
+
+struct MatchParams {
+  int num_tables = 0;
+  int bits_per_table = 0;
+  int tau = 0;
+  int top_k = 0;
+  float max_ratio = 0.f;
+  float max_distance = 0.f;
+};
+
+// Segment of one pair's matches in the output: [begin, begin + count).
+struct MatchSegment {
+  uint32_t begin;
+  uint32_t count;
+};
+
+// Number of resident blocks of the matching kernels that fill the device.
+int CascadeMatchGridSize(int device);
+
+// best[task.best_offset + i] = accepted best match in b of feature i of a, or
+// -1; with cross_check, then -1 unless the reverse query of that match gives
+// i back. Asynchronous on `stream`.
+void LaunchCascadeMatch(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                        bool cross_check, int grid_size, int32_t* best, cudaStream_t stream);
+
+// Writes each task's surviving matches (point2D_idx1, point2D_idx2) in
+// ascending idx1 into out (device-visible, e.g. mapped host memory) and its
+// segment into segments[task]; *cursor (device memory, zeroed before)
+// hands out space. Asynchronous on `stream`.
+void LaunchCompactMatches(const PairTask* tasks, int num_tasks, const int32_t* best, uint2* out,
+                          MatchSegment* segments, uint32_t* cursor, cudaStream_t stream);
+
+}  // namespace cuda
+}  // namespace cashash
