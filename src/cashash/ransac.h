@@ -1,0 +1,208 @@
+// LO-RANSAC with COLMAP's stopping rule, over small estimator classes.
+//
+// An estimator provides:
+//   using Model = ...;
+//   static constexpr int kSampleSize;     // minimal sample
+//   static constexpr int kMaxModels;      // most models one solve returns
+//   static constexpr int kMinLocalSize;   // fewest inliers for a local refit
+//   size_t NumData() const;
+//   int MinimalSolve(const int* sample, Model* models) const;
+//   int LocalSolve(const std::vector<int>& inliers, Model* models) const;
+//   RansacSupport Score(const Model&, double max_residual, int must_reach) const;
+//   void Inliers(const Model&, double max_residual, std::vector<int>*) const;
+//   void InlierMask(const Model&, double max_residual, std::vector<char>*) const;
+// where residuals are squared errors compared against max_residual
+// (= max_error^2), and Score may give up (returning num_inliers = -1) once the
+// model cannot reach `must_reach` inliers any more.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <climits>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "cashash/random_sampler.h"
+
+namespace cashash {
+
+struct RansacOptions {
+  double max_error = 4.0;
+  double confidence = 0.999;
+  int min_num_trials = 100;
+  int max_num_trials = 10000;
+  // A priori lowest inlier ratio: caps the trials at the count needed for it.
+  double min_inlier_ratio = 0.25;
+  // COLMAP multiplies the textbook trial count by 3 to be safe.
+  double num_trials_multiplier = 3.0;
+  uint64_t seed = 0;
+};
+
+struct RansacSupport {
+  int num_inliers = 0;
+  double residual_sum = std::numeric_limits<double>::max();
+
+  // More inliers win; ties go to the smaller residual sum (COLMAP's
+  // InlierSupportMeasurer).
+  bool BetterThan(const RansacSupport& other) const {
+    return num_inliers > other.num_inliers ||
+           (num_inliers == other.num_inliers && residual_sum < other.residual_sum);
+  }
+};
+
+template <typename Model>
+struct RansacReport {
+  bool success = false;
+  int num_trials = 0;
+  RansacSupport support;
+  Model model = Model::Zero();
+  std::vector<char> inlier_mask;
+};
+
+// Trials needed to draw one all-inlier sample of `sample_size` with the given
+// confidence, times `multiplier`; saturates at INT_MAX.
+inline int RansacRequiredTrials(size_t num_inliers, size_t num_samples, double confidence,
+                                double multiplier, int sample_size) {
+  const double inlier_ratio = static_cast<double>(num_inliers) / static_cast<double>(num_samples);
+  const double nom = 1.0 - confidence;
+  if (nom <= 0) return INT_MAX;
+  const double denom = 1.0 - std::pow(inlier_ratio, sample_size);
+  if (denom <= 0) return 1;
+  if (denom == 1.0) return INT_MAX;
+  const double trials = std::ceil(std::log(nom) / std::log(denom) * multiplier);
+  return trials >= static_cast<double>(INT_MAX) ? INT_MAX : static_cast<int>(trials);
+}
+
+// The hard cap on trials: max_num_trials, lowered to what min_inlier_ratio
+// would require (COLMAP evaluates this with 100000 hypothetical samples).
+inline int RansacMaxTrials(const RansacOptions& options, int sample_size) {
+  constexpr size_t kNumSamples = 100000;
+  const int from_ratio = RansacRequiredTrials(
+      static_cast<size_t>(options.min_inlier_ratio * kNumSamples), kNumSamples,
+      options.confidence, options.num_trials_multiplier, sample_size);
+  return std::min(options.max_num_trials, from_ratio);
+}
+
+template <typename Estimator>
+RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
+                                                 const RansacOptions& options) {
+  using Model = typename Estimator::Model;
+  constexpr int kSampleSize = Estimator::kSampleSize;
+  constexpr int kMaxLocalIterations = 10;
+
+  RansacReport<Model> report;
+  const size_t num_data = estimator.NumData();
+  if (num_data < static_cast<size_t>(kSampleSize)) return report;
+
+  const double max_residual = options.max_error * options.max_error;
+  const int max_trials = RansacMaxTrials(options, kSampleSize);
+  int dyn_max_trials = max_trials;
+
+  SplitMix64 rng(options.seed);
+  std::array<int, kSampleSize> sample;
+  std::array<Model, Estimator::kMaxModels> models;
+  std::array<Model, Estimator::kMaxModels> local_models;
+  std::vector<int> inliers;
+  inliers.reserve(num_data);
+
+  RansacSupport best;
+  Model best_model = Model::Zero();
+  bool have_model = false;
+  int trials = 0;
+  bool done = false;
+  for (; trials < max_trials && !done; ++trials) {
+    SampleDistinct(rng, static_cast<uint32_t>(num_data), kSampleSize, sample.data());
+    const int num_models = estimator.MinimalSolve(sample.data(), models.data());
+    for (int m = 0; m < num_models; ++m) {
+      const RansacSupport support = estimator.Score(models[m], max_residual, best.num_inliers);
+      if (support.BetterThan(best)) {
+        best = support;
+        best_model = models[m];
+        have_model = true;
+        // Local optimisation: refit on the inliers while the set grows.
+        if (best.num_inliers > kSampleSize && best.num_inliers >= Estimator::kMinLocalSize) {
+          for (int it = 0; it < kMaxLocalIterations; ++it) {
+            estimator.Inliers(best_model, max_residual, &inliers);
+            const int num_local = estimator.LocalSolve(inliers, local_models.data());
+            const int previous = best.num_inliers;
+            for (int l = 0; l < num_local; ++l) {
+              const RansacSupport local =
+                  estimator.Score(local_models[l], max_residual, best.num_inliers);
+              if (local.BetterThan(best)) {
+                best = local;
+                best_model = local_models[l];
+              }
+            }
+            if (best.num_inliers <= previous) break;
+          }
+        }
+        dyn_max_trials = RansacRequiredTrials(best.num_inliers, num_data, options.confidence,
+                                              options.num_trials_multiplier, kSampleSize);
+      }
+      if (trials >= dyn_max_trials && trials >= options.min_num_trials) {
+        done = true;
+        break;
+      }
+    }
+  }
+
+  report.num_trials = trials;
+  report.support = best;
+  report.model = best_model;
+  if (!have_model || best.num_inliers < kSampleSize) return report;
+  report.success = true;
+  estimator.InlierMask(best_model, max_residual, &report.inlier_mask);
+  return report;
+}
+
+// Shared scoring loop: `residual(i)` gives the squared error of pair i. Runs
+// in blocks so the inner loop stays branch-free and vectorisable, and gives up
+// between blocks once `must_reach` inliers are out of reach.
+template <typename ResidualFn>
+inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reach,
+                                    ResidualFn residual) {
+  constexpr size_t kBlock = 256;
+  RansacSupport support;
+  int count = 0;
+  double sum = 0;
+  for (size_t begin = 0; begin < n; begin += kBlock) {
+    const size_t end = std::min(n, begin + kBlock);
+    int block_count = 0;
+    double block_sum = 0;
+    for (size_t i = begin; i < end; ++i) {
+      const double r = residual(i);
+      const bool in = r <= max_residual;
+      block_count += in;
+      block_sum += in ? r : 0.0;
+    }
+    count += block_count;
+    sum += block_sum;
+    if (static_cast<size_t>(count) + (n - end) < static_cast<size_t>(must_reach)) {
+      support.num_inliers = -1;
+      return support;
+    }
+  }
+  support.num_inliers = count;
+  support.residual_sum = sum;
+  return support;
+}
+
+template <typename ResidualFn>
+inline void CollectInliers(size_t n, double max_residual, ResidualFn residual,
+                           std::vector<int>* inliers) {
+  inliers->clear();
+  for (size_t i = 0; i < n; ++i) {
+    if (residual(i) <= max_residual) inliers->push_back(static_cast<int>(i));
+  }
+}
+
+template <typename ResidualFn>
+inline void CollectInlierMask(size_t n, double max_residual, ResidualFn residual,
+                              std::vector<char>* mask) {
+  mask->assign(n, 0);
+  for (size_t i = 0; i < n; ++i) (*mask)[i] = residual(i) <= max_residual;
+}
+
+}  // namespace cashash

@@ -1,0 +1,250 @@
+// COLMAP's two-view verification: F, H (and E with focal priors) by
+// LO-RANSAC, the configuration decision, and the watermark check.
+#include "cashash/two_view_geometry.h"
+
+#include <cmath>
+#include <sstream>
+
+#include <Eigen/Dense>
+
+#include "cashash/camera_models.h"
+#include "cashash/essential_matrix.h"
+#include "cashash/fundamental_matrix.h"
+#include "cashash/homography_matrix.h"
+#include "cashash/point_pairs.h"
+#include "cashash/ransac.h"
+#include "cashash/translation_model.h"
+
+namespace cashash {
+namespace {
+
+// Tags that give each estimator of a pair its own random stream.
+enum SeedTag : uint64_t { kSeedF = 1, kSeedH = 2, kSeedE = 3, kSeedWatermark = 4 };
+
+RansacOptions MakeRansacOptions(const TwoViewGeometryOptions& options, uint64_t tag) {
+  RansacOptions r;
+  r.max_error = options.max_error;
+  r.confidence = options.confidence;
+  r.min_num_trials = options.min_num_trials;
+  r.max_num_trials = options.max_num_trials;
+  r.min_inlier_ratio = options.min_inlier_ratio;
+  r.seed = DeriveSeed(options.random_seed, tag);
+  return r;
+}
+
+FeatureMatches ExtractInlierMatches(const FeatureMatches& matches, const std::vector<char>& mask) {
+  FeatureMatches inliers;
+  for (size_t i = 0; i < matches.size(); ++i) {
+    if (mask[i]) inliers.push_back(matches[i]);
+  }
+  return inliers;
+}
+
+// A point lies in the border band when it is outside the box shrunk by
+// border_size x diagonal on every side (the box edges count as inside).
+bool InBorder(const Camera& camera, double border_size, double x, double y) {
+  const double w = static_cast<double>(camera.width), h = static_cast<double>(camera.height);
+  const double band = border_size * std::sqrt(w * w + h * h);
+  return !(x >= band && x <= w - band && y >= band && y <= h - band);
+}
+
+// COLMAP's DetectWatermark: most inliers lie in the border band of both
+// images and a single 2-D translation explains them.
+bool DetectWatermark(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                     const std::vector<char>& inlier_mask, int num_inliers,
+                     const TwoViewGeometryOptions& options) {
+  if (num_inliers <= 0) return false;
+  PointPairs inliers;
+  inliers.resize(static_cast<size_t>(num_inliers));
+  size_t j = 0;
+  int in_border = 0;
+  for (size_t i = 0; i < inlier_mask.size(); ++i) {
+    if (!inlier_mask[i]) continue;
+    inliers.Set(j++, pixels.x1[i], pixels.y1[i], pixels.x2[i], pixels.y2[i]);
+    if (InBorder(camera1, options.watermark_border_size, pixels.x1[i], pixels.y1[i]) &&
+        InBorder(camera2, options.watermark_border_size, pixels.x2[i], pixels.y2[i])) {
+      ++in_border;
+    }
+  }
+  inliers.resize(j);
+  if (static_cast<double>(in_border) / num_inliers < options.watermark_min_inlier_ratio) {
+    return false;
+  }
+  RansacOptions ransac = MakeRansacOptions(options, kSeedWatermark);
+  ransac.min_inlier_ratio = options.watermark_min_inlier_ratio;
+  const auto report = LoRansac(TranslationEstimator(inliers), ransac);
+  const double ratio = static_cast<double>(std::max(0, report.support.num_inliers)) / num_inliers;
+  return ratio >= options.watermark_min_inlier_ratio;
+}
+
+int NumInliers(const RansacReport<Eigen::Matrix3d>& report) {
+  return report.success ? report.support.num_inliers : 0;
+}
+
+}  // namespace
+
+std::string TwoViewGeometryOptions::Check() const {
+  std::ostringstream error;
+  auto in_unit = [&](const char* name, double value) {
+    if (error.tellp() == 0 && !(value >= 0 && value <= 1)) {
+      error << "TwoViewGeometry." << name << " must be in [0, 1]";
+    }
+  };
+  if (min_num_inliers < 0) error << "TwoViewGeometry.min_num_inliers must be >= 0";
+  in_unit("min_E_F_inlier_ratio", min_E_F_inlier_ratio);
+  in_unit("max_H_inlier_ratio", max_H_inlier_ratio);
+  in_unit("watermark_min_inlier_ratio", watermark_min_inlier_ratio);
+  in_unit("watermark_border_size", watermark_border_size);
+  if (error.tellp() == 0 && !(max_error > 0)) error << "TwoViewGeometry.max_error must be > 0";
+  in_unit("confidence", confidence);
+  in_unit("min_inlier_ratio", min_inlier_ratio);
+  if (error.tellp() == 0 && min_num_trials < 0) {
+    error << "TwoViewGeometry.min_num_trials must be >= 0";
+  }
+  if (error.tellp() == 0 && max_num_trials < min_num_trials) {
+    error << "TwoViewGeometry.max_num_trials must be >= min_num_trials";
+  }
+  return error.str();
+}
+
+TwoViewGeometry TwoViewGeometry::Inverted() const {
+  TwoViewGeometry inv;
+  inv.config = config;
+  inv.F = F.transpose();
+  inv.E = E.transpose();
+  // An unset (zero) H stays zero rather than turning into NaNs.
+  inv.H = H.isZero(0) ? H : Eigen::Matrix3d(H.inverse());
+  inv.qvec = Eigen::Vector4d(qvec(0), -qvec(1), -qvec(2), -qvec(3));
+  const Eigen::Quaterniond q(qvec(0), qvec(1), qvec(2), qvec(3));
+  inv.tvec = -(q.normalized().toRotationMatrix().transpose() * tvec);
+  inv.inlier_matches.reserve(inlier_matches.size());
+  for (const FeatureMatch& m : inlier_matches) {
+    FeatureMatch swapped;
+    swapped.point2D_idx1 = m.point2D_idx2;
+    swapped.point2D_idx2 = m.point2D_idx1;
+    inv.inlier_matches.push_back(swapped);
+  }
+  return inv;
+}
+
+TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
+                                        const std::vector<Eigen::Vector2d>& points1,
+                                        const Camera& camera2,
+                                        const std::vector<Eigen::Vector2d>& points2,
+                                        const FeatureMatches& matches,
+                                        const TwoViewGeometryOptions& options) {
+  TwoViewGeometry geometry;
+  const size_t min_num_inliers = static_cast<size_t>(std::max(0, options.min_num_inliers));
+  if (matches.size() < min_num_inliers) {
+    geometry.config = kDegenerate;
+    return geometry;
+  }
+
+  const size_t n = matches.size();
+  PointPairs pixels;
+  pixels.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d& p1 = points1[matches[i].point2D_idx1];
+    const Eigen::Vector2d& p2 = points2[matches[i].point2D_idx2];
+    pixels.Set(i, p1.x(), p1.y(), p2.x(), p2.y());
+  }
+  // F and H run on a normalised copy; one common scale makes the errors
+  // there exactly scale x the pixel errors.
+  PointPairs normalized;
+  const PairNormalization norm = NormalizePointPairs(pixels, &normalized);
+
+  RansacOptions f_options = MakeRansacOptions(options, kSeedF);
+  f_options.max_error = options.max_error * norm.scale;
+  const auto F_report = LoRansac(FundamentalEstimator(normalized), f_options);
+  if (F_report.success) {
+    const Eigen::Matrix3d F = norm.T2.transpose() * F_report.model * norm.T1;
+    geometry.F = F / F.norm();
+  }
+
+  RansacOptions h_options = MakeRansacOptions(options, kSeedH);
+  h_options.max_error = options.max_error * norm.scale;
+  const auto H_report = LoRansac(HomographyEstimator(normalized), h_options);
+  if (H_report.success) {
+    const Eigen::Matrix3d H = norm.T2.inverse() * H_report.model * norm.T1;
+    geometry.H = H / H.norm();
+  }
+
+  const bool calibrated = camera1.has_prior_focal_length && camera2.has_prior_focal_length &&
+                          CameraModelIsSupported(camera1.model_id) &&
+                          CameraModelIsSupported(camera2.model_id);
+  RansacReport<Eigen::Matrix3d> E_report;
+  if (calibrated) {
+    PointPairs world;
+    world.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      double u1, v1, u2, v2;
+      CameraImageToWorld(camera1, pixels.x1[i], pixels.y1[i], &u1, &v1);
+      CameraImageToWorld(camera2, pixels.x2[i], pixels.y2[i], &u2, &v2);
+      world.Set(i, u1, v1, u2, v2);
+    }
+    RansacOptions e_options = MakeRansacOptions(options, kSeedE);
+    // The pixel threshold mapped through each camera's focal length, averaged.
+    e_options.max_error = 0.5 * (options.max_error / CameraMeanFocalLength(camera1) +
+                                 options.max_error / CameraMeanFocalLength(camera2));
+    E_report = LoRansac(EssentialEstimator(world), e_options);
+    if (E_report.success) geometry.E = E_report.model;
+  }
+
+  const int num_F = NumInliers(F_report);
+  const int num_H = NumInliers(H_report);
+  const int num_E = NumInliers(E_report);
+  const int min_inliers = static_cast<int>(min_num_inliers);
+  if ((!F_report.success && !H_report.success && !E_report.success) ||
+      (num_F < min_inliers && num_H < min_inliers && num_E < min_inliers)) {
+    geometry.config = kDegenerate;
+    return geometry;
+  }
+
+  // Ratios as COLMAP computes them, division by zero included (an absent F
+  // makes them infinite).
+  const double E_F_ratio = static_cast<double>(num_E) / num_F;
+  const double H_F_ratio = static_cast<double>(num_H) / num_F;
+  const double H_E_ratio = static_cast<double>(num_H) / num_E;
+
+  const std::vector<char>* mask = nullptr;
+  int num_inliers = 0;
+  auto use = [&](const RansacReport<Eigen::Matrix3d>& report) {
+    mask = &report.inlier_mask;
+    num_inliers = report.support.num_inliers;
+  };
+  if (calibrated && E_report.success && E_F_ratio > options.min_E_F_inlier_ratio &&
+      num_E >= min_inliers) {
+    // Calibrated: keep whichever of E and F explains more matches.
+    use(num_E >= num_F ? E_report : F_report);
+    if (H_E_ratio > options.max_H_inlier_ratio) {
+      geometry.config = kPlanarOrPanoramic;
+      if (num_H > num_inliers) use(H_report);
+    } else {
+      geometry.config = kCalibrated;
+    }
+  } else if (F_report.success && num_F >= min_inliers) {
+    use(F_report);
+    if (H_F_ratio > options.max_H_inlier_ratio) {
+      geometry.config = kPlanarOrPanoramic;
+      // COLMAP 4 keeps H's inliers on a tie; 3.8 kept F's in this branch.
+      if (num_H >= num_F) use(H_report);
+    } else {
+      geometry.config = kUncalibrated;
+    }
+  } else if (H_report.success && num_H >= min_inliers) {
+    use(H_report);
+    geometry.config = kPlanarOrPanoramic;
+  } else {
+    geometry.config = kDegenerate;
+    return geometry;
+  }
+
+  geometry.inlier_matches = ExtractInlierMatches(matches, *mask);
+  if (options.detect_watermark &&
+      DetectWatermark(camera1, camera2, pixels, *mask, num_inliers, options)) {
+    geometry.config = kWatermark;
+  }
+  return geometry;
+}
+
+}  // namespace cashash
