@@ -1,0 +1,174 @@
+// Entry points of the GPU backend (cashash_cuda/gpu_feature_matcher.h): the
+// device queries and the factory, plus the brute-force FeatureMatcher that
+// keeps descriptors on the device and calls the brute-force kernels.
+#include "cashash_cuda/gpu_feature_matcher.h"
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "impl/brute_force_kernels.cuh"
+#include "impl/cascade_feature_matcher.cuh"
+#include "impl/cascade_match_kernels.cuh"
+#include "impl/device_memory.cuh"
+#include "utils/cuda_check.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+// Scratch of the brute-force kernels allowed for one batch of pairs.
+constexpr size_t kBruteForceBatchScratch = size_t{1} << 30;
+
+class GpuBruteForceMatcher : public FeatureMatcher {
+ public:
+  GpuBruteForceMatcher(const SiftMatchingOptions& sift_options, int gpu_index)
+      : sift_options_(sift_options), device_(gpu_index), budget_(MemoryBudgetFromEnvironment()) {
+    const std::string error = sift_options.Check();
+    if (!error.empty()) throw std::invalid_argument(error);
+    std::string reason;
+    if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+    CUDA_CHECK(cudaSetDevice(device_));
+    CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking));
+    kernels_ = std::make_unique<BruteForceKernels>(stream_);
+  }
+  ~GpuBruteForceMatcher() override {
+    cudaSetDevice(device_);
+    kernels_.reset();
+    images_.clear();
+    if (stream_ != nullptr) cudaStreamDestroy(stream_);
+  }
+
+  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override {
+    CUDA_CHECK(cudaSetDevice(device_));
+    RemoveImage(image_id);
+    const size_t n = std::min(descriptors.rows(), static_cast<size_t>(sift_options_.max_num_matches));
+    Image image;
+    image.rows = static_cast<int>(n);
+    if (n > 0) {
+      const size_t bytes = n * kDescriptorDim;
+      if (bytes > budget_ || used_ > budget_ - bytes) {
+        throw std::runtime_error("GPU memory budget exceeded by image " + std::to_string(image_id) + ": it needs " +
+                                 MiB(bytes) + ", " + MiB(used_) + " of " + MiB(budget_) + " are in use");
+      }
+      image.memory.Allocate(bytes, "image descriptors");
+      CUDA_CHECK(cudaMemcpy(image.memory.as<uint8_t>(), descriptors.data.data(), bytes, cudaMemcpyHostToDevice));
+      used_ += bytes;
+    }
+    images_.emplace(image_id, std::move(image));
+  }
+
+  void RemoveImage(image_t image_id) override {
+    const auto it = images_.find(image_id);
+    if (it == images_.end()) return;
+    used_ -= it->second.memory.bytes();
+    images_.erase(it);
+  }
+
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    CUDA_CHECK(cudaSetDevice(device_));
+    std::vector<FeatureMatches> results(pairs.size());
+    std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> batch;
+    std::vector<size_t> batch_pairs;
+    size_t scratch = 0;
+    const auto flush = [&]() {
+      if (batch.empty()) return;
+      std::vector<FeatureMatches> matches = kernels_->MatchPairs(batch, ToMatchThresholds(sift_options_));
+      for (size_t k = 0; k < batch.size(); ++k) results[batch_pairs[k]] = std::move(matches[k]);
+      batch.clear();
+      batch_pairs.clear();
+      scratch = 0;
+    };
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      const Image& a = Find(pairs[i].first);
+      const Image& b = Find(pairs[i].second);
+      if (a.rows == 0 || b.rows == 0) continue;
+      const size_t bytes = BruteForceKernels::MatchPairsScratchBytes(a.rows, b.rows);
+      if (!batch.empty() && scratch + bytes > kBruteForceBatchScratch) flush();
+      batch.emplace_back(DeviceDescriptors{a.memory.as<uint8_t>(), a.rows},
+                         DeviceDescriptors{b.memory.as<uint8_t>(), b.rows});
+      batch_pairs.push_back(i);
+      scratch += bytes;
+    }
+    flush();
+    return results;
+  }
+
+  std::string Name() const override { return "gpu-bruteforce"; }
+
+ private:
+  struct Image {
+    DeviceBuffer memory;
+    int rows = 0;
+  };
+  const Image& Find(image_t image_id) const {
+    const auto it = images_.find(image_id);
+    if (it == images_.end()) {
+      throw std::invalid_argument("GPU matcher: image " + std::to_string(image_id) + " was not added");
+    }
+    return it->second;
+  }
+
+  const SiftMatchingOptions sift_options_;
+  const int device_;
+  const size_t budget_;
+  size_t used_ = 0;
+  cudaStream_t stream_ = nullptr;
+  std::unique_ptr<BruteForceKernels> kernels_;
+  std::unordered_map<image_t, Image> images_;
+};
+
+}  // namespace
+
+int NumCudaDevices() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return 0;
+  }
+  return count;
+}
+
+bool CudaDeviceUsable(int gpu_index, std::string* reason) {
+  auto fail = [reason](const std::string& why) {
+    if (reason != nullptr) *reason = why;
+    return false;
+  };
+  const int count = NumCudaDevices();
+  if (count == 0) return fail("no CUDA device (or no driver) found");
+  if (gpu_index < 0 || gpu_index >= count) {
+    return fail("CUDA device " + std::to_string(gpu_index) + " does not exist (" + std::to_string(count) +
+                " found)");
+  }
+  if (cudaSetDevice(gpu_index) != cudaSuccess) {
+    const cudaError_t e = cudaGetLastError();
+    return fail("cannot use CUDA device " + std::to_string(gpu_index) + ": " + cudaGetErrorString(e));
+  }
+  // The kernels are built for one architecture; this fails when the device
+  // cannot run them (e.g. built for sm_90, device sm_80).
+  try {
+    (void)CascadeMatchGridSize(gpu_index);
+  } catch (const std::exception& e) {
+    (void)cudaGetLastError();
+    return fail("CUDA device " + std::to_string(gpu_index) + " cannot run the kernels: " + e.what());
+  }
+  return true;
+}
+
+std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean, int gpu_index) {
+  if (cashash_options.matcher == MatcherType::kBruteForce) {
+    return std::make_unique<GpuBruteForceMatcher>(sift_options, gpu_index);
+  }
+  return CreateGpuCascadeMatcher(sift_options, cashash_options, mean, gpu_index);
+}
+
+}  // namespace cuda
+}  // namespace cashash
