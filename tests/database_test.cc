@@ -133,6 +133,10 @@ class RawDb {
 
 enum class Schema { kColmap38, kColmap4 };
 
+void PrintTo(Schema schema, std::ostream* os) {
+  *os << (schema == Schema::kColmap38 ? "COLMAP 3.8 database" : "COLMAP 4.x database");
+}
+
 std::string SchemaName(const testing::TestParamInfo<Schema>& info) {
   return info.param == Schema::kColmap38 ? "Colmap38" : "Colmap4";
 }
