@@ -422,6 +422,9 @@ void Database::Rollback() {
     throw DatabaseError("no transaction to roll back on " + impl_->path);
   }
   impl_->in_transaction = false;
+  // SQLite may already have rolled back by itself (disk full, I/O error);
+  // then there is nothing to undo and the caller's original error matters.
+  if (sqlite3_get_autocommit(impl_->db) != 0) return;
   ExecuteSql(impl_->db, "ROLLBACK");
 }
 
