@@ -48,11 +48,14 @@ const MonomialTable& Monomials() {
 // Product of two polynomials whose degrees sum to at most 3.
 Poly Multiply(const Poly& a, const Poly& b) {
   const MonomialTable& t = Monomials();
+  // Higher degrees come first, so a polynomial's terms start at its first
+  // non-zero slot: skipping the leading zeros bounds the loops by the degree.
+  int first_a = 0, first_b = 0;
+  while (first_a < kNumMonomials && a[first_a] == 0) ++first_a;
+  while (first_b < kNumMonomials && b[first_b] == 0) ++first_b;
   Poly out{};
-  for (int i = 0; i < kNumMonomials; ++i) {
-    if (a[i] == 0) continue;
-    for (int j = 0; j < kNumMonomials; ++j) {
-      if (b[j] == 0) continue;
+  for (int i = first_a; i < kNumMonomials; ++i) {
+    for (int j = first_b; j < kNumMonomials; ++j) {
       const int ex = t.exps[i][0] + t.exps[j][0];
       const int ey = t.exps[i][1] + t.exps[j][1];
       const int ez = t.exps[i][2] + t.exps[j][2];
@@ -98,8 +101,12 @@ void NullSpace(const PointPairs& pairs, const int* idx, int count,
     row_of(idx[i], row.data());
     AtA.selfadjointView<Eigen::Lower>().rankUpdate(row);
   }
+  // The least-squares solution is nearest the smallest eigenvector: make it
+  // the constant term E4, so the solution sits near (x, y, z) = 0 rather
+  // than at infinity, where the elimination below would break down.
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> eig(AtA);
-  *basis = eig.eigenvectors().leftCols<4>();
+  basis->col(3) = eig.eigenvectors().col(0);
+  basis->leftCols<3>() = eig.eigenvectors().middleCols<3>(1);
 }
 
 }  // namespace

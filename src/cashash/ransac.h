@@ -157,29 +157,42 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
   return report;
 }
 
-// Shared scoring loop: `residual(i)` gives the squared error of pair i. Runs
-// in blocks so the inner loop stays branch-free and vectorisable, and gives up
-// between blocks once `must_reach` inliers are out of reach.
+// Shared scoring loop: `residual(i)` gives the squared error of pair i. Works
+// in blocks: residuals are first written to a small buffer (a pure map the
+// compiler vectorises; a floating-point sum would otherwise pin the loop to
+// scalar order), then counted and summed in four lanes. Between blocks it
+// gives up once `must_reach` inliers are out of reach.
 template <typename ResidualFn>
 inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reach,
                                     ResidualFn residual) {
   constexpr size_t kBlock = 256;
+  constexpr int kLanes = 4;
+  alignas(64) double r[kBlock];
   RansacSupport support;
   int count = 0;
   double sum = 0;
   for (size_t begin = 0; begin < n; begin += kBlock) {
-    const size_t end = std::min(n, begin + kBlock);
-    int block_count = 0;
-    double block_sum = 0;
-    for (size_t i = begin; i < end; ++i) {
-      const double r = residual(i);
-      const bool in = r <= max_residual;
-      block_count += in;
-      block_sum += in ? r : 0.0;
+    const size_t len = std::min(kBlock, n - begin);
+    for (size_t i = 0; i < len; ++i) r[i] = residual(begin + i);
+    int lane_count[kLanes] = {0, 0, 0, 0};
+    double lane_sum[kLanes] = {0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + kLanes <= len; i += kLanes) {
+      for (int l = 0; l < kLanes; ++l) {
+        const bool in = r[i + l] <= max_residual;
+        lane_count[l] += in;
+        lane_sum[l] += in ? r[i + l] : 0.0;
+      }
     }
-    count += block_count;
-    sum += block_sum;
-    if (static_cast<size_t>(count) + (n - end) < static_cast<size_t>(must_reach)) {
+    for (; i < len; ++i) {
+      const bool in = r[i] <= max_residual;
+      lane_count[0] += in;
+      lane_sum[0] += in ? r[i] : 0.0;
+    }
+    count += (lane_count[0] + lane_count[1]) + (lane_count[2] + lane_count[3]);
+    sum += (lane_sum[0] + lane_sum[1]) + (lane_sum[2] + lane_sum[3]);
+    const size_t remaining = n - begin - len;
+    if (static_cast<size_t>(count) + remaining < static_cast<size_t>(must_reach)) {
       support.num_inliers = -1;
       return support;
     }
