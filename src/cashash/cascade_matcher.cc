@@ -5,6 +5,10 @@
 
 #include "cashash/descriptor_distance.h"
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 namespace cashash {
 
 BucketTables BuildBucketTables(const HashedFeatures& hashed, int bits_per_table) {
@@ -20,6 +24,7 @@ BucketTables BuildBucketTables(const HashedFeatures& hashed, int bits_per_table)
   const int num_tables = hashed.num_tables;
   tables.offsets.assign(num_tables * (num_buckets + 1), 0);
   tables.features.resize(num_tables * n);
+  tables.codes.resize(2 * num_tables * n);
   for (int t = 0; t < num_tables; ++t) {
     uint32_t* offsets = tables.offsets.data() + t * (num_buckets + 1);
     // Counting sort: histogram, exclusive prefix sum, stable scatter.
@@ -33,6 +38,10 @@ BucketTables BuildBucketTables(const HashedFeatures& hashed, int bits_per_table)
     uint32_t* features = tables.features.data() + t * n;
     for (size_t i = 0; i < n; ++i) {
       features[cursor[hashed.bucket_ids[i * num_tables + t]]++] = static_cast<uint32_t>(i);
+    }
+    for (size_t p = 0; p < n; ++p) {
+      tables.codes[2 * (t * n + p)] = hashed.remap_codes[2 * features[p]];
+      tables.codes[2 * (t * n + p) + 1] = hashed.remap_codes[2 * features[p] + 1];
     }
   }
   return tables;
@@ -52,22 +61,33 @@ CascadeImage BuildCascadeImage(const FeatureDescriptors& descriptors, size_t num
 void CascadeStats::Add(const CascadeStats& other) {
   num_queries += other.num_queries;
   bucket_entries += other.bucket_entries;
-  unique_candidates += other.unique_candidates;
   within_tau += other.within_tau;
   ranked += other.ranked;
 }
 
 void CascadeScratch::Reset(size_t num_targets) {
-  stamps_.assign(num_targets, 0);
-  stamp_ = 0;
+  seen_.assign((num_targets + 63) / 64, 0);
 }
 
 namespace {
 
 inline int DescriptorDot(const uint8_t* a, const uint8_t* b) {
+#if defined(__AVX2__)
+  __m256i sum = _mm256_setzero_si256();
+  for (int k = 0; k < kDescriptorDim; k += 16) {
+    const __m256i x = _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(a + k)));
+    const __m256i y = _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(b + k)));
+    sum = _mm256_add_epi32(sum, _mm256_madd_epi16(x, y));
+  }
+  __m128i s = _mm_add_epi32(_mm256_castsi256_si128(sum), _mm256_extracti128_si256(sum, 1));
+  s = _mm_add_epi32(s, _mm_shuffle_epi32(s, _MM_SHUFFLE(1, 0, 3, 2)));
+  s = _mm_add_epi32(s, _mm_shuffle_epi32(s, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm_cvtsi128_si32(s);
+#else
   int dot = 0;
   for (int d = 0; d < kDescriptorDim; ++d) dot += static_cast<int>(a[d]) * static_cast<int>(b[d]);
   return dot;
+#endif
 }
 
 }  // namespace
@@ -103,36 +123,38 @@ class CascadeQuery {
     const uint64_t code0 = query_.hashed.remap_codes[2 * q];
     const uint64_t code1 = query_.hashed.remap_codes[2 * q + 1];
     const uint32_t* query_buckets = query_.hashed.bucket_ids.data() + q * num_tables;
-    const uint64_t* target_codes = target_.hashed.remap_codes.data();
-    uint32_t* stamps = scratch_.stamps_.data();
-    const uint32_t stamp = ++scratch_.stamp_;
+    uint64_t* seen = scratch_.seen_.data();
+    const int tau = tau_;
     std::vector<uint64_t>& keys = scratch_.keys_;
     keys.clear();
 
     uint64_t entries = 0;
-    uint64_t unique = 0;
+    const uint32_t* features = target_.buckets.features.data();
+    const uint64_t* codes = target_.buckets.codes.data();
     for (int t = 0; t < num_tables; ++t) {
-      const uint32_t* it = target_.buckets.begin(t, query_buckets[t]);
-      const uint32_t* end = target_.buckets.end(t, query_buckets[t]);
-      entries += static_cast<uint64_t>(end - it);
-      for (; it != end; ++it) {
-        const uint32_t f = *it;
-        if (stamps[f] == stamp) continue;
-        stamps[f] = stamp;
-        ++unique;
-        const int hamming = __builtin_popcountll(code0 ^ target_codes[2 * f]) +
-                            __builtin_popcountll(code1 ^ target_codes[2 * f + 1]);
+      const size_t end = target_.buckets.end(t, query_buckets[t]);
+      const size_t begin = target_.buckets.begin(t, query_buckets[t]);
+      entries += end - begin;
+      for (size_t p = begin; p < end; ++p) {
+        const int hamming = __builtin_popcountll(code0 ^ codes[2 * p]) +
+                            __builtin_popcountll(code1 ^ codes[2 * p + 1]);
+        if (hamming > tau) continue;
+        // A feature sharing several buckets is ranked once.
+        const uint32_t f = features[p];
+        const uint64_t bit = uint64_t{1} << (f % 64);
+        if (seen[f / 64] & bit) continue;
+        seen[f / 64] |= bit;
         // Key order = (Hamming distance, feature index) ascending.
-        if (hamming <= tau_) keys.push_back((static_cast<uint64_t>(hamming) << 32) | f);
+        keys.push_back((static_cast<uint64_t>(hamming) << 32) | f);
       }
     }
+    for (const uint64_t key : keys) seen[static_cast<uint32_t>(key) / 64] = 0;
     const size_t num_ranked = std::min(top_k_, keys.size());
     if (num_ranked < keys.size()) {
       std::nth_element(keys.begin(), keys.begin() + num_ranked, keys.end());
     }
     ++local_stats_.num_queries;
     local_stats_.bucket_entries += entries;
-    local_stats_.unique_candidates += unique;
     local_stats_.within_tau += keys.size();
     local_stats_.ranked += num_ranked;
 

@@ -23,16 +23,17 @@ struct BucketTables {
   size_t num_features = 0;
   std::vector<uint32_t> offsets;
   std::vector<uint32_t> features;
+  // The remap code of features[i] at codes[2 * i], codes[2 * i + 1]: ranking
+  // then reads codes in bucket order instead of jumping across the image.
+  std::vector<uint64_t> codes;
 
   size_t num_buckets() const { return size_t{1} << bits_per_table; }
-  // [begin, end) of the features in bucket `bucket` of table `table`.
-  const uint32_t* begin(int table, uint32_t bucket) const {
-    return features.data() + table * num_features +
-           offsets[table * (num_buckets() + 1) + bucket];
+  // [begin, end) positions in `features` of bucket `bucket` of table `table`.
+  size_t begin(int table, uint32_t bucket) const {
+    return table * num_features + offsets[table * (num_buckets() + 1) + bucket];
   }
-  const uint32_t* end(int table, uint32_t bucket) const {
-    return features.data() + table * num_features +
-           offsets[table * (num_buckets() + 1) + bucket + 1];
+  size_t end(int table, uint32_t bucket) const {
+    return table * num_features + offsets[table * (num_buckets() + 1) + bucket + 1];
   }
 };
 
@@ -54,10 +55,11 @@ CascadeImage BuildCascadeImage(const FeatureDescriptors& descriptors, size_t num
 // Candidate counts summed over queries, to tune the parameters.
 struct CascadeStats {
   uint64_t num_queries = 0;
-  uint64_t bucket_entries = 0;     // bucket entries visited (with repeats)
-  uint64_t unique_candidates = 0;  // distinct features sharing a bucket
-  uint64_t within_tau = 0;         // of those, Hamming distance <= tau
-  uint64_t ranked = 0;             // kept for the exact distance (<= top_k)
+  // Bucket entries visited: features sharing a bucket, counted once per
+  // table they share (the Hamming distance is computed for each).
+  uint64_t bucket_entries = 0;
+  uint64_t within_tau = 0;  // distinct candidates with Hamming distance <= tau
+  uint64_t ranked = 0;      // kept for the exact distance (<= top_k)
 
   void Add(const CascadeStats& other);
 };
@@ -70,8 +72,9 @@ class CascadeScratch {
 
  private:
   friend class CascadeQuery;
-  std::vector<uint32_t> stamps_;
-  uint32_t stamp_ = 0;
+  // One bit per target feature: "already a candidate of this query". Small
+  // enough to stay in L1; each query clears the bits it set.
+  std::vector<uint64_t> seen_;
   std::vector<uint64_t> keys_;
 };
 
