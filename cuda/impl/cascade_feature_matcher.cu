@@ -117,9 +117,14 @@ class GpuCascadeMatcher : public FeatureMatcher {
       image.memory.Allocate(layout.total, "image features");
       image.bytes = layout.total;
       image.parts = layout.Parts(image.memory.as<void>(), image.num_features);
-      CUDA_CHECK(cudaMemcpy(image.parts.descriptors, descriptors.data.data(), n * kDescriptorDim,
-                            cudaMemcpyHostToDevice));
-      CUDA_CHECK(cudaMemset(image.parts.offsets, 0, layout.offsets_bytes));
+      // On the stream that hashes: the upload and the zeroed counts are
+      // ordered before the hash launch (the streams do not sync with the
+      // legacy default stream).
+      CUDA_CHECK(cudaMemcpyAsync(image.parts.descriptors, descriptors.data.data(), n * kDescriptorDim,
+                                 cudaMemcpyHostToDevice, slots_[0].stream));
+      CUDA_CHECK(cudaMemsetAsync(image.parts.offsets, 0, layout.offsets_bytes, slots_[0].stream));
+      // `descriptors` may go away once we return.
+      CUDA_CHECK(cudaStreamSynchronize(slots_[0].stream));
       pending_.push_back(image_id);
     }
     images_.emplace(image_id, std::move(image));
@@ -227,6 +232,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
                           cudaMemcpyHostToDevice));
     CUDA_CHECK(cudaMemcpy(row_offsets_.as<float>(), offsets.data(), offsets.size() * sizeof(float),
                           cudaMemcpyHostToDevice));
+    // Pageable copies may still be in flight on return; the hash kernels run
+    // on non-blocking streams that do not wait for them.
+    CUDA_CHECK(cudaDeviceSynchronize());
   }
 
   // Hashes and buckets every image added since the last call, in one launch.
@@ -243,8 +251,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
       jobs.push_back(job);
     }
     DeviceBuffer device_jobs(jobs.size() * sizeof(HashJob), "hash jobs");
-    CUDA_CHECK(cudaMemcpy(device_jobs.as<HashJob>(), jobs.data(), jobs.size() * sizeof(HashJob),
-                          cudaMemcpyHostToDevice));
+    CUDA_CHECK(cudaMemcpyAsync(device_jobs.as<HashJob>(), jobs.data(), jobs.size() * sizeof(HashJob),
+                               cudaMemcpyHostToDevice, slots_[0].stream));
     HashParams params;
     params.projections_t = projections_t_.as<float>();
     params.row_offsets = row_offsets_.as<float>();
