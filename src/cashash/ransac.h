@@ -24,6 +24,10 @@
 #include <limits>
 #include <vector>
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 #include "cashash/random_sampler.h"
 
 namespace cashash {
@@ -160,13 +164,12 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
 // Shared scoring loop: `residual(i)` gives the squared error of pair i. Works
 // in blocks: residuals are first written to a small buffer (a pure map the
 // compiler vectorises; a floating-point sum would otherwise pin the loop to
-// scalar order), then counted and summed in four lanes. Between blocks it
+// scalar order), then counted and summed in four SIMD lanes. Between blocks it
 // gives up once `must_reach` inliers are out of reach.
 template <typename ResidualFn>
 inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reach,
                                     ResidualFn residual) {
   constexpr size_t kBlock = 256;
-  constexpr int kLanes = 4;
   alignas(64) double r[kBlock];
   RansacSupport support;
   int count = 0;
@@ -174,23 +177,34 @@ inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reac
   for (size_t begin = 0; begin < n; begin += kBlock) {
     const size_t len = std::min(kBlock, n - begin);
     for (size_t i = 0; i < len; ++i) r[i] = residual(begin + i);
-    int lane_count[kLanes] = {0, 0, 0, 0};
-    double lane_sum[kLanes] = {0, 0, 0, 0};
+    int block_count = 0;
+    double block_sum = 0;
     size_t i = 0;
-    for (; i + kLanes <= len; i += kLanes) {
-      for (int l = 0; l < kLanes; ++l) {
-        const bool in = r[i + l] <= max_residual;
-        lane_count[l] += in;
-        lane_sum[l] += in ? r[i + l] : 0.0;
-      }
+#if defined(__AVX2__)
+    // Compare-and-mask in four lanes: the mask selects 1.0 for the count and
+    // the residual itself for the sum (NaN residuals compare false).
+    const __m256d threshold = _mm256_set1_pd(max_residual);
+    const __m256d one = _mm256_set1_pd(1.0);
+    __m256d lane_count = _mm256_setzero_pd(), lane_sum = _mm256_setzero_pd();
+    for (; i + 4 <= len; i += 4) {
+      const __m256d v = _mm256_load_pd(r + i);
+      const __m256d in = _mm256_cmp_pd(v, threshold, _CMP_LE_OQ);
+      lane_count = _mm256_add_pd(lane_count, _mm256_and_pd(in, one));
+      lane_sum = _mm256_add_pd(lane_sum, _mm256_and_pd(in, v));
     }
+    alignas(32) double counts[4], sums[4];
+    _mm256_store_pd(counts, lane_count);
+    _mm256_store_pd(sums, lane_sum);
+    block_count = static_cast<int>((counts[0] + counts[1]) + (counts[2] + counts[3]));
+    block_sum = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+#endif
     for (; i < len; ++i) {
       const bool in = r[i] <= max_residual;
-      lane_count[0] += in;
-      lane_sum[0] += in ? r[i] : 0.0;
+      block_count += in;
+      block_sum += in ? r[i] : 0.0;
     }
-    count += (lane_count[0] + lane_count[1]) + (lane_count[2] + lane_count[3]);
-    sum += (lane_sum[0] + lane_sum[1]) + (lane_sum[2] + lane_sum[3]);
+    count += block_count;
+    sum += block_sum;
     const size_t remaining = n - begin - len;
     if (static_cast<size_t>(count) + remaining < static_cast<size_t>(must_reach)) {
       support.num_inliers = -1;
