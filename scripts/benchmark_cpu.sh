@@ -34,6 +34,10 @@ copy_db() {
 }
 
 [[ -x "$CASHASH" ]] || { echo "cashash not found at $CASHASH (set CASHASH_BINARY)"; exit 1; }
+# What the table needs to be read correctly later: when, where, how loaded.
+echo "Date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+echo "Machine: $(lscpu | sed -n 's/^Model name: *//p' | head -1), $(nproc) cores; $(uptime | sed 's/.*load/load/')"
+echo "COLMAP: $(colmap -h 2>/dev/null | head -1 | sed 's/ --.*//'); cashash: $CASHASH"
 rm -rf "$WORK"
 mkdir -p "$WORK"
 BASE="$WORK/features.db"
@@ -88,6 +92,7 @@ for method in colmap cascade bruteforce; do
   fi
 done
 
+echo "Finished: $(uptime | sed 's/.*load/load/')"
 python3 - "$WORK" "$NAME" "${SECONDS_OF[colmap]}" "${SECONDS_OF[cascade]}" "${SECONDS_OF[bruteforce]}" <<'PY'
 import json, sqlite3, sys
 

@@ -29,8 +29,9 @@ if [[ "${CASHASH_SKIP_DEPS:-0}" != 1 ]]; then
 fi
 
 step "Building cashash (Release; CUDA backend if nvcc is found) in $BUILD"
-cmake -S "$REPO" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >"$BUILD.configure.log" 2>&1 ||
-  { cat "$BUILD.configure.log"; exit 1; }
+mkdir -p "$BUILD"
+cmake -S "$REPO" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >"$BUILD/configure.log" 2>&1 ||
+  { cat "$BUILD/configure.log"; exit 1; }
 cmake --build "$BUILD" -j"$JOBS" --target cashash
 CASHASH="$BUILD/colmap_bridge/cashash"
 
