@@ -125,37 +125,68 @@ class CascadeQuery {
     const uint32_t* query_buckets = query_.hashed.bucket_ids.data() + q * num_tables;
     uint64_t* seen = scratch_.seen_.data();
     const int tau = tau_;
-    std::vector<uint64_t>& keys = scratch_.keys_;
-    keys.clear();
-
-    uint64_t entries = 0;
     const uint32_t* features = target_.buckets.features.data();
     const uint64_t* codes = target_.buckets.codes.data();
+
+    size_t entries = 0;
+    for (int t = 0; t < num_tables; ++t) {
+      entries += target_.buckets.end(t, query_buckets[t]) - target_.buckets.begin(t, query_buckets[t]);
+    }
+    std::vector<uint64_t>& keys = scratch_.keys_;
+    if (keys.size() < entries) keys.resize(entries);
+    uint32_t* histogram = scratch_.histogram_.data();
+    std::fill(histogram, histogram + tau + 1, 0u);
+
+    // Branch-free scan: whether an entry is kept (within tau and not yet a
+    // candidate of this query) is unpredictable, so it is computed, not
+    // branched on.
+    size_t num_keys = 0;
     for (int t = 0; t < num_tables; ++t) {
       const size_t end = target_.buckets.end(t, query_buckets[t]);
-      const size_t begin = target_.buckets.begin(t, query_buckets[t]);
-      entries += end - begin;
-      for (size_t p = begin; p < end; ++p) {
+      for (size_t p = target_.buckets.begin(t, query_buckets[t]); p < end; ++p) {
         const int hamming = __builtin_popcountll(code0 ^ codes[2 * p]) +
                             __builtin_popcountll(code1 ^ codes[2 * p + 1]);
-        if (hamming > tau) continue;
-        // A feature sharing several buckets is ranked once.
         const uint32_t f = features[p];
         const uint64_t bit = uint64_t{1} << (f % 64);
-        if (seen[f / 64] & bit) continue;
-        seen[f / 64] |= bit;
+        const uint64_t word = seen[f / 64];
+        const bool keep = hamming <= tau && (word & bit) == 0;
+        seen[f / 64] = word | (keep ? bit : 0);
         // Key order = (Hamming distance, feature index) ascending.
-        keys.push_back((static_cast<uint64_t>(hamming) << 32) | f);
+        keys[num_keys] = (static_cast<uint64_t>(hamming) << 32) | f;
+        num_keys += keep;
+        histogram[keep ? hamming : 0] += keep;
       }
     }
-    for (const uint64_t key : keys) seen[static_cast<uint32_t>(key) / 64] = 0;
-    const size_t num_ranked = std::min(top_k_, keys.size());
-    if (num_ranked < keys.size()) {
-      std::nth_element(keys.begin(), keys.begin() + num_ranked, keys.end());
+    for (size_t i = 0; i < num_keys; ++i) seen[static_cast<uint32_t>(keys[i]) / 64] = 0;
+
+    // The top_k keys: every key below the cut-off distance, then the lowest
+    // indices at the cut-off distance.
+    const size_t num_ranked = std::min(top_k_, num_keys);
+    if (num_ranked < num_keys) {
+      int cutoff = 0;
+      size_t below = 0;
+      while (below + histogram[cutoff] < num_ranked) below += histogram[cutoff++];
+      uint64_t* ties = keys.data() + num_keys;  // scratch space behind the keys
+      if (keys.size() < 2 * num_keys) {
+        keys.resize(2 * num_keys);
+        ties = keys.data() + num_keys;
+      }
+      size_t num_selected = 0, num_ties = 0;
+      for (size_t i = 0; i < num_keys; ++i) {
+        const int hamming = static_cast<int>(keys[i] >> 32);
+        if (hamming < cutoff) {
+          keys[num_selected++] = keys[i];
+        } else if (hamming == cutoff) {
+          ties[num_ties++] = keys[i];
+        }
+      }
+      const size_t need = num_ranked - num_selected;
+      if (need < num_ties) std::nth_element(ties, ties + need, ties + num_ties);
+      std::copy(ties, ties + need, keys.begin() + num_selected);
     }
     ++local_stats_.num_queries;
     local_stats_.bucket_entries += entries;
-    local_stats_.within_tau += keys.size();
+    local_stats_.within_tau += num_keys;
     local_stats_.ranked += num_ranked;
 
     // Best and second best by (dot descending, index ascending); the order

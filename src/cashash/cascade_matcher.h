@@ -2,6 +2,7 @@
 // definition in cascade_hashing.h (steps 4 to 6).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -76,6 +77,8 @@ class CascadeScratch {
   // enough to stay in L1; each query clears the bits it set.
   std::vector<uint64_t> seen_;
   std::vector<uint64_t> keys_;
+  // Candidates per Hamming distance, for the top_k selection.
+  std::array<uint32_t, CasHashOptions::kRemapBits + 1> histogram_{};
 };
 
 // Best match in `target` of each feature of `query` (steps 4 and 5): one
