@@ -40,7 +40,17 @@ static_assert(kTileCols <= PackedBestTwo::kPositions, "tile positions must fit t
 // Dots at or above 512^2 all have angle 0 (the cosine is clamped to 1).
 constexpr int kAngleTableMaxDot = 512 * 512;
 
-__global__ void __launch_bounds__(kThreads, 2)
+// Variants measured on an H100 (docs/gpu_brute_force_design.md): 2 blocks per
+// SM with the strip loop unrolled twice was the fastest.
+#ifndef CASHASH_BF_MIN_BLOCKS
+#define CASHASH_BF_MIN_BLOCKS 2  // blocks per SM the register budget is sized for
+#endif
+#ifndef CASHASH_BF_STRIP_UNROLL
+#define CASHASH_BF_STRIP_UNROLL 2  // 8-column strips per unrolled step
+#endif
+constexpr int kStripUnroll = CASHASH_BF_STRIP_UNROLL;
+
+__global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
     BestTwoKernel(const BestTwoProblem* __restrict__ problems, const int2* __restrict__ items, int key_scale) {
   __shared__ __align__(128) uint8_t tiles[2][kTileBytes];
 
@@ -107,7 +117,7 @@ __global__ void __launch_bounds__(kThreads, 2)
     __syncthreads();
 
     const uint32_t stage = SharedAddress(&tiles[tile & 1][0]) + lane_offset;
-#pragma unroll 2
+#pragma unroll(kStripUnroll)
     for (int n = 0; n < kTileCols / 8; ++n) {
       uint32_t b[8];
       {
@@ -130,6 +140,13 @@ __global__ void __launch_bounds__(kThreads, 2)
       // scale comes in as a kernel argument so the multiply stays an IMAD
       // (FMA pipe) instead of a shift on the min/max (ALU) pipe.
       const int position_key = PackedBestTwo::kPositions - 1 - (n * 8 + 2 * t);
+#ifdef CASHASH_BF_PROBE_MMA_ONLY
+      // Timing probe only (wrong results): the tensor-core part without the
+      // best-two selection, one add per dot to keep the products alive.
+#pragma unroll
+      for (int i = 0; i < 4; ++i) window[2 * i].best += acc[i][0] + acc[i][1] + acc[i][2] + acc[i][3];
+      (void)position_key;
+#else
 #pragma unroll
       for (int i = 0; i < 4; ++i) {
         window[2 * i].Push(acc[i][0] * key_scale + position_key);
@@ -137,6 +154,7 @@ __global__ void __launch_bounds__(kThreads, 2)
         window[2 * i + 1].Push(acc[i][2] * key_scale + position_key);
         window[2 * i + 1].Push(acc[i][3] * key_scale + position_key - 1);
       }
+#endif
     }
     const int col0 = tile * kTileCols;
 #pragma unroll
