@@ -22,20 +22,22 @@ bool FundamentalEightPoint(const PointPairs& pairs, const std::vector<int>& idx,
                            Eigen::Matrix3d* model);
 
 // Squared Sampson error of pair i under F (row-major entries f[9]).
-inline double SampsonSquaredError(const double* f, double x1, double y1, double x2, double y2) {
-  const double a = f[0] * x1 + f[1] * y1 + f[2];
-  const double b = f[3] * x1 + f[4] * y1 + f[5];
-  const double c = f[6] * x1 + f[7] * y1 + f[8];
-  const double d = f[0] * x2 + f[3] * y2 + f[6];
-  const double e = f[1] * x2 + f[4] * y2 + f[7];
-  const double num = x2 * a + y2 * b + c;
+template <typename T>
+inline T SampsonSquaredError(const T* f, T x1, T y1, T x2, T y2) {
+  const T a = f[0] * x1 + f[1] * y1 + f[2];
+  const T b = f[3] * x1 + f[4] * y1 + f[5];
+  const T c = f[6] * x1 + f[7] * y1 + f[8];
+  const T d = f[0] * x2 + f[3] * y2 + f[6];
+  const T e = f[1] * x2 + f[4] * y2 + f[7];
+  const T num = x2 * a + y2 * b + c;
   return num * num / (a * a + b * b + d * d + e * e);
 }
 
 // Row-major copy of a 3x3 matrix, the layout the residual loops read.
-inline void RowMajor(const Eigen::Matrix3d& m, double* out) {
+template <typename T>
+inline void RowMajor(const Eigen::Matrix3d& m, T* out) {
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) out[3 * r + c] = m(r, c);
+    for (int c = 0; c < 3; ++c) out[3 * r + c] = static_cast<T>(m(r, c));
 }
 
 // Sampson-error scoring shared by the F and E estimators.
@@ -45,27 +47,27 @@ class EpipolarScorer {
   size_t NumData() const { return pairs_.size(); }
 
   RansacSupport Score(const Eigen::Matrix3d& model, double max_residual, int must_reach) const {
-    double f[9];
+    float f[9];
     RowMajor(model, f);
-    const double *x1 = pairs_.x1.data(), *y1 = pairs_.y1.data();
-    const double *x2 = pairs_.x2.data(), *y2 = pairs_.y2.data();
-    return ScoreResiduals(pairs_.size(), max_residual, must_reach, [&](size_t i) {
-      return SampsonSquaredError(f, x1[i], y1[i], x2[i], y2[i]);
-    });
+    const float *x1 = pairs_.fx1.data(), *y1 = pairs_.fy1.data();
+    const float *x2 = pairs_.fx2.data(), *y2 = pairs_.fy2.data();
+    return ScoreResiduals(pairs_.size(), max_residual, must_reach,
+                          [&](size_t i) { return SampsonSquaredError(f, x1[i], y1[i], x2[i], y2[i]); });
   }
   void Inliers(const Eigen::Matrix3d& model, double max_residual, std::vector<int>* out) const {
-    double f[9];
+    float f[9];
     RowMajor(model, f);
-    CollectInliers(pairs_.size(), max_residual, [&](size_t i) {
-      return SampsonSquaredError(f, pairs_.x1[i], pairs_.y1[i], pairs_.x2[i], pairs_.y2[i]);
-    }, out);
+    CollectInliers(pairs_.size(), max_residual, [&](size_t i) { return Residual(f, i); }, out);
   }
   void InlierMask(const Eigen::Matrix3d& model, double max_residual, std::vector<char>* out) const {
-    double f[9];
+    float f[9];
     RowMajor(model, f);
-    CollectInlierMask(pairs_.size(), max_residual, [&](size_t i) {
-      return SampsonSquaredError(f, pairs_.x1[i], pairs_.y1[i], pairs_.x2[i], pairs_.y2[i]);
-    }, out);
+    CollectInlierMask(pairs_.size(), max_residual, [&](size_t i) { return Residual(f, i); }, out);
+  }
+
+ private:
+  float Residual(const float* f, size_t i) const {
+    return SampsonSquaredError(f, pairs_.fx1[i], pairs_.fy1[i], pairs_.fx2[i], pairs_.fy2[i]);
   }
 
  protected:

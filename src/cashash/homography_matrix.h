@@ -20,12 +20,12 @@ bool HomographyFourPoint(const PointPairs& pairs, const int* idx, Eigen::Matrix3
 bool HomographyDlt(const PointPairs& pairs, const std::vector<int>& idx, Eigen::Matrix3d* model);
 
 // Squared distance between x2 and H x1 (h: row-major entries).
-inline double HomographyTransferSquaredError(const double* h, double x1, double y1, double x2,
-                                             double y2) {
-  const double w = h[6] * x1 + h[7] * y1 + h[8];
-  const double inv_w = 1.0 / w;
-  const double du = (h[0] * x1 + h[1] * y1 + h[2]) * inv_w - x2;
-  const double dv = (h[3] * x1 + h[4] * y1 + h[5]) * inv_w - y2;
+template <typename T>
+inline T HomographyTransferSquaredError(const T* h, T x1, T y1, T x2, T y2) {
+  const T w = h[6] * x1 + h[7] * y1 + h[8];
+  const T inv_w = T(1) / w;
+  const T du = (h[0] * x1 + h[1] * y1 + h[2]) * inv_w - x2;
+  const T dv = (h[3] * x1 + h[4] * y1 + h[5]) * inv_w - y2;
   return du * du + dv * dv;
 }
 
@@ -46,32 +46,31 @@ class HomographyEstimator {
     return HomographyDlt(pairs_, inliers, models) ? 1 : 0;
   }
   RansacSupport Score(const Model& model, double max_residual, int must_reach) const {
-    double h[9];
+    float h[9];
     RowMajor(model, h);
-    const double *x1 = pairs_.x1.data(), *y1 = pairs_.y1.data();
-    const double *x2 = pairs_.x2.data(), *y2 = pairs_.y2.data();
+    const float *x1 = pairs_.fx1.data(), *y1 = pairs_.fy1.data();
+    const float *x2 = pairs_.fx2.data(), *y2 = pairs_.fy2.data();
     return ScoreResiduals(pairs_.size(), max_residual, must_reach, [&](size_t i) {
       return HomographyTransferSquaredError(h, x1[i], y1[i], x2[i], y2[i]);
     });
   }
   void Inliers(const Model& model, double max_residual, std::vector<int>* out) const {
-    double h[9];
+    float h[9];
     RowMajor(model, h);
-    CollectInliers(pairs_.size(), max_residual, [&](size_t i) {
-      return HomographyTransferSquaredError(h, pairs_.x1[i], pairs_.y1[i], pairs_.x2[i],
-                                            pairs_.y2[i]);
-    }, out);
+    CollectInliers(pairs_.size(), max_residual, [&](size_t i) { return Residual(h, i); }, out);
   }
   void InlierMask(const Model& model, double max_residual, std::vector<char>* out) const {
-    double h[9];
+    float h[9];
     RowMajor(model, h);
-    CollectInlierMask(pairs_.size(), max_residual, [&](size_t i) {
-      return HomographyTransferSquaredError(h, pairs_.x1[i], pairs_.y1[i], pairs_.x2[i],
-                                            pairs_.y2[i]);
-    }, out);
+    CollectInlierMask(pairs_.size(), max_residual, [&](size_t i) { return Residual(h, i); }, out);
   }
 
  private:
+  float Residual(const float* h, size_t i) const {
+    return HomographyTransferSquaredError(h, pairs_.fx1[i], pairs_.fy1[i], pairs_.fx2[i],
+                                          pairs_.fy2[i]);
+  }
+
   const PointPairs& pairs_;
 };
 

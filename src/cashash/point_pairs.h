@@ -1,5 +1,8 @@
 // Corresponding 2-D points stored as four flat arrays (structure of arrays),
 // so that scoring a model over all pairs is a straight vectorisable loop.
+// Solvers read the double arrays; model scoring reads the float mirrors,
+// which fit eight to an AVX register (the coordinates are normalised to unit
+// scale or are pixels, where float resolves far below the 4 px threshold).
 #pragma once
 
 #include <cstddef>
@@ -11,6 +14,7 @@ namespace cashash {
 
 struct PointPairs {
   std::vector<double> x1, y1, x2, y2;
+  std::vector<float> fx1, fy1, fx2, fy2;
 
   size_t size() const { return x1.size(); }
   void resize(size_t n) {
@@ -18,12 +22,20 @@ struct PointPairs {
     y1.resize(n);
     x2.resize(n);
     y2.resize(n);
+    fx1.resize(n);
+    fy1.resize(n);
+    fx2.resize(n);
+    fy2.resize(n);
   }
   void Set(size_t i, double ax, double ay, double bx, double by) {
     x1[i] = ax;
     y1[i] = ay;
     x2[i] = bx;
     y2[i] = by;
+    fx1[i] = static_cast<float>(ax);
+    fy1[i] = static_cast<float>(ay);
+    fx2[i] = static_cast<float>(bx);
+    fy2[i] = static_cast<float>(by);
   }
 };
 

@@ -161,7 +161,7 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
   return report;
 }
 
-// Shared scoring loop: `residual(i)` gives the squared error of pair i. Works
+// Shared scoring loop: `residual(i)` gives the squared error (float) of pair i. Works
 // in blocks: residuals are first written to a small buffer (a pure map the
 // compiler vectorises; a floating-point sum would otherwise pin the loop to
 // scalar order), then counted and summed in four SIMD lanes. Between blocks it
@@ -170,7 +170,8 @@ template <typename ResidualFn>
 inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reach,
                                     ResidualFn residual) {
   constexpr size_t kBlock = 256;
-  alignas(64) double r[kBlock];
+  alignas(64) float r[kBlock];
+  const float threshold_f = static_cast<float>(max_residual);
   RansacSupport support;
   int count = 0;
   double sum = 0;
@@ -181,25 +182,28 @@ inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reac
     double block_sum = 0;
     size_t i = 0;
 #if defined(__AVX2__)
-    // Compare-and-mask in four lanes: the mask selects 1.0 for the count and
-    // the residual itself for the sum (NaN residuals compare false).
-    const __m256d threshold = _mm256_set1_pd(max_residual);
-    const __m256d one = _mm256_set1_pd(1.0);
-    __m256d lane_count = _mm256_setzero_pd(), lane_sum = _mm256_setzero_pd();
-    for (; i + 4 <= len; i += 4) {
-      const __m256d v = _mm256_load_pd(r + i);
-      const __m256d in = _mm256_cmp_pd(v, threshold, _CMP_LE_OQ);
-      lane_count = _mm256_add_pd(lane_count, _mm256_and_pd(in, one));
-      lane_sum = _mm256_add_pd(lane_sum, _mm256_and_pd(in, v));
+    // Compare-and-mask in eight lanes: the mask selects 1 for the count and
+    // the residual itself for the sum (NaN residuals compare false). Counts
+    // stay exact in float: a lane sees at most kBlock / 8 pairs.
+    const __m256 threshold = _mm256_set1_ps(threshold_f);
+    const __m256 one = _mm256_set1_ps(1.0f);
+    __m256 lane_count = _mm256_setzero_ps(), lane_sum = _mm256_setzero_ps();
+    for (; i + 8 <= len; i += 8) {
+      const __m256 v = _mm256_load_ps(r + i);
+      const __m256 in = _mm256_cmp_ps(v, threshold, _CMP_LE_OQ);
+      lane_count = _mm256_add_ps(lane_count, _mm256_and_ps(in, one));
+      lane_sum = _mm256_add_ps(lane_sum, _mm256_and_ps(in, v));
     }
-    alignas(32) double counts[4], sums[4];
-    _mm256_store_pd(counts, lane_count);
-    _mm256_store_pd(sums, lane_sum);
-    block_count = static_cast<int>((counts[0] + counts[1]) + (counts[2] + counts[3]));
-    block_sum = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    alignas(32) float counts[8], sums[8];
+    _mm256_store_ps(counts, lane_count);
+    _mm256_store_ps(sums, lane_sum);
+    for (int l = 0; l < 8; ++l) {
+      block_count += static_cast<int>(counts[l]);
+      block_sum += sums[l];
+    }
 #endif
     for (; i < len; ++i) {
-      const bool in = r[i] <= max_residual;
+      const bool in = r[i] <= threshold_f;
       block_count += in;
       block_sum += in ? r[i] : 0.0;
     }
@@ -219,17 +223,20 @@ inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reac
 template <typename ResidualFn>
 inline void CollectInliers(size_t n, double max_residual, ResidualFn residual,
                            std::vector<int>* inliers) {
+  // Same float comparison as ScoreResiduals, so counts and sets agree.
+  const float threshold = static_cast<float>(max_residual);
   inliers->clear();
   for (size_t i = 0; i < n; ++i) {
-    if (residual(i) <= max_residual) inliers->push_back(static_cast<int>(i));
+    if (residual(i) <= threshold) inliers->push_back(static_cast<int>(i));
   }
 }
 
 template <typename ResidualFn>
 inline void CollectInlierMask(size_t n, double max_residual, ResidualFn residual,
                               std::vector<char>* mask) {
+  const float threshold = static_cast<float>(max_residual);
   mask->assign(n, 0);
-  for (size_t i = 0; i < n; ++i) (*mask)[i] = residual(i) <= max_residual;
+  for (size_t i = 0; i < n; ++i) (*mask)[i] = residual(i) <= threshold;
 }
 
 }  // namespace cashash

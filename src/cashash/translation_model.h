@@ -46,9 +46,9 @@ class TranslationEstimator {
   }
 
  private:
-  double Residual(const Model& t, size_t i) const {
-    const double dx = pairs_.x1[i] + t.x() - pairs_.x2[i];
-    const double dy = pairs_.y1[i] + t.y() - pairs_.y2[i];
+  float Residual(const Model& t, size_t i) const {
+    const float dx = pairs_.fx1[i] + static_cast<float>(t.x()) - pairs_.fx2[i];
+    const float dy = pairs_.fy1[i] + static_cast<float>(t.y()) - pairs_.fy2[i];
     return dx * dx + dy * dy;
   }
 
