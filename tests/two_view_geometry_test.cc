@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
 
+#include "cashash/camera_projection.h"
 #include "synthetic_two_view.h"
 
 namespace cashash {
@@ -84,6 +85,28 @@ TEST(TwoViewGeometry, WrongFocalPriorFallsBackToF) {
   const TwoViewGeometry g = EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2,
                                                     scene.matches, TwoViewGeometryOptions());
   EXPECT_EQ(g.config, kUncalibrated);
+  EXPECT_GT(InlierRecall(scene, g).first, 0.95);
+}
+
+TEST(TwoViewGeometry, DistortedCameraIsUndistortedForE) {
+  // Re-render the scene through a SIMPLE_RADIAL lens: E must be estimated
+  // on undistorted coordinates to explain the matches.
+  auto scene = MakeScene(SceneOptions());
+  Camera camera;
+  camera.model_id = 2;  // SIMPLE_RADIAL
+  camera.width = scene.width;
+  camera.height = scene.height;
+  camera.params = {scene.K(0, 0), scene.K(0, 2), scene.K(1, 2), -0.12};
+  camera.has_prior_focal_length = true;
+  for (auto* points : {&scene.points1, &scene.points2}) {
+    for (Eigen::Vector2d& p : *points) {
+      const Eigen::Vector3d ray = scene.K.inverse() * p.homogeneous();
+      CameraWorldToImage(camera, ray.x(), ray.y(), &p.x(), &p.y());
+    }
+  }
+  const TwoViewGeometry g = EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2,
+                                                    scene.matches, TwoViewGeometryOptions());
+  EXPECT_EQ(g.config, kCalibrated);
   EXPECT_GT(InlierRecall(scene, g).first, 0.95);
 }
 
