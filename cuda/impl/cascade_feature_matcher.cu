@@ -43,6 +43,10 @@ std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
            std::to_string(kMaxSignatureBits) + ", got " +
            std::to_string(options.num_tables * options.bits_per_table);
   }
+  if (options.num_tables > kMaxGpuTables) {
+    return "the GPU cascade matcher needs CasHash.num_tables <= " + std::to_string(kMaxGpuTables) + ", got " +
+           std::to_string(options.num_tables);
+  }
   if (options.top_k > kMaxGpuTopK) {
     return "the GPU cascade matcher needs CasHash.top_k <= " + std::to_string(kMaxGpuTopK) + ", got " +
            std::to_string(options.top_k);

@@ -17,6 +17,8 @@ namespace cuda {
 constexpr int kQueriesPerItem = 16;
 // The warp keeps the ranked candidates in one register per lane.
 constexpr int kMaxGpuTopK = 32;
+// One lane per table when locating a query's buckets.
+constexpr int kMaxGpuTables = 32;
 // Feature rows share a 32-bit ranking key with the Hamming distance.
 constexpr uint32_t kMaxGpuFeatures = 1u << 24;
 
