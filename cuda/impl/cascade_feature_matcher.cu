@@ -349,6 +349,12 @@ class GpuCascadeMatcher : public FeatureMatcher {
     params.top_k = options_.top_k;
     params.max_ratio = static_cast<float>(sift_options_.max_ratio);
     params.max_distance = static_cast<float>(sift_options_.max_distance);
+    for (int field = 0; field * options_.bits_per_table < 64; ++field) {
+      const int low = field * options_.bits_per_table;
+      const int high = std::min(low + options_.bits_per_table, 64) - 1;
+      params.field_low_bits |= uint64_t{1} << low;
+      params.field_high_bits |= uint64_t{1} << high;
+    }
     LaunchCascadeMatch(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params,
                        sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
     LaunchCompactMatches(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), slot->best.as<int32_t>(),

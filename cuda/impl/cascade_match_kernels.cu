@@ -135,12 +135,14 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, uint64_t sig
                                 __popcll(code.y ^ (uint64_t(c.w) << 32 | c.z));
       const uint32_t candidate = (distance << 24) | s.z;
       if (distance <= tau && candidate < kth) {
-        // Counted only in the first table where it shares the query's bucket.
+        // Counted only in the first table where it shares the query's bucket:
+        // a duplicate has a zero b-bit field of diff below table t. Fields
+        // from t up get their top bit set, then the borrow test finds a zero
+        // field exactly (a borrow can only start at a zero field).
         const uint64_t diff = signature ^ (uint64_t(s.y) << 32 | s.x);
-        bool duplicate = false;
-        for (int earlier = 0; earlier < t; ++earlier) {
-          duplicate |= ((diff >> (earlier * bits)) & bucket_mask) == 0;
-        }
+        const uint64_t below = t == 0 ? 0 : (uint64_t{1} << (t * bits)) - 1;
+        const uint64_t v = (diff & below) | (params.field_high_bits & ~below);
+        const bool duplicate = ((v - params.field_low_bits) & ~v & params.field_high_bits) != 0;
         if (!duplicate) key = candidate;
       }
     }

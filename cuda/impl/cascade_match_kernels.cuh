@@ -36,6 +36,10 @@ struct MatchParams {
   int top_k = 0;
   float max_ratio = 0.f;
   float max_distance = 0.f;
+  // Lowest / highest bit of every b-bit bucket field of a signature (the
+  // fields past num_tables included), for the duplicate test.
+  uint64_t field_low_bits = 0;
+  uint64_t field_high_bits = 0;
 };
 
 // Segment of one pair's matches in the output: [begin, begin + count).
