@@ -67,6 +67,7 @@ MeanDescriptor ComputeDatabaseMean(DatabaseFeatureSource& source, const std::vec
   return ComputeMeanDescriptor(pointers);
 }
 
+#ifdef CASHASH_WITH_CUDA
 int FirstGpuIndex(const std::string& gpu_index) {
   const std::string first = gpu_index.substr(0, gpu_index.find(','));
   try {
@@ -76,6 +77,7 @@ int FirstGpuIndex(const std::string& gpu_index) {
                              gpu_index + "'");
   }
 }
+#endif
 
 std::unique_ptr<FeatureMatcher> CreateMatcher(const MatcherCommandOptions& options, const MeanDescriptor& mean) {
   if (options.use_gpu) {
