@@ -125,8 +125,8 @@ TEST_P(CpuMatcherTypes, TruncatesToMaxNumMatches) {
   std::vector<FeatureDescriptors> truncated = images;
   for (auto& image : truncated) image.data.resize(150 * kDescriptorDim);
   const std::vector<FeatureMatches> full = RunMatcher(images, s, o, 1);
-  // The mean differs (it is computed from what the caller passes), so hash
-  // with the same mean for the comparison: the brute force is exact anyway.
+  // RunMatcher computes the mean from the images it is given, so the cascade
+  // hashes differ between the two runs; the exact brute force must agree.
   const std::vector<FeatureMatches> cut = RunMatcher(truncated, s, o, 1);
   for (const auto& matches : full) {
     EXPECT_FALSE(matches.empty());
