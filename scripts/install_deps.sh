@@ -33,6 +33,7 @@ done
 python_missing=()
 python3 -c "import numpy" 2>/dev/null || python_missing+=(numpy)
 python3 -c "import PIL" 2>/dev/null || python_missing+=(pillow)
+python3 -c "import matplotlib" 2>/dev/null || python_missing+=(matplotlib)  # accuracy report plots
 if ! python3 -c "import pycolmap, sys; sys.exit(pycolmap.__version__ != '4.2.1')" 2>/dev/null; then
   python_missing+=("pycolmap==4.2.1")
 fi

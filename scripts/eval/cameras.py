@@ -1,0 +1,131 @@
+"""Camera ground truth (Strecha's fountain-P11, herzjesu-P25): reconstruct
+with COLMAP's mapper after a matcher, align the model to the ground-truth
+centres with a similarity transform and measure position and rotation errors.
+"""
+import glob
+import os
+
+import numpy as np
+
+from eval import tools
+
+
+def read_gt_cameras(scene_dir):
+    """{image name: (R camera-to-world, centre)} from gt_dense_cameras/*.camera.
+
+    File layout: K (3 lines), distortion (1 line), R camera-to-world (3 lines),
+    centre C (1 line), image size; P = K [R^T | -R^T C].
+    """
+    cameras = {}
+    for path in sorted(glob.glob(os.path.join(scene_dir, "gt_dense_cameras", "*.camera"))):
+        rows = [[float(v) for v in line.split()] for line in open(path) if line.strip()]
+        rotation = np.array(rows[4:7])
+        centre = np.array(rows[7])
+        cameras[os.path.basename(path)[:-len(".camera")]] = (rotation, centre)
+    return cameras
+
+
+def quaternion_to_matrix(q):
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def read_model_images(images_txt):
+    """{name: (R camera-to-world, centre)} from a COLMAP images.txt (world-to-camera qvec, tvec)."""
+    cameras = {}
+    lines = [l for l in open(images_txt) if not l.startswith("#")]
+    for line in lines[0::2]:
+        fields = line.split()
+        if len(fields) < 10:
+            continue
+        r_wc = quaternion_to_matrix(np.array([float(v) for v in fields[1:5]]))
+        t = np.array([float(v) for v in fields[5:8]])
+        cameras[fields[9]] = (r_wc.T, -r_wc.T @ t)
+    return cameras
+
+
+def umeyama(source, target):
+    """Similarity (s, R, t) minimising |target - (s R source + t)|^2 over the rows."""
+    mu_s, mu_t = source.mean(axis=0), target.mean(axis=0)
+    xs, xt = source - mu_s, target - mu_t
+    covariance = xt.T @ xs / len(source)
+    u, d, vt = np.linalg.svd(covariance)
+    sign = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        sign[2, 2] = -1
+    rotation = u @ sign @ vt
+    variance = (xs ** 2).sum() / len(source)
+    scale = np.trace(np.diag(d) @ sign) / variance
+    return scale, rotation, mu_t - scale * rotation @ mu_s
+
+
+def camera_errors(gt, model):
+    """Aligns model to gt on the common images; returns the error summary."""
+    names = sorted(set(gt) & set(model))
+    gt_centres = np.array([c for _, c in gt.values()])
+    scene_size = max(np.linalg.norm(a - b) for a in gt_centres for b in gt_centres)
+    summary = {"gt_images": len(gt), "registered": len(names), "scene_size": float(scene_size)}
+    if len(names) < 3:
+        return summary
+    source = np.array([model[n][1] for n in names])
+    target = np.array([gt[n][1] for n in names])
+    scale, rotation, translation = umeyama(source, target)
+    aligned = (scale * (rotation @ source.T)).T + translation
+    position = np.linalg.norm(aligned - target, axis=1)
+    angles = []
+    for n in names:
+        relative = gt[n][0].T @ (rotation @ model[n][0])
+        angles.append(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
+    angles = np.array(angles)
+    summary.update({
+        "position_median": float(np.median(position)), "position_max": float(position.max()),
+        "position_median_rel": float(np.median(position) / scene_size),
+        "position_max_rel": float(position.max() / scene_size),
+        "rotation_median_deg": float(np.median(angles)), "rotation_max_deg": float(angles.max()),
+    })
+    return summary
+
+
+def match_command(matcher, cashash_binary, database):
+    """The command line of one matcher over all pairs of a database."""
+    if matcher == "colmap":
+        return ["colmap", "exhaustive_matcher", "--database_path", database,
+                "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", "2"]
+    return [cashash_binary, "exhaustive_matcher", "--database_path", database,
+            "--CasHash.matcher", matcher, "--SiftMatching.num_threads", "2"]
+
+
+def largest_model(sparse_dir, work_dir, log):
+    """Converts every model the mapper wrote to TXT; returns the cameras of the largest."""
+    best = {}
+    for model_dir in sorted(glob.glob(os.path.join(sparse_dir, "*"))):
+        if not os.path.isdir(model_dir):
+            continue
+        text_dir = os.path.join(work_dir, "txt_" + os.path.basename(model_dir))
+        os.makedirs(text_dir, exist_ok=True)
+        tools.run_tool(["colmap", "model_converter", "--input_path", model_dir, "--output_path", text_dir,
+                        "--output_type", "TXT"], log, nice=0)
+        cameras = read_model_images(os.path.join(text_dir, "images.txt"))
+        if len(cameras) > len(best):
+            best = cameras
+    return best
+
+
+def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log):
+    """Copies the feature database, matches with matcher, maps, aligns. Returns the summary."""
+    os.makedirs(work_dir, exist_ok=True)
+    database = os.path.join(work_dir, "database.db")
+    tools.copy_database(source_db, database)
+    match_wall, match_cpu, _ = tools.run_tool(match_command(matcher, cashash_binary, database), log)
+    sparse = os.path.join(work_dir, "sparse")
+    os.makedirs(sparse, exist_ok=True)
+    map_wall, _, _ = tools.run_tool(["colmap", "mapper", "--database_path", database, "--image_path",
+                                     os.path.join(scene_dir, "images"), "--output_path", sparse,
+                                     "--Mapper.num_threads", "2"], log)
+    model = largest_model(sparse, work_dir, log)
+    summary = camera_errors(read_gt_cameras(scene_dir), model)
+    summary.update({"match_wall_s": match_wall, "match_cpu_s": match_cpu, "mapper_wall_s": map_wall})
+    return summary

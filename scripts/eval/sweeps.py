@@ -1,0 +1,84 @@
+"""Parameter sweeps that mirror the paper's figures.
+
+tau (the paper's Fig. "influence of the threshold tau"): raw matches and
+matching time on a multi-image scene, precision at eps px on the homography
+sequences. top_k and bits per table: recall against exact brute force and
+time, from scripts/bench/matcher_recall_bench.
+"""
+import os
+import re
+
+from eval import homography, tools
+
+TAUS = [20, 24, 28, 32, 36, 40, 48, 64, 128]
+TOP_KS = [1, 2, 3, 5, 10, 20]
+BITS = [6, 7, 8, 9, 10, 11]
+
+
+def cashash_raw_matches(binary, database, extra, log, pair_list=None):
+    """Runs the cascade on one thread without verification; returns (CPU s, matching s, raw matches)."""
+    if pair_list:
+        command = [binary, "matches_importer", "--database_path", database, "--match_list_path", pair_list,
+                   "--match_type", "pairs"]
+    else:
+        command = [binary, "exhaustive_matcher", "--database_path", database]
+    command += ["--overwrite", "1", "--SiftMatching.num_threads", "1",
+                "--FeatureMatching.skip_geometric_verification", "1"] + extra
+    _, cpu, text = tools.run_tool(command, log)
+    matching = re.search(r"matching ([0-9.]+) s", text)
+    raw = re.search(r"; ([0-9]+) raw matches", text)
+    return cpu, float(matching.group(1)) if matching else float("nan"), int(raw.group(1)) if raw else -1
+
+
+def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log):
+    """{tau: {scene_cpu_s, scene_matching_s, scene_matches, precision per sequence}}."""
+    os.makedirs(work_dir, exist_ok=True)
+    scene_copy = os.path.join(work_dir, "scene.db")
+    tools.copy_database(scene_db, scene_copy)
+    copies = {}
+    for name, (features_db, _) in homography_dbs.items():
+        copies[name] = os.path.join(work_dir, name + ".db")
+        tools.copy_database(features_db, copies[name])
+    pair_list = os.path.join(work_dir, "pairs.txt")
+    homography.write_pair_list(pair_list)
+    results = {}
+    for tau in TAUS:
+        extra = ["--CasHash.matcher", "cascade", "--CasHash.tau", str(tau)]
+        cpu, matching, raw = cashash_raw_matches(binary, scene_copy, extra, log)
+        row = {"scene_cpu_s": cpu, "scene_matching_s": matching, "scene_matches": raw, "precision": {},
+               "correct": {}, "matches": {}}
+        for name, (_, hs) in homography_dbs.items():
+            cashash_raw_matches(binary, copies[name], extra, log, pair_list)
+            evaluated = homography.evaluate_database(copies[name], hs, [eps])
+            total = sum(p["matches"] for p in evaluated.values())
+            correct = sum(p["correct"][str(eps)] for p in evaluated.values())
+            row["matches"][name] = total
+            row["correct"][name] = correct
+            row["precision"][name] = correct / total if total else 0.0
+        results[tau] = row
+    return results
+
+
+def recall_bench(bench_binary, database, settings, log):
+    """Runs matcher_recall_bench; returns its rows as dicts keyed by the column names."""
+    text = ";".join("%d,%d,%d,%d" % s for s in settings)
+    _, _, out = tools.run_tool([bench_binary, "--database", database, "--threads", "1", "--settings", text], log)
+    rows = []
+    brute = re.search(r"brute force: ([0-9]+) matches, ([0-9.]+) CPU s, ([0-9.]+) pairs per CPU second", out)
+    for line in out.splitlines():
+        m = re.match(r"\| (\d+) x (\d+) \| (\d+) \| (\d+) \|(.*)\|\s*$", line)
+        if not m:
+            continue
+        values = [float(v) for v in m.group(5).split("|")]
+        rows.append({"tables": int(m.group(1)), "bits": int(m.group(2)), "tau": int(m.group(3)),
+                     "top_k": int(m.group(4)), "recall": values[0], "min_pair_recall": values[1],
+                     "precision": values[2], "bucket_entries": values[3], "within_tau": values[4],
+                     "ranked": values[5], "hash_ms_per_image": values[6], "pairs_per_cpu_s": values[7],
+                     "speedup": values[8]})
+    return {"rows": rows, "brute_force_pairs_per_cpu_s": float(brute.group(3)) if brute else None}
+
+
+def topk_bits_sweep(bench_binary, database, tables, tau, default_top_k, default_bits, log):
+    settings = [(tables, default_bits, tau, k) for k in TOP_KS]
+    settings += [(tables, b, tau, default_top_k) for b in BITS if b != default_bits]
+    return recall_bench(bench_binary, database, settings, log)

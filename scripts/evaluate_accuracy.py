@@ -1,0 +1,202 @@
+#!/usr/bin/env python3
+"""Accuracy of cashash against ground truth, in one command.
+
+  scripts/evaluate_accuracy.py --build-dir build [--data-dir ../shared/data]
+      [--out docs/accuracy] [--report docs/ACCURACY.md] [--work-dir /tmp/cashash_accuracy]
+      [--skip-colmap-matcher] [--colmap-matcher-scenes fountain-P11] [--skip-cameras]
+      [--skip-sweeps] [--reuse]
+
+1. Homographies (Oxford graf, boat, bikes, leuven; HPatches v_graffiti):
+   COLMAP SIFT, then raw matches of pairs 1-2 ... 1-6 by the cascade (CPU,
+   and GPU where one is present), cashash brute force and COLMAP's matcher;
+   correct = within eps px of the ground-truth homography.
+2. Sweeps of tau, top_k and bits per table.
+3. Cameras (fountain-P11, herzjesu-P25): COLMAP mapper after each matcher,
+   similarity alignment to the ground-truth centres, position and rotation
+   errors.
+Writes the Markdown report and PNG plots. Intermediate databases and logs
+stay in --work-dir; --reuse picks up finished steps from there.
+"""
+import argparse
+import json
+import os
+import sys
+
+# No __pycache__ folders in the source tree.
+sys.dont_write_bytecode = True
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from eval import cameras, homography, loss_analysis, report, sweeps, tools  # noqa: E402
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EPS = [3, 6]
+CAMERA_SCENES = ["fountain-P11", "herzjesu-P25"]
+
+
+def parse_args():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--build-dir", default=os.path.join(REPO, "build"))
+    parser.add_argument("--data-dir", default=os.path.join(REPO, "..", "shared", "data"))
+    parser.add_argument("--out", default=os.path.join(REPO, "docs", "accuracy"), help="folder of the PNG plots")
+    parser.add_argument("--report", default=os.path.join(REPO, "docs", "ACCURACY.md"))
+    parser.add_argument("--work-dir", default="/tmp/cashash_accuracy")
+    parser.add_argument("--feature-db-dir", default="/tmp/dbs",
+                        help="COLMAP feature databases <scene>.db of the camera scenes (copied, never written); "
+                             "missing ones are extracted with COLMAP's CPU SIFT")
+    parser.add_argument("--skip-colmap-matcher", action="store_true", help="no COLMAP matcher in the camera part")
+    parser.add_argument("--colmap-matcher-scenes", default=",".join(CAMERA_SCENES),
+                        help="camera scenes on which COLMAP's (slow) CPU matcher runs")
+    parser.add_argument("--camera-scenes", default=",".join(CAMERA_SCENES))
+    parser.add_argument("--skip-cameras", action="store_true")
+    parser.add_argument("--skip-sweeps", action="store_true")
+    parser.add_argument("--sweep-scene", default="fountain-P11", help="scene of the tau timing and recall sweeps")
+    parser.add_argument("--reuse", action="store_true", help="reuse finished steps found in --work-dir")
+    return parser.parse_args()
+
+
+def load_json(path):
+    with open(path) as f:
+        return json.load(f)
+
+
+def save_json(path, value):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(value, f, indent=1)
+
+
+def scene_feature_db(args, scene, log):
+    """The scene's feature database: the given one, or one extracted here."""
+    given = os.path.join(args.feature_db_dir, scene + ".db")
+    if os.path.exists(given):
+        return given
+    extracted = os.path.join(args.work_dir, "features", scene + ".db")
+    if not os.path.exists(extracted):
+        os.makedirs(os.path.dirname(extracted), exist_ok=True)
+        tools.run_tool(["colmap", "feature_extractor", "--database_path", extracted, "--image_path",
+                        os.path.join(args.data_dir, scene, "images"), "--ImageReader.single_camera", "1",
+                        "--SiftExtraction.use_gpu", "0"], log)
+    return extracted
+
+
+def homography_matchers(binary, use_gpu):
+    """name -> command prefix that matches the pairs of a list (without database and list)."""
+    matchers = {
+        "cascade": [binary, "matches_importer", "--CasHash.matcher", "cascade", "--SiftMatching.use_gpu", "0"],
+        "bruteforce": [binary, "matches_importer", "--CasHash.matcher", "bruteforce", "--SiftMatching.use_gpu", "0"],
+        "colmap": ["colmap", "matches_importer", "--SiftMatching.use_gpu", "0"],
+    }
+    if use_gpu:
+        matchers["cascade_gpu"] = [binary, "matches_importer", "--CasHash.matcher", "cascade",
+                                   "--SiftMatching.use_gpu", "1"]
+    return matchers
+
+
+def run_homographies(args, binary, use_gpu):
+    work = os.path.join(args.work_dir, "homography")
+    log = os.path.join(work, "logs", "homography.log")
+    pair_list = os.path.join(work, "pairs.txt")
+    os.makedirs(work, exist_ok=True)
+    homography.write_pair_list(pair_list)
+    results, dbs = {}, {}
+    for name, _, images, hs in homography.sequences(args.data_dir):
+        seq_dir = os.path.join(work, name)
+        png = os.path.join(seq_dir, "png")
+        homography.prepare_images(images, png)
+        features = os.path.join(seq_dir, "features.db")
+        homography.extract_features(png, features, os.path.join(work, "logs", name + "_extract.log"))
+        dbs[name] = (features, hs)
+        results[name] = {}
+        for matcher, prefix in homography_matchers(binary, use_gpu).items():
+            database = os.path.join(seq_dir, matcher + ".db")
+            timing_path = os.path.join(seq_dir, matcher + ".json")
+            if not (args.reuse and os.path.exists(timing_path)):
+                tools.copy_database(features, database)
+                wall, cpu, _ = tools.run_tool(prefix + ["--database_path", database, "--match_list_path", pair_list,
+                                                        "--match_type", "pairs", "--SiftMatching.num_threads", "2"],
+                                              log)
+                save_json(timing_path, {"wall_s": wall, "cpu_s": cpu})
+            evaluated = homography.evaluate_database(database, hs, EPS)
+            results[name][matcher] = {"pairs": evaluated, "timing": load_json(timing_path)}
+        print("homography %s done" % name, flush=True)
+    return results, dbs
+
+
+def run_losses(results, dbs):
+    losses, angles, kept = {}, [], []
+    for name, by_matcher in results.items():
+        per_pair, a, k = loss_analysis.analyse_sequence(dbs[name][0], by_matcher["bruteforce"]["pairs"],
+                                                        by_matcher["cascade"]["pairs"], 6)
+        losses[name] = per_pair
+        angles.append(a)
+        kept.append(k)
+    import numpy as np
+    return losses, loss_analysis.kept_by_angle(np.concatenate(angles), np.concatenate(kept))
+
+
+def run_sweeps(args, binary, bench, dbs):
+    work = os.path.join(args.work_dir, "sweeps")
+    log = os.path.join(work, "sweeps.log")
+    scene_db = scene_feature_db(args, args.sweep_scene, log)
+    tau_path, bench_path = os.path.join(work, "tau.json"), os.path.join(work, "topk_bits.json")
+    if not (args.reuse and os.path.exists(tau_path)):
+        save_json(tau_path, sweeps.tau_sweep(binary, scene_db, dbs, os.path.join(work, "tau"), 6, log))
+    if not (args.reuse and os.path.exists(bench_path)):
+        save_json(bench_path, sweeps.topk_bits_sweep(bench, scene_db, 7, 40, 10, 8, log))
+    print("sweeps done", flush=True)
+    return {"tau": {int(k): v for k, v in load_json(tau_path).items()}, "topk_bits": load_json(bench_path)}
+
+
+def run_cameras(args, binary):
+    work = os.path.join(args.work_dir, "cameras")
+    log = os.path.join(work, "cameras.log")
+    colmap_scenes = [] if args.skip_colmap_matcher else args.colmap_matcher_scenes.split(",")
+    out = {}
+    for scene in args.camera_scenes.split(","):
+        scene_dir = os.path.join(args.data_dir, scene)
+        if not os.path.isdir(scene_dir):
+            continue
+        source = scene_feature_db(args, scene, log)
+        out[scene] = {}
+        for matcher in ["cascade", "bruteforce", "colmap"]:
+            summary_path = os.path.join(work, scene, matcher, "summary.json")
+            if matcher == "colmap" and scene not in colmap_scenes:
+                if os.path.exists(summary_path) and args.reuse:
+                    out[scene][matcher] = load_json(summary_path)
+                continue
+            if not (args.reuse and os.path.exists(summary_path)):
+                summary = cameras.reconstruct(scene_dir, source, matcher, binary,
+                                              os.path.join(work, scene, matcher), log)
+                save_json(summary_path, summary)
+            out[scene][matcher] = load_json(summary_path)
+            print("cameras %s %s done" % (scene, matcher), flush=True)
+    return out
+
+
+def main():
+    args = parse_args()
+    args.data_dir = os.path.abspath(args.data_dir)
+    binary = os.path.join(os.path.abspath(args.build_dir), "colmap_bridge", "cashash")
+    bench = os.path.join(os.path.abspath(args.build_dir), "scripts", "matcher_recall_bench")
+    if not os.path.exists(binary):
+        sys.exit("no cashash binary at %s: build the 'cashash' target first" % binary)
+    use_gpu = tools.gpu_present()
+    results, dbs = run_homographies(args, binary, use_gpu)
+    losses, by_angle = run_losses(results, dbs)
+    sweep_results = None
+    if not args.skip_sweeps:
+        if not os.path.exists(bench):
+            sys.exit("no %s: build the 'matcher_recall_bench' target or pass --skip-sweeps" % bench)
+        sweep_results = run_sweeps(args, binary, bench, dbs)
+    camera_results = None if args.skip_cameras else run_cameras(args, binary)
+    save_json(os.path.join(args.work_dir, "summary.json"), {
+        "homography": {s: {m: {"pairs": {p: {k: v for k, v in r.items() if k in ("matches", "correct")}
+                                         for p, r in d["pairs"].items()}, "timing": d["timing"]}
+                           for m, d in by.items()} for s, by in results.items()},
+        "losses": losses, "kept_by_angle": by_angle, "cameras": camera_results})
+    report.write(args, results, losses, by_angle, sweep_results, camera_results, use_gpu, EPS)
+    print("report written to %s, plots in %s" % (args.report, args.out))
+
+
+if __name__ == "__main__":
+    main()
