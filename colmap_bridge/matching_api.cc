@@ -1,0 +1,241 @@
+#include "colmap_bridge/matching_api.h"
+
+#include <algorithm>
+#include <fstream>
+#include <iostream>
+#include <stdexcept>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "cashash/pair_generation.h"
+#include "cashash/pair_id.h"
+#include "colmap_bridge/database.h"
+#include "colmap_bridge/database_pipeline_io.h"
+#include "colmap_bridge/pair_list.h"
+#ifdef CASHASH_WITH_CUDA
+#include "cashash_cuda/gpu_feature_matcher.h"
+#endif
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+// The hashing mean comes from at most this many images spread evenly over
+// the database, so that a huge database is not read twice for it.
+constexpr size_t kMaxImagesForMean = 100;
+
+MeanDescriptor ComputeDatabaseMean(DatabaseFeatureSource& source, const std::vector<image_t>& image_ids) {
+  std::vector<FeatureDescriptors> sample;
+  const size_t n = image_ids.size();
+  const size_t count = std::min(n, kMaxImagesForMean);
+  for (size_t k = 0; k < count; ++k) {
+    sample.push_back(source.database().ReadDescriptors(image_ids[k * n / count]));
+  }
+  std::vector<const FeatureDescriptors*> pointers;
+  for (const FeatureDescriptors& d : sample) pointers.push_back(&d);
+  return ComputeMeanDescriptor(pointers);
+}
+
+#ifdef CASHASH_WITH_CUDA
+int FirstGpuIndex(const std::string& gpu_index) {
+  const std::string first = gpu_index.substr(0, gpu_index.find(','));
+  try {
+    return std::max(0, std::stoi(first));
+  } catch (const std::exception&) {
+    throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+                                gpu_index + "'");
+  }
+}
+#endif
+
+// Callers that set no warning sink still see warnings, on stderr as the
+// command line prints them.
+void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.warning) {
+    callbacks.warning(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
+}
+
+void Info(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.info) callbacks.info(text);
+}
+
+void WarnAboutSmallImages(DatabaseFeatureSource& source, const std::vector<image_t>& image_ids,
+                          const MatchingCallbacks& callbacks) {
+  for (image_t image_id : image_ids) {
+    const size_t rows = source.database().NumDescriptors(image_id);
+    if (rows < 2) {
+      Warn(callbacks, "image " + std::to_string(image_id) + " (" + source.image(image_id).name + ") has " +
+                          std::to_string(rows) + " feature" + (rows == 1 ? "" : "s") +
+                          "; its pairs get empty matches");
+    }
+  }
+}
+
+// The options as the command line would run them on `database_path`;
+// throws std::invalid_argument with the command line's message when one is
+// out of range.
+MatcherCommandOptions CheckedOptions(const std::string& database_path, const MatcherCommandOptions& options) {
+  MatcherCommandOptions checked = options;
+  checked.database_path = database_path;
+  const std::string problem = CheckMatcherCommandOptions(checked);
+  if (!problem.empty()) throw std::invalid_argument(problem);
+  return checked;
+}
+
+std::vector<image_t> ImageIds(const DatabaseFeatureSource& source) {
+  std::vector<image_t> ids;
+  for (const Image& image : source.images()) ids.push_back(image.image_id);
+  return ids;
+}
+
+std::vector<image_t> ImagesOfPairs(const std::vector<ImagePair>& pairs) {
+  std::vector<image_t> image_ids;
+  for (const ImagePair& pair : pairs) {
+    image_ids.push_back(pair.first);
+    image_ids.push_back(pair.second);
+  }
+  std::sort(image_ids.begin(), image_ids.end());
+  image_ids.erase(std::unique(image_ids.begin(), image_ids.end()), image_ids.end());
+  return image_ids;
+}
+
+// Runs the pipeline over `chunks`, leaving out pairs already in the database
+// unless options.overwrite is set.
+MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
+                            const std::vector<image_t>& image_ids, std::vector<PairChunk> chunks,
+                            size_t num_pairs_requested, const MatchingCallbacks& callbacks) {
+  MatchingSummary summary;
+  summary.pairs_requested = num_pairs_requested;
+  if (!options.overwrite) {
+    const std::unordered_set<pair_t> done = source.database().ReadCompletedPairIds();
+    if (!done.empty()) {
+      chunks = RemovePairs(std::move(chunks), [&](const ImagePair& pair) {
+        return done.count(ImagePairToPairId(pair.first, pair.second)) > 0;
+      });
+    }
+  }
+  size_t num_pairs = 0;
+  for (const PairChunk& chunk : chunks) num_pairs += chunk.pairs.size();
+  summary.pairs_skipped = num_pairs_requested - num_pairs;
+  if (summary.pairs_skipped > 0) {
+    Info(callbacks, "Skipping " + std::to_string(summary.pairs_skipped) + " of " +
+                        std::to_string(num_pairs_requested) +
+                        " pairs already in the database (use --overwrite 1 to match them again)");
+  }
+  if (num_pairs == 0) {
+    Info(callbacks, "Nothing to match.");
+    return summary;
+  }
+  WarnAboutSmallImages(source, image_ids, callbacks);
+
+  const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
+  std::unique_ptr<FeatureMatcher> matcher =
+      CreateMatcherForOptions(options, mean, [&](const std::string& text) { Warn(callbacks, text); });
+  DatabaseResultSink sink(options.database_path, !options.skip_geometric_verification);
+
+  PipelineOptions pipeline_options;
+  pipeline_options.num_threads = options.sift.num_threads;
+  pipeline_options.skip_geometric_verification = options.skip_geometric_verification;
+  pipeline_options.two_view = options.two_view;
+  MatchingPipeline pipeline(pipeline_options, &source, matcher.get(), &sink);
+  if (callbacks.progress) pipeline.SetProgressCallback(callbacks.progress);
+  if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
+  summary.matcher_name = matcher->Name();
+  Info(callbacks, "Matcher: " + summary.matcher_name);
+  summary.pipeline = pipeline.Run(chunks);
+  return summary;
+}
+
+// Pairs of image ids for pairs of names, checked as a pair list file is:
+// unknown names and self-pairs are errors, repeats are matched once.
+std::vector<ImagePair> PairsOfNames(const std::vector<std::pair<std::string, std::string>>& name_pairs,
+                                    const DatabaseFeatureSource& source) {
+  std::unordered_map<std::string, image_t> ids_by_name;
+  for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
+  std::vector<ImagePair> pairs;
+  std::unordered_set<pair_t> seen;
+  for (size_t i = 0; i < name_pairs.size(); ++i) {
+    const std::string where = "image pair " + std::to_string(i);
+    const std::string& name1 = name_pairs[i].first;
+    const std::string& name2 = name_pairs[i].second;
+    const auto it1 = ids_by_name.find(name1);
+    if (it1 == ids_by_name.end()) throw std::runtime_error(where + ": image '" + name1 + "' is not in table images");
+    const auto it2 = ids_by_name.find(name2);
+    if (it2 == ids_by_name.end()) throw std::runtime_error(where + ": image '" + name2 + "' is not in table images");
+    if (it1->second == it2->second) throw std::runtime_error(where + ": pair of image '" + name1 + "' with itself");
+    if (seen.insert(ImagePairToPairId(it1->second, it2->second)).second) {
+      pairs.emplace_back(it1->second, it2->second);
+    }
+  }
+  return pairs;
+}
+
+MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
+                             const std::vector<ImagePair>& pairs, const MatchingCallbacks& callbacks) {
+  const size_t block = static_cast<size_t>(options.block_size);
+  std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
+  return MatchChunks(options, source, ImagesOfPairs(pairs), std::move(chunks), pairs.size(), callbacks);
+}
+
+}  // namespace
+
+std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning) {
+  if (options.use_gpu) {
+#ifdef CASHASH_WITH_CUDA
+    const int gpu_index = FirstGpuIndex(options.gpu_index);
+    std::string reason;
+    if (cuda::CudaDeviceUsable(gpu_index, &reason)) {
+      return cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, gpu_index);
+    }
+    if (warning) warning("no usable CUDA device (" + reason + "); matching on the CPU");
+#else
+    if (warning) warning("cashash was built without CUDA; matching on the CPU");
+#endif
+  }
+  return CreateCpuFeatureMatcher(options.sift, options.cashash, mean);
+}
+
+MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& callbacks) {
+  const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+  DatabaseFeatureSource source(database_path);
+  if (callbacks.database_opened) callbacks.database_opened();
+  const std::vector<image_t> image_ids = ImageIds(source);
+  if (image_ids.size() < 2) {
+    Warn(callbacks, "table images of " + database_path + " holds " + std::to_string(image_ids.size()) + " image" +
+                        (image_ids.size() == 1 ? "" : "s") + "; nothing to match");
+    return MatchingSummary();
+  }
+  std::vector<PairChunk> chunks = ExhaustivePairChunks(image_ids, checked.block_size);
+  const size_t n = image_ids.size();
+  return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, callbacks);
+}
+
+MatchingSummary MatchPairs(const std::string& database_path,
+                           const std::vector<std::pair<std::string, std::string>>& image_name_pairs,
+                           const MatcherCommandOptions& options, const MatchingCallbacks& callbacks) {
+  const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+  DatabaseFeatureSource source(database_path);
+  if (callbacks.database_opened) callbacks.database_opened();
+  return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), callbacks);
+}
+
+MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
+                              const MatcherCommandOptions& options, const MatchingCallbacks& callbacks) {
+  const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+  DatabaseFeatureSource source(database_path);
+  if (callbacks.database_opened) callbacks.database_opened();
+  std::unordered_map<std::string, image_t> ids_by_name;
+  for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
+  std::ifstream file(match_list_path);
+  if (!file) throw std::runtime_error("cannot open --match_list_path " + match_list_path);
+  return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), callbacks);
+}
+
+}  // namespace colmap
+}  // namespace cashash
