@@ -78,7 +78,11 @@ def camera_errors(gt, model):
     angles = []
     for n in names:
         relative = gt[n][0].T @ (rotation @ model[n][0])
-        angles.append(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
+        # atan2 of sine and cosine stays accurate for small angles, where arccos
+        # of a trace rounded near 3 would report hundredths of a degree.
+        sine = np.linalg.norm([relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0],
+                               relative[1, 0] - relative[0, 1]]) / 2
+        angles.append(np.degrees(np.arctan2(sine, (np.trace(relative) - 1) / 2)))
     angles = np.array(angles)
     summary.update({
         "position_median": float(np.median(position)), "position_max": float(position.max()),
