@@ -9,19 +9,26 @@ namespace cashash {
 namespace colmap {
 namespace {
 
-// rows x cols must be non-negative and fill the blob exactly.
+// rows x cols must be non-negative and fill the blob exactly. The product is
+// checked for overflow first: a corrupt row claiming 2^62 rows must not wrap
+// around to the blob's size and then size an allocation.
 void CheckShape(const MatrixBlob& blob, size_t element_size, const std::string& owner) {
   if (blob.rows < 0 || blob.cols < 0) {
     throw DatabaseError(owner + ": negative shape rows x cols = " + std::to_string(blob.rows) +
                         " x " + std::to_string(blob.cols));
   }
-  const size_t expected = static_cast<size_t>(blob.rows) * static_cast<size_t>(blob.cols) *
-                          element_size;
-  if (blob.num_bytes != expected) {
+  size_t expected = 0;
+  const bool overflow =
+      __builtin_mul_overflow(static_cast<size_t>(blob.rows), static_cast<size_t>(blob.cols),
+                             &expected) ||
+      __builtin_mul_overflow(expected, element_size, &expected);
+  if (overflow || blob.num_bytes != expected) {
     throw DatabaseError(owner + ": blob size " + std::to_string(blob.num_bytes) +
                         " does not match rows x cols = " + std::to_string(blob.rows) + " x " +
                         std::to_string(blob.cols) + " of " + std::to_string(element_size) +
-                        "-byte values (" + std::to_string(expected) + " bytes)");
+                        "-byte values (" +
+                        (overflow ? std::string("more than 2^64") : std::to_string(expected)) +
+                        " bytes)");
   }
 }
 
@@ -53,6 +60,13 @@ Keypoints DecodeKeypoints(const MatrixBlob& blob, const std::string& owner) {
     Keypoint& kp = keypoints[i];
     kp.x = v[0];
     kp.y = v[1];
+    for (size_t c = 0; c < cols; ++c) {
+      // NaN or infinite values would poison RANSAC and the watermark test.
+      if (!std::isfinite(v[c])) {
+        throw DatabaseError(owner + ": row " + std::to_string(i) + " holds a non-finite value (" +
+                            std::to_string(v[c]) + ") in column " + std::to_string(c));
+      }
+    }
     if (cols == 4) {
       // (scale, orientation) -> the rotation-scaled identity shape.
       const float scale = v[2];
@@ -76,9 +90,9 @@ FeatureDescriptors DecodeSiftDescriptors(const MatrixBlob& blob, const std::stri
     throw DatabaseError(owner + ": expected uint8 x " + std::to_string(kDescriptorDim) +
                         " SIFT descriptors, found " + std::to_string(blob.cols) + " columns");
   }
-  if (blob.rows >= 0 &&
-      blob.num_bytes == static_cast<size_t>(blob.rows) * kDescriptorDim * sizeof(float) &&
-      blob.rows > 0) {
+  // rows is bounded first so that rows x 512 cannot wrap around.
+  if (blob.rows > 0 && static_cast<uint64_t>(blob.rows) < (uint64_t{1} << 40) &&
+      blob.num_bytes == static_cast<size_t>(blob.rows) * kDescriptorDim * sizeof(float)) {
     throw DatabaseError(owner + ": blob size " + std::to_string(blob.num_bytes) +
                         " does not match rows x cols = " + std::to_string(blob.rows) + " x " +
                         std::to_string(blob.cols) +

@@ -14,6 +14,7 @@
 #include "colmap_bridge/database.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <sqlite3.h>
@@ -27,8 +28,18 @@ namespace colmap {
 namespace {
 
 // A concurrent COLMAP process (GUI, another matcher) holding the lock makes
-// us wait this long before giving up.
-constexpr int kBusyTimeoutMs = 60000;
+// us wait this long before giving up; CASHASH_BUSY_TIMEOUT_MS overrides it
+// (tests use a short one).
+constexpr int kDefaultBusyTimeoutMs = 60000;
+
+int BusyTimeoutMs() {
+  const char* text = std::getenv("CASHASH_BUSY_TIMEOUT_MS");
+  if (text == nullptr || *text == '\0') return kDefaultBusyTimeoutMs;
+  char* end = nullptr;
+  const long value = std::strtol(text, &end, 10);
+  if (*end != '\0' || value < 0 || value > 24L * 3600 * 1000) return kDefaultBusyTimeoutMs;
+  return static_cast<int>(value);
+}
 
 // COLMAP 4.x numbers user_version as major * 1000000 + minor * 10000 + ...
 // (4.2.1 -> 4020100); 3.x used major * 1000 + minor * 100 (3.8 -> 3800).
@@ -110,6 +121,19 @@ struct Database::Impl {
     sqlite3_finalize(raw);
     if (rc == SQLITE_DONE) return names;
     if (code == SQLITE_NOTADB) throw DatabaseError("not a SQLite database: " + path);
+    if (code == SQLITE_CORRUPT) {
+      throw DatabaseError("database " + path + " is damaged (" + message +
+                          "); PRAGMA integrity_check tells more");
+    }
+    if (code == SQLITE_CANTOPEN || code == SQLITE_READONLY) {
+      // A WAL database needs its -wal and -shm files beside it.
+      throw DatabaseError("cannot read database " + path + ": " + message +
+                          " (its directory must be writable for SQLite's -wal/-shm files)");
+    }
+    if (code == SQLITE_BUSY) {
+      throw DatabaseError("cannot read database " + path + ": " + message +
+                          " (another process held the lock for longer than the busy timeout)");
+    }
     throw DatabaseError("cannot read database " + path + ": " + message);
   }
 
@@ -134,7 +158,13 @@ struct Database::Impl {
       const std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
       throw DatabaseError("cannot open database " + path + ": " + message);
     }
-    sqlite3_busy_timeout(db, kBusyTimeoutMs);
+    sqlite3_busy_timeout(db, BusyTimeoutMs());
+    // SQLite silently opens a write-protected file read-only; say so now
+    // rather than after matching everything.
+    if (!read_only && sqlite3_db_readonly(db, "main") == 1) {
+      throw DatabaseError("database " + path +
+                          " is read-only (file permissions); cashash needs to write matches");
+    }
 
     const std::vector<std::string> tables = TableNames();
     auto has_table = [&](const std::string& name) {

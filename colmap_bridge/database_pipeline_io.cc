@@ -1,5 +1,7 @@
 #include "colmap_bridge/database_pipeline_io.h"
 
+#include <iostream>
+
 namespace cashash {
 namespace colmap {
 
@@ -7,8 +9,16 @@ DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
     : database_(database_path, /*read_only=*/true) {
   images_ = database_.ReadAllImages();
   for (Camera& camera : database_.ReadAllCameras()) cameras_.emplace(camera.camera_id, std::move(camera));
+  std::unordered_map<std::string, image_t> ids_by_name;
   for (size_t i = 0; i < images_.size(); ++i) {
     image_index_.emplace(images_[i].image_id, i);
+    // COLMAP's schema makes names UNIQUE; a hand-made table may not, and pair
+    // lists and the mapper find images by name.
+    const auto named = ids_by_name.emplace(images_[i].name, images_[i].image_id);
+    if (!named.second) {
+      throw DatabaseError("table images: images " + std::to_string(named.first->second) + " and " +
+                          std::to_string(images_[i].image_id) + " have the same name '" + images_[i].name + "'");
+    }
     if (!cameras_.count(images_[i].camera_id)) {
       throw DatabaseError("table images: image " + std::to_string(images_[i].image_id) + " (" + images_[i].name +
                           ") refers to camera " + std::to_string(images_[i].camera_id) +
@@ -17,7 +27,43 @@ DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
   }
 }
 
+void DatabaseFeatureSource::SetWarningCallback(std::function<void(const std::string&)> warning) {
+  warning_ = std::move(warning);
+}
+
 const Image& DatabaseFeatureSource::image(image_t image_id) const { return images_.at(image_index_.at(image_id)); }
+
+void DatabaseFeatureSource::WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints) {
+  const Camera& camera = CameraOfImage(image_id);
+  if (camera.width == 0 || camera.height == 0) return;
+  // Pixel centres run from 0.5 to width - 0.5; a pixel of slack on each side.
+  const double max_x = static_cast<double>(camera.width) + 1.0;
+  const double max_y = static_cast<double>(camera.height) + 1.0;
+  size_t outside = 0;
+  size_t first = 0;
+  for (size_t i = 0; i < keypoints.size(); ++i) {
+    const Keypoint& kp = keypoints[i];
+    if (kp.x < -1.0 || kp.y < -1.0 || kp.x > max_x || kp.y > max_y) {
+      if (outside++ == 0) first = i;
+    }
+  }
+  if (outside == 0) return;
+  {
+    std::lock_guard<std::mutex> lock(warned_mutex_);
+    if (!warned_images_.insert(image_id).second) return;
+  }
+  const Keypoint& kp = keypoints[first];
+  const std::string text = "image " + std::to_string(image_id) + " (" + image(image_id).name + "): " +
+                           std::to_string(outside) + " of " + std::to_string(keypoints.size()) +
+                           " keypoints lie outside the " + std::to_string(camera.width) + " x " +
+                           std::to_string(camera.height) + " image (first: row " + std::to_string(first) + " at " +
+                           std::to_string(kp.x) + ", " + std::to_string(kp.y) + "); matching them anyway";
+  if (warning_) {
+    warning_(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
+}
 
 ImageFeatures DatabaseFeatureSource::LoadFeatures(image_t image_id) {
   ImageFeatures features;
@@ -30,6 +76,7 @@ ImageFeatures DatabaseFeatureSource::LoadFeatures(image_t image_id) {
                         std::to_string(features.keypoints.size()) + " rows but table descriptors has " +
                         std::to_string(features.descriptors.rows()));
   }
+  WarnAboutKeypointsOutside(image_id, features.keypoints);
   return features;
 }
 
@@ -38,7 +85,7 @@ const Camera& DatabaseFeatureSource::CameraOfImage(image_t image_id) const {
 }
 
 DatabaseResultSink::DatabaseResultSink(const std::string& database_path, bool write_two_view_geometries)
-    : database_(database_path, /*read_only=*/false), write_two_view_geometries_(write_two_view_geometries) {}
+    : lock_(database_path), database_(database_path, /*read_only=*/false), write_two_view_geometries_(write_two_view_geometries) {}
 
 void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
   database_.BeginTransaction();

@@ -3,12 +3,16 @@
 // transaction per chunk, so that a stopped run leaves whole chunks only.
 #pragma once
 
+#include <functional>
+#include <mutex>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "cashash/matching_pipeline.h"
 #include "colmap_bridge/database.h"
+#include "colmap_bridge/database_writer_lock.h"
 
 namespace cashash {
 namespace colmap {
@@ -16,32 +20,46 @@ namespace colmap {
 class DatabaseFeatureSource : public FeatureSource {
  public:
   // Reads the images and cameras tables; throws DatabaseError if an image
-  // refers to a camera that does not exist.
+  // refers to a camera that does not exist or two images share a name.
   explicit DatabaseFeatureSource(const std::string& database_path);
+
+  // Where warnings about usable but suspicious data go (keypoints outside
+  // their image); by default "WARNING: ..." lines on stderr. Called from the
+  // loading thread.
+  void SetWarningCallback(std::function<void(const std::string&)> warning);
 
   const std::vector<Image>& images() const { return images_; }
   const Image& image(image_t image_id) const;
 
   // Throws DatabaseError naming the image when keypoints and descriptors
-  // disagree in their number of rows.
+  // disagree in their number of rows or a keypoint is NaN / infinite; warns
+  // once per image about keypoints outside the image (COLMAP uses them).
   ImageFeatures LoadFeatures(image_t image_id) override;
   const Camera& CameraOfImage(image_t image_id) const override;
 
   Database& database() { return database_; }
 
  private:
+  void WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints);
+
   Database database_;
   std::vector<Image> images_;
   std::unordered_map<image_t, size_t> image_index_;
   std::unordered_map<camera_t, Camera> cameras_;
+  std::function<void(const std::string&)> warning_;
+  std::mutex warned_mutex_;
+  std::unordered_set<image_t> warned_images_;
 };
 
 class DatabaseResultSink : public ResultSink {
  public:
+  // Throws DatabaseError when another cashash process writes to the same
+  // database (see DatabaseWriterLock).
   DatabaseResultSink(const std::string& database_path, bool write_two_view_geometries);
   void WriteChunk(const std::vector<PairResult>& results) override;
 
  private:
+  DatabaseWriterLock lock_;  // taken before opening, released after closing
   Database database_;
   bool write_two_view_geometries_;
 };

@@ -4,6 +4,37 @@
 
 namespace cashash {
 namespace colmap {
+namespace {
+
+// "on /path/db: database is locked (...)": which file, what SQLite says, and
+// for the errors a user can act on, what to do.
+std::string WhereAndWhy(sqlite3* db, const char* sqlite_message) {
+  const char* file = sqlite3_db_filename(db, "main");
+  std::string text = std::string(" on ") + (file != nullptr && *file ? file : "the database") +
+                     ": " + sqlite_message;
+  switch (sqlite3_errcode(db) & 0xff) {
+    case SQLITE_BUSY:
+    case SQLITE_LOCKED:
+      text += " (another process held the lock for longer than the busy timeout)";
+      break;
+    case SQLITE_CORRUPT:
+    case SQLITE_NOTADB:
+      text += " (the file is damaged; PRAGMA integrity_check tells more)";
+      break;
+    case SQLITE_FULL:
+      text += " (no space left for the database or its journal)";
+      break;
+    case SQLITE_READONLY:
+    case SQLITE_CANTOPEN:
+      text += " (check that the file and its directory are writable)";
+      break;
+    default:
+      break;
+  }
+  return text;
+}
+
+}  // namespace
 
 SqliteStatement::SqliteStatement(sqlite3* db, const std::string& sql) : db_(db), sql_(sql) {
   if (sqlite3_prepare_v2(db_, sql_.c_str(), -1, &stmt_, nullptr) != SQLITE_OK) {
@@ -14,8 +45,8 @@ SqliteStatement::SqliteStatement(sqlite3* db, const std::string& sql) : db_(db),
 SqliteStatement::~SqliteStatement() { sqlite3_finalize(stmt_); }
 
 void SqliteStatement::Fail(const char* action) const {
-  throw DatabaseError(std::string("SQLite error ") + action + " \"" + sql_ +
-                      "\": " + sqlite3_errmsg(db_));
+  throw DatabaseError(std::string("SQLite error ") + action + " \"" + sql_ + "\"" +
+                      WhereAndWhy(db_, sqlite3_errmsg(db_)));
 }
 
 void SqliteStatement::BindInt64(int index, int64_t value) {
@@ -83,9 +114,9 @@ void SqliteStatement::Reset() {
 void ExecuteSql(sqlite3* db, const std::string& sql) {
   char* message = nullptr;
   if (sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message) != SQLITE_OK) {
-    const std::string text = message != nullptr ? message : sqlite3_errmsg(db);
+    const std::string text = WhereAndWhy(db, message != nullptr ? message : sqlite3_errmsg(db));
     sqlite3_free(message);
-    throw DatabaseError("SQLite error running \"" + sql + "\": " + text);
+    throw DatabaseError("SQLite error running \"" + sql + "\"" + text);
   }
 }
 
