@@ -50,18 +50,51 @@ def analyse_sequence(features_db, brute, cascade, eps):
         b_set = {tuple(p) for p in b["pairs"].tolist()}
         extra_correct = sum(1 for p in c_ok.tolist() if tuple(p) not in b_set)
         n = int(key.split("-")[1])
+        is_extra = np.array([tuple(p) not in b_set for p in c["pairs"].tolist()], dtype=bool)
+        extra_reasons = classify_extra_matches(descriptors[1], descriptors[n], c["pairs"][is_extra],
+                                               c["errors"][is_extra] <= eps) if len(is_extra) else None
         theta = centred_angles(descriptors[1][b_ok[:, 0]], descriptors[n][b_ok[:, 1]], mean) \
             if len(b_ok) else np.zeros(0)
         per_pair[key] = {
             "brute_correct": int(len(b_ok)), "kept": int(kept.sum()), "lost": int((~kept).sum()),
             "lost_replaced": int(replaced), "lost_absent": int((~kept).sum() - replaced),
             "cascade_only_correct": int(extra_correct),
+            "cascade_only": int(is_extra.sum()) if len(is_extra) else 0,
+            "cascade_only_reasons": extra_reasons,
+            "brute_wrong": int((b["errors"] > eps).sum()), "cascade_wrong": int((c["errors"] > eps).sum()),
             "median_angle_kept_deg": float(np.degrees(np.median(theta[kept]))) if kept.any() else None,
             "median_angle_lost_deg": float(np.degrees(np.median(theta[~kept]))) if (~kept).any() else None,
         }
         angles.append(theta)
         kept_flags.append(kept)
     return per_pair, np.concatenate(angles), np.concatenate(kept_flags)
+
+
+def classify_extra_matches(d1, d2, extra, correct, max_ratio=0.8):
+    """Why the cascade returns matches that brute force does not.
+
+    extra: (i, j) cascade matches absent from brute force; correct: whether
+    each is within eps. Returns counts by reason and correctness:
+    'ratio': j is i's exact nearest neighbour, but the exact second best makes
+    the ratio test fail (the cascade never saw that second best);
+    'not_nearest': j is not i's exact nearest neighbour (the nearest was not a
+    candidate); 'other': nearest and passing the ratio test (cross check)."""
+    counts = {r: {"correct": 0, "wrong": 0} for r in ("ratio", "not_nearest", "other")}
+    if len(extra) == 0:
+        return counts
+    dots = d1[extra[:, 0]].astype(np.int64) @ d2.T.astype(np.int64)
+    order = np.argsort(-dots, axis=1, kind="stable")[:, :2]
+    for row, ((i, j), ok) in enumerate(zip(extra.tolist(), correct)):
+        best, second = order[row]
+        angle = np.arccos(np.minimum(dots[row, [best, second]] / 512.0 ** 2, 1.0))
+        if best != j:
+            reason = "not_nearest"
+        elif angle[0] >= max_ratio * angle[1]:
+            reason = "ratio"
+        else:
+            reason = "other"
+        counts[reason]["correct" if ok else "wrong"] += 1
+    return counts
 
 
 def kept_by_angle(angles, kept):
