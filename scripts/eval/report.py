@@ -13,8 +13,10 @@ import numpy as np  # noqa: E402
 from eval import loss_analysis  # noqa: E402
 
 LABELS = {"cascade": "cashash cascade (CPU)", "cascade_gpu": "cashash cascade (GPU)",
-          "bruteforce": "cashash brute force", "colmap": "COLMAP 3.8 CPU matcher"}
-COLOURS = {"cascade": "tab:blue", "cascade_gpu": "tab:cyan", "bruteforce": "tab:orange", "colmap": "tab:green"}
+          "bruteforce": "cashash brute force", "colmap": "COLMAP 3.8 CPU matcher",
+          "cascade_r078": "cashash cascade, max_ratio 0.78"}
+COLOURS = {"cascade": "tab:blue", "cascade_gpu": "tab:cyan", "bruteforce": "tab:orange", "colmap": "tab:green",
+           "cascade_r078": "tab:purple"}
 DPI = 80
 
 
@@ -145,16 +147,18 @@ def homography_section(results, use_gpu, eps_list, plot):
                                                                            c3, 100 * p3))
         if not use_gpu:
             lines.append("| %s | %s | not run here | | | | |" % (name, LABELS["cascade_gpu"]))
-        _, cc, cp = _totals(by, "cascade", 6)
         _, bc, bp = _totals(by, "bruteforce", 6)
-        checks.append((name, 100 * (cp - bp), cc / bc if bc else 0.0))
-    lines += ["", "Targets: cascade precision at 6 px within 2 points of brute force, and at least 90 % of "
-              "brute force's correct matches:", "",
-              "| sequence | precision cascade - brute force (points) | correct cascade / brute force | met |",
-              "|---|---|---|---|"]
-    for name, dp, ratio in checks:
-        lines.append("| %s | %+.2f | %.1f %% | %s |" % (name, dp, 100 * ratio,
-                                                        "yes" if abs(dp) <= 2 and ratio >= 0.9 else "**no**"))
+        for variant in ("cascade", "cascade_r078"):
+            if variant in by:
+                _, cc, cp = _totals(by, variant, 6)
+                checks.append((name, variant, 100 * (cp - bp), cc / bc if bc else 0.0))
+    lines += ["", "Targets: cascade precision at 6 px within 2 points of brute force (ratio 0.8), and at least "
+              "90 % of brute force's correct matches:", "",
+              "| sequence | cascade | precision cascade - brute force (points) | correct cascade / brute force "
+              "| met |", "|---|---|---|---|---|"]
+    for name, variant, dp, ratio in checks:
+        lines.append("| %s | %s | %+.2f | %.1f %% | %s |" % (
+            name, LABELS[variant], dp, 100 * ratio, "yes" if abs(dp) <= 2 and ratio >= 0.9 else "**no**"))
     lines += ["", "![correct matches and precision](accuracy/%s)" % plot, "", "### Per pair", ""]
     for name, by in results.items():
         lines += ["**%s**" % name, "",
@@ -275,6 +279,76 @@ def camera_section(cams):
     return lines
 
 
+def summary_section(results, losses, by_angle, cams):
+    """Targets and the main findings, with the numbers they rest on."""
+    lines = ["## Summary against the targets", ""]
+    misses, ratios, diffs = [], [], []
+    for name, by in results.items():
+        _, cc, cp = _totals(by, "cascade", 6)
+        _, bc, bp = _totals(by, "bruteforce", 6)
+        diffs.append(100 * (cp - bp))
+        ratios.append(cc / bc if bc else 0.0)
+        if abs(100 * (cp - bp)) > 2:
+            misses.append("%s (%+.1f points)" % (name, 100 * (cp - bp)))
+    variant = []
+    for name, by in results.items():
+        if "cascade_r078" in by:
+            _, vc, vp = _totals(by, "cascade_r078", 6)
+            _, bc, bp = _totals(by, "bruteforce", 6)
+            variant.append((100 * (vp - bp), vc / bc if bc else 0.0))
+    lines.append("- Correct matches at 6 px, cascade / brute force: %.1f %% to %.1f %% over the %d sequences "
+                 "(target >= 90 %%: %s)." % (100 * min(ratios), 100 * max(ratios), len(ratios),
+                                            "met" if min(ratios) >= 0.9 else "**not met**"))
+    lines.append("- Precision at 6 px, cascade - brute force: %+.1f to %+.1f points (target within 2 points: %s)."
+                 % (min(diffs), max(diffs), "met" if not misses else "**not met** on " + ", ".join(misses)))
+    if variant:
+        lines.append("- With `--SiftMatching.max_ratio 0.78` for the cascade only (brute force at 0.8): precision "
+                     "%+.1f to %+.1f points, correct matches %.1f %% to %.1f %% of brute force's (both targets %s)."
+                     % (min(v[0] for v in variant), max(v[0] for v in variant), 100 * min(v[1] for v in variant),
+                        100 * max(v[1] for v in variant),
+                        "met" if all(abs(v[0]) <= 2 and v[1] >= 0.9 for v in variant) else "**not met**"))
+    total_lost = sum(r["lost"] for p in losses.values() for r in p.values())
+    total_bc = sum(r["brute_correct"] for p in losses.values() for r in p.values())
+    absent = sum(r["lost_absent"] for p in losses.values() for r in p.values())
+    worst = sorted(((r["lost"] / r["brute_correct"], n, k, r) for n, p in losses.items() for k, r in p.items()
+                    if r["brute_correct"] >= 50), key=lambda t: t[0], reverse=True)[:4]
+    lines.append("- Where matches are lost: %d of %d correct brute-force matches (%.1f %%), %d of them because the "
+                 "query got no cascade match at all. Worst pairs (>= 50 correct): %s. The lost matches are the "
+                 "dissimilar ones: the kept fraction falls from %.0f %% below 20 degrees between the mean-centred "
+                 "descriptors to %.0f %% at 30-35 degrees, as the first-level bucket collision probability of 7 "
+                 "tables x 8 random-hyperplane bits predicts (table in section 2); pairs with a large viewpoint or "
+                 "scale change have more such matches, hence the higher loss rates of the pairs above." % (
+                     total_lost, total_bc, 100.0 * total_lost / max(total_bc, 1), absent,
+                     ", ".join("%s %s %.1f %% (%d of %d)" % (n, k, 100 * f, r["lost"], r["brute_correct"])
+                               for f, n, k, r in worst),
+                     100 * _kept_range(by_angle, 0, 20), 100 * _kept_range(by_angle, 30, 35)))
+    lines.append("- Why precision is lower: the cascade ranks only its candidates, so when the exact second best "
+                 "is not among them an ambiguous match passes the ratio test (column *wrong: ratio* in section 2), "
+                 "and the reverse direction can likewise keep a pair brute force's cross check drops.")
+    if cams:
+        for scene, by in cams.items():
+            c, o = by.get("cascade"), by.get("colmap")
+            if c and o and "position_median" in c and "position_median" in o:
+                ok = c["position_median"] <= 1.1 * o["position_median"] and \
+                    c["rotation_median_deg"] <= 1.1 * o["rotation_median_deg"]
+                lines.append("- %s: median camera position error %.4f (cascade) vs %.4f (COLMAP's matcher), "
+                             "median rotation error %.3f vs %.3f degrees (target: cascade within 10 %%: %s)." % (
+                                 scene, c["position_median"], o["position_median"], c["rotation_median_deg"],
+                                 o["rotation_median_deg"], "met" if ok else "**not met**"))
+            elif c and "position_median" in c:
+                lines.append("- %s: median camera position error %.4f (%.5f of the scene) after the cascade; "
+                             "COLMAP's matcher not run on this scene." % (scene, c["position_median"],
+                                                                          c["position_median_rel"]))
+    lines.append("")
+    return lines
+
+
+def _kept_range(by_angle, lo, hi):
+    rows = [r for r in by_angle if lo <= r[0] < hi]
+    count = sum(r[1] for r in rows)
+    return sum(r[1] * r[2] for r in rows) / count if count else float("nan")
+
+
 def write(args, results, losses, by_angle, sweeps, cams, use_gpu, eps_list):
     os.makedirs(args.out, exist_ok=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
@@ -284,6 +358,7 @@ def write(args, results, losses, by_angle, sweeps, cams, use_gpu, eps_list):
              "Rerun: `python3 scripts/evaluate_accuracy.py --build-dir <build>`." % (
                  datetime.date.today().isoformat(), commit, platform.machine(), os.cpu_count(),
                  ", GPU present" if use_gpu else ", no GPU"), ""]
+    lines += summary_section(results, losses, by_angle, cams)
     lines += homography_section(results, use_gpu, eps_list, plot_homography(results, args.out))
     lines += loss_section(losses, by_angle, plot_loss_by_angle(by_angle, args.out))
     if sweeps:
