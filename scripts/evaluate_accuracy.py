@@ -166,13 +166,17 @@ def run_cameras(args, binary):
             summary_path = os.path.join(work, scene, matcher, "summary.json")
             if matcher == "colmap" and scene not in colmap_scenes:
                 if os.path.exists(summary_path) and args.reuse:
-                    out[scene][matcher] = load_json(summary_path)
+                    out[scene][matcher] = cameras.evaluate_existing(scene_dir, os.path.dirname(summary_path),
+                                                                    load_json(summary_path))
                 continue
             if not (args.reuse and os.path.exists(summary_path)):
                 summary = cameras.reconstruct(scene_dir, source, matcher, binary,
                                               os.path.join(work, scene, matcher), log)
                 save_json(summary_path, summary)
-            out[scene][matcher] = load_json(summary_path)
+            # Errors are recomputed from the stored models, so that a change of
+            # the error measures needs no new reconstruction.
+            out[scene][matcher] = cameras.evaluate_existing(scene_dir, os.path.dirname(summary_path),
+                                                            load_json(summary_path))
             print("cameras %s %s done" % (scene, matcher), flush=True)
     return out
 

@@ -62,6 +62,26 @@ def umeyama(source, target):
     return scale, rotation, mu_t - scale * rotation @ mu_s
 
 
+def rotation_angle_deg(r):
+    """Angle of a rotation matrix. atan2 of sine and cosine stays accurate for
+    small angles, where arccos of a trace rounded near 3 would report
+    hundredths of a degree."""
+    sine = np.linalg.norm([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / 2
+    return float(np.degrees(np.arctan2(sine, (np.trace(r) - 1) / 2)))
+
+
+def relative_rotation_errors(gt, model, names):
+    """Alignment-free: for every pair of cameras, the angle between the
+    ground-truth and the model's relative rotation."""
+    errors = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            rel_gt = gt[names[a]][0].T @ gt[names[b]][0]
+            rel_model = model[names[a]][0].T @ model[names[b]][0]
+            errors.append(rotation_angle_deg(rel_gt.T @ rel_model))
+    return np.array(errors)
+
+
 def camera_errors(gt, model):
     """Aligns model to gt on the common images; returns the error summary."""
     names = sorted(set(gt) & set(model))
@@ -77,18 +97,16 @@ def camera_errors(gt, model):
     position = np.linalg.norm(aligned - target, axis=1)
     angles = []
     for n in names:
-        relative = gt[n][0].T @ (rotation @ model[n][0])
-        # atan2 of sine and cosine stays accurate for small angles, where arccos
-        # of a trace rounded near 3 would report hundredths of a degree.
-        sine = np.linalg.norm([relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0],
-                               relative[1, 0] - relative[0, 1]]) / 2
-        angles.append(np.degrees(np.arctan2(sine, (np.trace(relative) - 1) / 2)))
+        angles.append(rotation_angle_deg(gt[n][0].T @ (rotation @ model[n][0])))
     angles = np.array(angles)
+    relative = relative_rotation_errors(gt, model, names)
     summary.update({
         "position_median": float(np.median(position)), "position_max": float(position.max()),
         "position_median_rel": float(np.median(position) / scene_size),
         "position_max_rel": float(position.max() / scene_size),
         "rotation_median_deg": float(np.median(angles)), "rotation_max_deg": float(angles.max()),
+        "relative_rotation_median_deg": float(np.median(relative)),
+        "relative_rotation_max_deg": float(relative.max()),
     })
     return summary
 
@@ -132,4 +150,15 @@ def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log):
     model = largest_model(sparse, work_dir, log)
     summary = camera_errors(read_gt_cameras(scene_dir), model)
     summary.update({"match_wall_s": match_wall, "match_cpu_s": match_cpu, "mapper_wall_s": map_wall})
+    return summary
+
+
+def evaluate_existing(scene_dir, work_dir, summary):
+    """Recomputes the error part of summary from the TXT models already in work_dir."""
+    best = {}
+    for text_dir in sorted(glob.glob(os.path.join(work_dir, "txt_*"))):
+        cameras = read_model_images(os.path.join(text_dir, "images.txt"))
+        if len(cameras) > len(best):
+            best = cameras
+    summary.update(camera_errors(read_gt_cameras(scene_dir), best))
     return summary
