@@ -175,7 +175,7 @@ __global__ void __launch_bounds__(kThreads) ScatterKernel(const HashJob* jobs, i
     e.code_hi = code.y;
     e.signature = signature;
     e.index = f;
-    e.unused = 0;
+    e.table_shift = static_cast<uint32_t>(t * params.bits_per_table);
     job.parts.entries[size_t(t) * n + pos] = e;
   }
 }

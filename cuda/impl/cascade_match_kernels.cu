@@ -2,15 +2,16 @@
 //
 // Per query (one warp): the lanes stream the query's buckets of all tables
 // of the target image 32 entries at a time (BucketEntry rows are contiguous:
-// two coalesced 16-byte loads per lane, one 32-byte sector), compute the 128-bit Hamming distance
-// with popcount, drop it if > tau or not better than the current k-th key,
-// drop duplicates (a candidate counts only in the first table where it shares
-// the query's bucket: its signature tells which), and insert the survivors
-// into a warp-resident sorted list of keys (distance << 24 | feature). The
-// k best keys then get exact integer dot products (dp4a, 8 lanes per
-// candidate), and best / second best decide with COLMAP's ratio and distance
-// rule. Ties follow cascade_hashing.h: keys are unique and ordered by
-// (distance, index); dots by (dot descending, index ascending).
+// two coalesced 16-byte loads per lane, one 32-byte sector), compute the
+// 128-bit Hamming distance with popcount, drop it if > tau or not better than
+// the current k-th key, drop duplicates (a candidate counts only in the first
+// table where it shares the query's bucket: its signature tells which), and
+// queue the survivors; queued keys (distance << 24 | feature) are merged into
+// a warp-resident sorted list 32 at a time with a bitonic sort. The k best
+// keys then get exact integer dot products (dp4a, 8 lanes per candidate),
+// and best / second best decide with COLMAP's ratio and distance rule. Ties
+// follow cascade_hashing.h: keys are unique and ordered by (distance, index);
+// dots by (dot descending, index ascending).
 #include "impl/cascade_match_kernels.cuh"
 
 #include "utils/cuda_check.cuh"
@@ -21,6 +22,8 @@ namespace cuda {
 namespace {
 
 constexpr int kThreads = 256;
+// 4 blocks of 256 threads per SM: at most 64 registers, 32 warps per SM.
+constexpr int kMinBlocksPerSm = 4;
 constexpr uint32_t kIndexMask = kMaxGpuFeatures - 1;
 constexpr float kDotNormalisation = 1.0f / (512.0f * 512.0f);
 
@@ -52,30 +55,118 @@ __device__ __forceinline__ uint32_t Dot16(uint4 a, uint4 b) {
   return __dp4a(a.w, b.w, s);
 }
 
-// Per-warp shared scratch: where each table's bucket starts in the query's
-// concatenated candidate stream, and the entry index base of each table.
-struct WarpTables {
-  uint32_t start[kMaxGpuTables + 1];
-  uint32_t base[kMaxGpuTables];
+// Per-warp shared scratch of one query. Tables with an empty bucket are
+// left out, so that "slot" s is the s-th non-empty bucket in stream order.
+struct WarpScratch {
+  uint32_t base[kMaxGpuTables];   // entry index of stream position p in slot s: base[s] + p
+  uint32_t start[kMaxGpuTables];  // stream position where slot s begins
+  // (both are read back into lane s: the compaction goes through here)
+  uint32_t pending[64];           // survivors not yet merged into the ranked list
 };
 
-// Table holding stream position `pos`, searched upwards from `t` (the
-// largest t with start[t] <= pos; empty tables are skipped).
-__device__ __forceinline__ int TableOf(const WarpTables& tables, int t, uint32_t pos) {
-  while (tables.start[t + 1] <= pos) ++t;
-  return t;
+// Capacity of WarpScratch::pending: two chunks' survivors always fit.
+constexpr int kPendingCapacity = 64;
+
+// Up to this many pending survivors are inserted one by one (~12
+// instructions each); more are sorted and merged (~110 instructions).
+constexpr int kSerialMergeMax = 6;
+
+// Candidates of one query ranked by key (distance << 24 | feature). The
+// chunks append their survivors to a shared buffer; 32 or more pending (or
+// the end of the stream) are sorted and merged into the warp-resident list
+// 32 at a time, so the first chunks of a query, where nearly every candidate
+// within tau survives, cost one merge instead of one insertion per survivor.
+struct QueryRanking {
+  WarpSortedList ranked;
+  uint32_t kth = WarpSortedList::kEmptyKey;  // k-th ranked key (only ever decreases)
+  int num_pending = 0;                       // same in every lane
+
+  __device__ __forceinline__ void Merge(const uint32_t* pending, int top_k) {
+    __syncwarp();
+    for (int base = 0; base < num_pending; base += 32) {
+      const int batch = min(32, num_pending - base);
+      if (batch <= kSerialMergeMax) {
+        for (int i = 0; i < batch; ++i) {
+          const uint32_t k = pending[base + i];
+          if (k < kth) {
+            ranked.Insert(k);
+            kth = ranked.At(top_k - 1);
+          }
+        }
+      } else {
+        const uint32_t v =
+            LaneId() < static_cast<unsigned>(batch) ? pending[base + LaneId()] : WarpSortedList::kEmptyKey;
+        ranked.MergeSorted(WarpBitonicSort(v));
+        kth = ranked.At(top_k - 1);
+      }
+    }
+    num_pending = 0;
+    __syncwarp();
+  }
+
+  // Queues this lane's keys of two chunks (kEmptyKey: none); merges once 32
+  // or more are pending, so that the k-th key tightens early.
+  __device__ __forceinline__ void Add(uint32_t key0, uint32_t key1, uint32_t* pending, int top_k) {
+    const unsigned ballot0 = __ballot_sync(kFullWarpMask, key0 != WarpSortedList::kEmptyKey);
+    const unsigned ballot1 = __ballot_sync(kFullWarpMask, key1 != WarpSortedList::kEmptyKey);
+    const int count0 = __popc(ballot0), count = count0 + __popc(ballot1);
+    if (count == 0) return;
+    if (num_pending + count > kPendingCapacity) Merge(pending, top_k);
+    const unsigned below = LaneMaskLt();
+    if (key0 != WarpSortedList::kEmptyKey) pending[num_pending + __popc(ballot0 & below)] = key0;
+    if (key1 != WarpSortedList::kEmptyKey) pending[num_pending + count0 + __popc(ballot1 & below)] = key1;
+    num_pending += count;
+    if (num_pending >= 32) Merge(pending, top_k);
+  }
+};
+
+// Where the entries of one chunk of 32 stream positions [first, first + 32)
+// are: lane L gets the entry index of position first + L. `slot_before` is
+// the slot of position first - 1 (~0u before the stream) and moves on to the
+// slot of position first + 31. The slots starting inside the chunk are one
+// OR-reduction of bits, so no lane searches the table starts.
+// Lane s holds my_start / my_base of slot s. Lanes past the end of the
+// stream get the last entry (in the last slot), so that every lane loads
+// unconditionally from a valid address.
+__device__ __forceinline__ uint32_t ChunkEntryIndex(uint32_t my_start, uint32_t my_base, uint32_t first, uint32_t total,
+                                                   uint32_t& slot_before) {
+  const uint32_t rel = my_start - first;
+  const unsigned starts = __reduce_or_sync(kFullWarpMask, rel < 32 ? 1u << rel : 0u);
+  const uint32_t slot = slot_before + __popc(starts & LaneMaskLe());
+  slot_before += __popc(starts);
+  return __shfl_sync(kFullWarpMask, my_base, slot) + min(first + LaneId(), total - 1);
 }
 
-// Accepted best match in `target` of feature q of `query` (signature and
-// code passed in, loaded ahead by the caller), or -1 (the same value in every
-// lane).
+// Ranking key of one bucket entry, or kEmptyKey when it is beyond tau, not
+// below the current k-th key, or a duplicate: a candidate counts only in the
+// first table where it shares the query's bucket, i.e. a duplicate has a zero
+// b-bit field of (signature diff) below its own table. Fields from its table
+// up get their top bit set, then the borrow test finds a zero field exactly
+// (a borrow can only start at a zero field).
+__device__ __forceinline__ uint32_t EntryKey(uint4 c, uint4 s, bool valid, uint64_t signature, ulonglong2 code,
+                                             uint32_t tau, uint32_t kth, const MatchParams& params) {
+  const uint32_t distance = __popc(uint32_t(code.x) ^ c.x) + __popc(uint32_t(code.x >> 32) ^ c.y) +
+                            __popc(uint32_t(code.y) ^ c.z) + __popc(uint32_t(code.y >> 32) ^ c.w);
+  const uint32_t candidate = (distance << 24) | s.z;
+  uint32_t key = WarpSortedList::kEmptyKey;
+  if (valid && distance <= tau && candidate < kth) {
+    const uint64_t diff = signature ^ (uint64_t(s.y) << 32 | s.x);
+    const uint64_t below = (uint64_t{1} << s.w) - 1;
+    const uint64_t v = (diff & below) | (params.field_high_bits & ~below);
+    const bool duplicate = ((v - params.field_low_bits) & ~v & params.field_high_bits) != 0;
+    if (!duplicate) key = candidate;
+  }
+  return key;
+}
+
+// Accepted best match in `target` of feature q of `query`, or -1 (the same
+// value in every lane).
 //
-// The buckets of all tables form one stream of candidates, cut into chunks
-// of 32 (one per lane); the next chunk's entries are loaded before the
-// current one is ranked, so that a warp waits for one L2 round trip per
-// chunk at most instead of one per bucket plus one per chunk.
-__device__ int MatchQuery(const DeviceImageView& query, uint32_t q, uint64_t signature, ulonglong2 code,
-                          const DeviceImageView& target, const MatchParams& params, WarpTables& tables) {
+// The buckets of all tables form one stream of candidates, processed two
+// chunks of 32 (one entry per lane) at a time with all four loads issued
+// before either chunk is ranked.
+__device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const DeviceImageView& target,
+                          const MatchParams& params, WarpScratch& scratch) {
   const unsigned lane = LaneId();
   const int num_tables = params.num_tables;
   const int bits = params.bits_per_table;
@@ -83,6 +174,9 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, uint64_t sig
   const uint64_t bucket_mask = buckets - 1;
   const uint32_t n = target.num_features;
   const uint32_t tau = static_cast<uint32_t>(params.tau);
+  const uint64_t signature = query.signatures[q];
+  const ulonglong2 code = query.codes[q];
+  const BucketEntry* entries = target.entries;
 
   // Lane t < num_tables reads the bucket of table t; a scan places them.
   uint32_t size = 0, begin = 0;
@@ -93,74 +187,38 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, uint64_t sig
     size = offsets[1] - begin;
   }
   uint32_t inclusive = size;
-#pragma unroll
-  for (int d = 1; d < 32; d <<= 1) {
+  for (int d = 1; d < num_tables; d <<= 1) {
     const uint32_t o = __shfl_up_sync(kFullWarpMask, inclusive, d);
     if (lane >= static_cast<unsigned>(d)) inclusive += o;
   }
-  const uint32_t total = __shfl_sync(kFullWarpMask, inclusive, 31);
-  const uint32_t stream_start = inclusive - size;
-  __syncwarp();
-  tables.start[lane] = static_cast<int>(lane) < num_tables ? stream_start : 0xffffffffu;
-  tables.base[lane] = lane * n + begin - stream_start;
-  if (lane == 0) tables.start[kMaxGpuTables] = 0xffffffffu;
-  __syncwarp();
-
-  // Chunk 0.
-  uint32_t pos = lane;
-  int t = TableOf(tables, 0, pos);
-  uint4 c = make_uint4(0, 0, 0, 0), s = make_uint4(0, 0, 0, 0);
-  if (pos < total) {
-    const uint4* entry = reinterpret_cast<const uint4*>(target.entries + (tables.base[t] + pos));
-    c = __ldg(entry);
-    s = __ldg(entry + 1);
+  const uint32_t total = __shfl_sync(kFullWarpMask, inclusive, num_tables - 1);
+  const unsigned nonempty = __ballot_sync(kFullWarpMask, size != 0);
+  __syncwarp();  // the previous query's reads of the scratch are done
+  if (size != 0) {
+    const uint32_t slot = __popc(nonempty & LaneMaskLt());
+    scratch.base[slot] = lane * n + begin - (inclusive - size);
+    scratch.start[slot] = inclusive - size;
   }
+  __syncwarp();
+  const bool has_slot = lane < static_cast<unsigned>(__popc(nonempty));
+  const uint32_t my_start = has_slot ? scratch.start[lane] : 0xffffffffu;
+  const uint32_t my_base = has_slot ? scratch.base[lane] : 0u;
 
-  WarpSortedList ranked;
-  uint32_t kth = WarpSortedList::kEmptyKey;  // key of the k-th ranked candidate
-  for (uint32_t first = 0; first < total; first += 32) {
-    // Load the next chunk ahead.
-    const uint32_t next_pos = first + 32 + lane;
-    const int next_t = TableOf(tables, __shfl_sync(kFullWarpMask, t, 31), next_pos);
-    uint4 next_c = make_uint4(0, 0, 0, 0), next_s = make_uint4(0, 0, 0, 0);
-    if (next_pos < total) {
-      const uint4* entry = reinterpret_cast<const uint4*>(target.entries + (tables.base[next_t] + next_pos));
-      next_c = __ldg(entry);
-      next_s = __ldg(entry + 1);
-    }
-
-    uint32_t key = WarpSortedList::kEmptyKey;
-    if (pos < total) {
-      const uint32_t distance = __popcll(code.x ^ (uint64_t(c.y) << 32 | c.x)) +
-                                __popcll(code.y ^ (uint64_t(c.w) << 32 | c.z));
-      const uint32_t candidate = (distance << 24) | s.z;
-      if (distance <= tau && candidate < kth) {
-        // Counted only in the first table where it shares the query's bucket:
-        // a duplicate has a zero b-bit field of diff below table t. Fields
-        // from t up get their top bit set, then the borrow test finds a zero
-        // field exactly (a borrow can only start at a zero field).
-        const uint64_t diff = signature ^ (uint64_t(s.y) << 32 | s.x);
-        const uint64_t below = t == 0 ? 0 : (uint64_t{1} << (t * bits)) - 1;
-        const uint64_t v = (diff & below) | (params.field_high_bits & ~below);
-        const bool duplicate = ((v - params.field_low_bits) & ~v & params.field_high_bits) != 0;
-        if (!duplicate) key = candidate;
-      }
-    }
-    unsigned pending = __ballot_sync(kFullWarpMask, key != WarpSortedList::kEmptyKey);
-    while (pending != 0) {
-      const int src = __ffs(pending) - 1;
-      pending &= pending - 1;
-      const uint32_t k = __shfl_sync(kFullWarpMask, key, src);
-      if (k < kth) {
-        ranked.Insert(k);
-        kth = ranked.At(params.top_k - 1);
-      }
-    }
-    pos = next_pos;
-    t = next_t;
-    c = next_c;
-    s = next_s;
+  QueryRanking ranking;
+  uint32_t slot_before = ~0u;
+  for (uint32_t first = 0; first < total; first += 64) {
+    const uint32_t pos0 = first + lane, pos1 = pos0 + 32;
+    const uint32_t index0 = ChunkEntryIndex(my_start, my_base, first, total, slot_before);
+    const uint32_t index1 = ChunkEntryIndex(my_start, my_base, first + 32, total, slot_before);
+    const uint4* entry0 = reinterpret_cast<const uint4*>(entries + index0);
+    const uint4* entry1 = reinterpret_cast<const uint4*>(entries + index1);
+    const uint4 c0 = __ldg(entry0), s0 = __ldg(entry0 + 1), c1 = __ldg(entry1), s1 = __ldg(entry1 + 1);
+    ranking.Add(EntryKey(c0, s0, pos0 < total, signature, code, tau, ranking.kth, params),
+                EntryKey(c1, s1, pos1 < total, signature, code, tau, ranking.kth, params), scratch.pending,
+                params.top_k);
   }
+  if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
+  const WarpSortedList& ranked = ranking.ranked;
 
   // Exact dot products of the ranked candidates: 4 at a time, 8 lanes each,
   // two rounds per step with both loads issued first.
@@ -184,62 +242,57 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, uint64_t sig
     if (rel >= 0 && rel < 4) my_dot = got0;
     if (rel >= 4 && rel < 8) my_dot = got1;
   }
-  // Order (dot descending, index ascending) as one 64-bit maximum.
-  const uint64_t value = static_cast<int>(lane) < count
-                             ? (uint64_t(uint32_t(my_dot)) << 32) | (0xffffffffu - (ranked.key & kIndexMask))
-                             : 0;
-  const uint64_t best = WarpMaxU64(value);
-  const uint64_t second = WarpMaxU64(value == best ? 0 : value);
-  const int best_dot = static_cast<int>(best >> 32);
-  const int second_dot = second != 0 ? static_cast<int>(second >> 32) : 0;
-  if (best_dot <= 0) return -1;
-  if (!Accept(best_dot, second_dot, params.max_ratio, params.max_distance)) return -1;
-  return static_cast<int>(0xffffffffu - static_cast<uint32_t>(best));
+  // Best by (dot descending, index ascending), second = largest dot of the
+  // others (0 when none): three single-instruction warp reductions. Dots of
+  // uint8 vectors are >= 0.
+  const bool valid = static_cast<int>(lane) < count;
+  const uint32_t dot = valid ? static_cast<uint32_t>(my_dot) : 0u;
+  const uint32_t index = ranked.key & kIndexMask;
+  const uint32_t best_dot = __reduce_max_sync(kFullWarpMask, dot);
+  if (best_dot == 0) return -1;
+  const uint32_t best_index = __reduce_min_sync(kFullWarpMask, valid && dot == best_dot ? index : 0xffffffffu);
+  const uint32_t second_dot = __reduce_max_sync(kFullWarpMask, valid && index != best_index ? dot : 0u);
+  if (!Accept(static_cast<int>(best_dot), static_cast<int>(second_dot), params.max_ratio, params.max_distance)) {
+    return -1;
+  }
+  return static_cast<int>(best_index);
 }
 
-// Forward pass (kReverse = false): best[i] = match of a's feature i in b.
-// Reverse pass: for every i with best[i] = j >= 0, query j of b against a
-// and clear best[i] unless the answer is i.
-template <bool kReverse>
-__global__ void __launch_bounds__(kThreads) CascadeMatchKernel(const PairTask* tasks, int num_tasks,
-                                                              uint32_t total_items, MatchParams params,
-                                                              int32_t* best) {
-  __shared__ WarpTables warp_tables[kThreads / 32];
-  WarpTables& tables = warp_tables[threadIdx.x >> 5];
+// best[i] = match of a's feature i in b. With kCrossCheck, a forward match j
+// is re-queried right away (j of b against a, same warp) and dropped unless
+// the answer is i: one launch, and the reverse work spreads over all warps
+// with the forward work instead of waiting in a second pass.
+template <bool kCrossCheck>
+__global__ void __launch_bounds__(kThreads, kMinBlocksPerSm) CascadeMatchKernel(const PairTask* tasks, int num_tasks,
+                                                                              uint32_t total_items, MatchParams params,
+                                                                              int32_t* best) {
+  __shared__ WarpScratch warp_scratch[kThreads / 32];
+  WarpScratch& scratch = warp_scratch[threadIdx.x >> 5];
   const unsigned lane = LaneId();
   const uint32_t warps = gridDim.x * (kThreads / 32);
   for (uint32_t item = blockIdx.x * (kThreads / 32) + (threadIdx.x >> 5); item < total_items; item += warps) {
+    // The image views stay in (cached) global memory: a copy of both would
+    // take 22 registers for the whole loop.
     const PairTask* task = tasks + FindTask(tasks, num_tasks, item);
-    const DeviceImageView a = task->a;
-    const DeviceImageView b = task->b;
     const uint32_t first = (item - task->item_begin) * kQueriesPerItem;
-    const uint32_t last = min(first + kQueriesPerItem, a.num_features);
+    const uint32_t last = min(first + kQueriesPerItem, task->a.num_features);
     int32_t* results = best + task->best_offset;
-    if (!kReverse) {
-      uint64_t signature = a.signatures[first];
-      ulonglong2 code = a.codes[first];
-      for (uint32_t i = first; i < last; ++i) {
-        // The next query's hashes are loaded while this one is matched.
-        const uint32_t next = min(i + 1, last - 1);
-        const uint64_t next_signature = a.signatures[next];
-        const ulonglong2 next_code = a.codes[next];
-        const int match = MatchQuery(a, i, signature, code, b, params, tables);
-        if (lane == 0) results[i] = match;
-        signature = next_signature;
-        code = next_code;
+    // One call site for both directions keeps one copy of MatchQuery.
+    uint32_t i = first;
+    int forward = -1;
+    bool reverse = false;
+    while (i < last) {
+      const int answer = MatchQuery(reverse ? task->b : task->a, reverse ? static_cast<uint32_t>(forward) : i,
+                                    reverse ? task->a : task->b, params, scratch);
+      if (kCrossCheck && !reverse && answer >= 0) {
+        forward = answer;
+        reverse = true;
+        continue;
       }
-    } else {
-      const uint32_t i_lane = first + lane;
-      const int forward = (lane < kQueriesPerItem && i_lane < last) ? results[i_lane] : -1;
-      unsigned todo = __ballot_sync(kFullWarpMask, forward >= 0);
-      while (todo != 0) {
-        const int src = __ffs(todo) - 1;
-        todo &= todo - 1;
-        const uint32_t j = static_cast<uint32_t>(__shfl_sync(kFullWarpMask, forward, src));
-        const uint32_t i = first + src;
-        const int back = MatchQuery(b, j, b.signatures[j], b.codes[j], a, params, tables);
-        if (lane == 0 && back != static_cast<int>(i)) results[i] = -1;
-      }
+      const int result = !reverse ? answer : (answer == static_cast<int>(i) ? forward : -1);
+      if (lane == 0) results[i] = result;
+      reverse = false;
+      ++i;
     }
   }
 }
@@ -290,7 +343,7 @@ __global__ void __launch_bounds__(kCompactThreads) CompactKernel(const PairTask*
 int CascadeMatchGridSize(int device) {
   int sms = 0, per_sm = 0;
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, CascadeMatchKernel<false>, kThreads, 0));
+  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, CascadeMatchKernel<true>, kThreads, 0));
   return sms * (per_sm > 0 ? per_sm : 1);
 }
 
@@ -299,12 +352,12 @@ void LaunchCascadeMatch(const PairTask* tasks, int num_tasks, uint32_t total_ite
   if (num_tasks == 0 || total_items == 0) return;
   const uint32_t needed = (total_items + kThreads / 32 - 1) / (kThreads / 32);
   const int grid = static_cast<int>(needed < static_cast<uint32_t>(grid_size) ? needed : static_cast<uint32_t>(grid_size));
-  CascadeMatchKernel<false><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, best);
-  CUDA_CHECK_LAUNCH();
   if (cross_check) {
     CascadeMatchKernel<true><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, best);
-    CUDA_CHECK_LAUNCH();
+  } else {
+    CascadeMatchKernel<false><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, best);
   }
+  CUDA_CHECK_LAUNCH();
 }
 
 void LaunchCompactMatches(const PairTask* tasks, int num_tasks, const int32_t* best, uint2* out,

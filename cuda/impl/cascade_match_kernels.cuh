@@ -1,7 +1,8 @@
 // Cascade matching of many image pairs per launch: a persistent grid of
 // warps walks a queue of (pair, chunk of query features) items; one warp
-// answers one query at a time (steps 4 and 5 of cascade_hashing.h), then a
-// reverse pass cross-checks and a compaction pass writes the matches.
+// answers one query at a time (steps 4 and 5 of cascade_hashing.h) and, with
+// cross-check, the reverse query of each forward match right after it; then
+// a compaction pass writes the matches.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -52,8 +53,8 @@ struct MatchSegment {
 int CascadeMatchGridSize(int device);
 
 // best[task.best_offset + i] = accepted best match in b of feature i of a, or
-// -1; with cross_check, then -1 unless the reverse query of that match gives
-// i back. Asynchronous on `stream`.
+// -1; with cross_check, -1 also unless the reverse query of that match gives
+// i back (one launch). Asynchronous on `stream`.
 void LaunchCascadeMatch(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
                         bool cross_check, int grid_size, int32_t* best, cudaStream_t stream);
 

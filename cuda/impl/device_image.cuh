@@ -17,7 +17,7 @@ struct alignas(16) BucketEntry {
   uint64_t code_hi;  // remap bits 64..127
   uint64_t signature;  // bucket id of table t in bits t*b .. t*b+b-1
   uint32_t index;    // feature row
-  uint32_t unused;
+  uint32_t table_shift;  // t * bits_per_table for the table t that lists it (duplicate test)
 };
 static_assert(sizeof(BucketEntry) == 32, "two 16-byte loads per entry");
 

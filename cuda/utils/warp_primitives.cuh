@@ -1,5 +1,5 @@
 // Small warp-level building blocks shared by the GPU kernels: reductions,
-// a warp-wide exclusive count and a warp-resident sorted top-k list.
+// lane masks, a warp bitonic sort and a warp-resident sorted top-k list.
 #pragma once
 
 #include <cstdint>
@@ -49,7 +49,55 @@ struct WarpSortedList {
   }
   // Key at position i (every lane gets it).
   __device__ __forceinline__ uint32_t At(int i) const { return __shfl_sync(kFullWarpMask, key, i); }
+
+  // Merges 32 keys sorted ascending over the lanes (`sorted`, unique and
+  // absent from the list, kEmptyKey allowed): keeps the 32 smallest of both.
+  // min(list[i], sorted[31 - i]) is a bitonic sequence holding exactly those
+  // 32, so five half-cleaner steps sort it: 6 shuffles instead of one
+  // insertion per key.
+  __device__ __forceinline__ void MergeSorted(uint32_t sorted) {
+    const unsigned lane = LaneId();
+    const uint32_t reversed = __shfl_sync(kFullWarpMask, sorted, 31 - lane);
+    key = min(key, reversed);
+#pragma unroll
+    for (int j = 16; j > 0; j >>= 1) {
+      const uint32_t other = __shfl_xor_sync(kFullWarpMask, key, j);
+      key = (lane & j) ? max(key, other) : min(key, other);
+    }
+  }
 };
+
+// Bitmask of the lanes below this one.
+__device__ __forceinline__ unsigned LaneMaskLt() {
+  unsigned mask;
+  asm("mov.u32 %0, %%lanemask_lt;" : "=r"(mask));
+  return mask;
+}
+
+// Bitmask of this lane and the lanes below it.
+__device__ __forceinline__ unsigned LaneMaskLe() {
+  unsigned mask;
+  asm("mov.u32 %0, %%lanemask_le;" : "=r"(mask));
+  return mask;
+}
+
+// Sorts one 32-bit value per lane ascending over the warp (bitonic network,
+// 15 shuffle steps).
+__device__ __forceinline__ uint32_t WarpBitonicSort(uint32_t v) {
+  const unsigned lane = LaneId();
+#pragma unroll
+  for (int k = 2; k <= 32; k <<= 1) {
+#pragma unroll
+    for (int j = k / 2; j > 0; j >>= 1) {
+      const uint32_t other = __shfl_xor_sync(kFullWarpMask, v, j);
+      // Upper lane of an ascending run or lower lane of a descending run
+      // keeps the larger value.
+      const bool take_max = ((lane & j) != 0) != ((lane & k) != 0);
+      v = take_max ? max(v, other) : min(v, other);
+    }
+  }
+  return v;
+}
 
 }  // namespace cuda
 }  // namespace cashash
