@@ -24,6 +24,9 @@ std::string WhereAndWhy(sqlite3* db, const char* sqlite_message) {
     case SQLITE_FULL:
       text += " (no space left for the database or its journal)";
       break;
+    case SQLITE_IOERR:
+      text += " (disk full, file size limit or failing storage; committed chunks are kept)";
+      break;
     case SQLITE_READONLY:
     case SQLITE_CANTOPEN:
       text += " (check that the file and its directory are writable)";

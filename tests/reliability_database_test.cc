@@ -536,6 +536,7 @@ TEST(ReliabilityFaultTest, DiskFullWhileWriting) {
   sigaction(SIGXFSZ, &old_action, nullptr);
   EXPECT_TRUE(Contains(error, path)) << error;
   EXPECT_TRUE(Contains(error, "disk I/O error") || Contains(error, "full")) << error;
+  EXPECT_TRUE(Contains(error, "disk full")) << error;
   EXPECT_EQ(IntegrityOf(path), "ok");
   EXPECT_EQ(CountRows(path, "matches"), 1u);
   Database db(path, true);

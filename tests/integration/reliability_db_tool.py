@@ -1,17 +1,28 @@
 #!/usr/bin/env python3
-"""Writes a small COLMAP 3.8-style feature database with synthetic features,
-for the reliability tests: no feature extraction, a second or two to build.
+"""Helpers of the reliability tests (tests/integration/reliability_*.sh).
+
+  make OUT.db [--images N] [--features K] ...   synthetic feature database
+  check DB [--pairs N]     integrity_check ok, matches and two_view_geometries
+                           hold the same pairs, no more than N of them
+  compare DB REF           same rows (pair_id and every column) in both tables
+  count DB                 prints the number of matches rows
+  watch DB PIDFILE         reads DB while the process in PIDFILE writes it;
+                           fails if any read fails or sees half a chunk
+
+`make` writes a small COLMAP 3.8-style database with synthetic features: no
+feature extraction, a second or two to build.
 
 Random 3-D points are seen by cameras on a circle; every image gets the
 projections of a random subset of the points as keypoints and, as
 descriptors, perturbed copies of one SIFT-like vector per point. Images
 sharing points therefore have real matches that verify geometrically.
 
-Usage: reliability_make_database.py OUT.db [--images N] [--features K]
-       [--points P] [--seed S] [--journal wal|delete]
 """
 import argparse
+import os
 import sqlite3
+import sys
+import time
 
 import numpy as np
 
@@ -59,15 +70,7 @@ def look_at(center, target):
     return np.stack([x, y, z])
 
 
-def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("path")
-    parser.add_argument("--images", type=int, default=60)
-    parser.add_argument("--features", type=int, default=400)
-    parser.add_argument("--points", type=int, default=600)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--journal", choices=["wal", "delete"], default="wal")
-    args = parser.parse_args()
+def make(args):
     rng = np.random.default_rng(args.seed)
 
     points = rng.uniform(-1.0, 1.0, size=(args.points, 3))
@@ -105,6 +108,109 @@ def main():
                     (image_id, len(chosen), descriptors.tobytes()))
     con.commit()
     con.close()
+
+
+def fail(message):
+    print(f"FAIL: {message}", file=sys.stderr)
+    sys.exit(1)
+
+
+def pair_ids(con, table):
+    return {row[0] for row in con.execute(f"SELECT pair_id FROM {table}")}
+
+
+def check(args):
+    con = sqlite3.connect(args.path, timeout=60)
+    integrity = con.execute("PRAGMA integrity_check").fetchone()[0]
+    if integrity != "ok":
+        fail(f"{args.path}: integrity_check says {integrity}")
+    matches, geometries = pair_ids(con, "matches"), pair_ids(con, "two_view_geometries")
+    if matches != geometries:
+        fail(f"{args.path}: {len(matches ^ geometries)} pairs have a row in one table only")
+    if args.pairs is not None and len(matches) > args.pairs:
+        fail(f"{args.path}: {len(matches)} pairs, more than {args.pairs}")
+    print(f"{args.path}: integrity ok, {len(matches)} pairs in both tables")
+
+
+def rows(con, table):
+    return sorted(con.execute(f"SELECT * FROM {table}").fetchall())
+
+
+def compare(args):
+    con, ref = sqlite3.connect(args.path), sqlite3.connect(args.reference)
+    for table in ("matches", "two_view_geometries"):
+        a, b = rows(con, table), rows(ref, table)
+        if a != b:
+            keys_a, keys_b = {r[0] for r in a}, {r[0] for r in b}
+            differ = sum(1 for x, y in zip(a, b) if x != y)
+            fail(f"{table}: {len(a)} rows vs {len(b)} in the reference, "
+                 f"{len(keys_a ^ keys_b)} pair_ids in one only, {differ} rows differ")
+    print(f"{args.path}: same matches and two_view_geometries rows as {args.reference} "
+          f"({len(rows(con, 'matches'))} pairs)")
+
+
+def count(args):
+    con = sqlite3.connect(args.path, timeout=60)
+    print(con.execute("SELECT COUNT(*) FROM matches").fetchone()[0])
+
+
+def watch(args):
+    """A concurrent reader: every snapshot must be readable and hold whole
+    chunks (a pair in matches is in two_view_geometries too) and counts never
+    go down."""
+    last, reads = 0, 0
+    while True:
+        alive = os.path.exists(args.pidfile)
+        if alive:
+            try:
+                os.kill(int(open(args.pidfile).read()), 0)
+            except (OSError, ValueError):
+                alive = False
+        con = sqlite3.connect(f"file:{args.path}?mode=ro", uri=True, timeout=60)
+        try:
+            con.execute("BEGIN")  # one snapshot for both reads
+            matches = pair_ids(con, "matches")
+            geometries = pair_ids(con, "two_view_geometries")
+            con.execute("COMMIT")
+        except sqlite3.Error as error:
+            fail(f"reader: {error}")
+        finally:
+            con.close()
+        reads += 1
+        if matches != geometries:
+            fail(f"reader saw a half-written chunk: {len(matches)} vs {len(geometries)} rows")
+        if len(matches) < last:
+            fail(f"reader saw the row count go down from {last} to {len(matches)}")
+        last = len(matches)
+        if not alive:
+            break
+        time.sleep(0.05)
+    print(f"reader: {reads} consistent snapshots, last one {last} pairs")
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("make")
+    p.add_argument("path")
+    p.add_argument("--images", type=int, default=60)
+    p.add_argument("--features", type=int, default=400)
+    p.add_argument("--points", type=int, default=600)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--journal", choices=["wal", "delete"], default="wal")
+    p = sub.add_parser("check")
+    p.add_argument("path")
+    p.add_argument("--pairs", type=int)
+    p = sub.add_parser("compare")
+    p.add_argument("path")
+    p.add_argument("reference")
+    p = sub.add_parser("count")
+    p.add_argument("path")
+    p = sub.add_parser("watch")
+    p.add_argument("path")
+    p.add_argument("pidfile")
+    args = parser.parse_args()
+    {"make": make, "check": check, "compare": compare, "count": count, "watch": watch}[args.command](args)
 
 
 if __name__ == "__main__":
