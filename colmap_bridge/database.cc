@@ -18,6 +18,7 @@
 #include <cstring>
 #include <filesystem>
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include "cashash/pair_id.h"
 #include "colmap_bridge/blob_codec.h"
@@ -164,6 +165,16 @@ struct Database::Impl {
     if (!read_only && sqlite3_db_readonly(db, "main") == 1) {
       throw DatabaseError("database " + path +
                           " is read-only (file permissions); cashash needs to write matches");
+    }
+    if (!read_only) {
+      // SQLite creates its journal (-journal or -wal/-shm) beside the file: a
+      // write-protected directory would fail the first commit, after matching.
+      const std::filesystem::path absolute = std::filesystem::absolute(path, error);
+      const std::string directory = absolute.parent_path().string();
+      if (!error && access(directory.c_str(), W_OK) != 0) {
+        throw DatabaseError("the directory " + directory + " of database " + path +
+                            " is not writable; SQLite creates its journal files there");
+      }
     }
 
     const std::vector<std::string> tables = TableNames();
