@@ -1,0 +1,148 @@
+"""Cascade Hashing feature matching for COLMAP databases.
+
+    import cashash
+    cashash.match_exhaustive("database.db")                 # like pycolmap.match_exhaustive
+    cashash.match_pairs("database.db", [("a.jpg", "b.jpg")])
+    result = cashash.match(desc1, desc2, kp1, kp2)         # numpy in, numpy out
+
+Options are keywords named as the fields of MatchingOptions and of its parts
+(SiftMatchingOptions, CasHashOptions, TwoViewGeometryOptions), e.g.
+``max_ratio=0.8, num_tables=7, min_num_inliers=15, block_size=50``; a
+prepared ``options=MatchingOptions()`` may be passed as well. Errors raise
+ValueError (an option out of range) or RuntimeError (unusable input) with
+the messages of the ``cashash`` command line.
+"""
+
+import numpy as np
+
+from . import _core
+from ._core import CasHashOptions, MatchingOptions, SiftMatchingOptions, TwoViewGeometryOptions
+
+__all__ = [
+    "CasHashOptions",
+    "MatchingOptions",
+    "SiftMatchingOptions",
+    "TwoViewGeometryOptions",
+    "make_options",
+    "match",
+    "match_exhaustive",
+    "match_pairs",
+    "with_cuda",
+]
+
+with_cuda = _core.with_cuda
+
+# COLMAP's two-view configuration names by value (TwoViewGeometry config).
+TWO_VIEW_CONFIGS = {
+    0: "UNDEFINED", 1: "DEGENERATE", 2: "CALIBRATED", 3: "UNCALIBRATED", 4: "PLANAR",
+    5: "PANORAMIC", 6: "PLANAR_OR_PANORAMIC", 7: "WATERMARK", 8: "MULTIPLE",
+}
+
+
+def _fields(obj):
+    return [name for name in dir(obj) if not name.startswith("_")]
+
+
+def make_options(options=None, **kwargs):
+    """A MatchingOptions from `options` (copied) with keyword fields set.
+
+    A keyword names a field of MatchingOptions or of one of its parts; an
+    unknown keyword raises TypeError.
+    """
+    result = MatchingOptions()
+    if options is None:
+        # The GPU is used only where it was built, so that CPU builds do
+        # not warn on every call.
+        result.use_gpu = with_cuda
+    else:
+        for part in ("sift", "cashash", "two_view"):
+            source, target = getattr(options, part), getattr(result, part)
+            for name in _fields(source):
+                setattr(target, name, getattr(source, name))
+        for name in _fields(options):
+            if name not in ("sift", "cashash", "two_view"):
+                setattr(result, name, getattr(options, name))
+    for name, value in kwargs.items():
+        for target in (result, result.sift, result.cashash, result.two_view):
+            if name in _fields(target) and name not in ("sift", "cashash", "two_view"):
+                setattr(target, name, value)
+                break
+        else:
+            raise TypeError(f"unknown matching option '{name}'")
+    return result
+
+
+def match_exhaustive(database_path, options=None, progress=None, **kwargs):
+    """Matches and verifies every image pair of a COLMAP database.
+
+    Writes the matches and two_view_geometries tables as
+    ``colmap exhaustive_matcher`` does; pairs already there are skipped
+    unless ``overwrite=True``. ``progress(pairs_done, pairs_total)`` is
+    called after each committed block; an exception it raises stops the run
+    (finished blocks stay committed) and is raised again. Returns a dict of
+    counts: pairs_requested, pairs_skipped, pairs_done, raw_matches,
+    verified_pairs, inlier_matches, seconds, matcher, stopped.
+    """
+    return _core.match_exhaustive(str(database_path), make_options(options, **kwargs), progress)
+
+
+def match_pairs(database_path, pairs, options=None, progress=None, **kwargs):
+    """Like match_exhaustive, for the given (name1, name2) image pairs."""
+    pairs = [(str(a), str(b)) for a, b in pairs]
+    return _core.match_pairs(str(database_path), pairs, make_options(options, **kwargs), progress)
+
+
+def _descriptors(array):
+    array = np.asarray(array)
+    if array.dtype != np.uint8:
+        # Float SIFT descriptors (unit length) scale to bytes as COLMAP
+        # stores them.
+        array = np.clip(np.round(array.astype(np.float64) * 512.0), 0, 255).astype(np.uint8)
+    return np.ascontiguousarray(array)
+
+
+def _camera(camera):
+    """A camera as a dict for the C++ side, from a dict or a pycolmap.Camera."""
+    if camera is None:
+        return None
+    get = camera.get if isinstance(camera, dict) else lambda name, default=None: getattr(camera, name, default)
+    model = get("model")
+    if model is None:
+        model = get("model_id")
+    if isinstance(model, str):
+        names = {_core.camera_model_name(i): i for i in range(32) if _core.camera_model_name(i)}
+        if model not in names:
+            raise ValueError(f"unknown camera model '{model}'")
+        model = names[model]
+    elif hasattr(model, "value"):
+        model = model.value
+    return {
+        "model_id": int(model),
+        "width": int(get("width")),
+        "height": int(get("height")),
+        "params": [float(p) for p in get("params")],
+        "has_prior_focal_length": bool(get("has_prior_focal_length", True)),
+    }
+
+
+def match(descriptors1, descriptors2, keypoints1=None, keypoints2=None, camera1=None, camera2=None,
+          options=None, **kwargs):
+    """Matches two images' features in memory, no database involved.
+
+    descriptors: N x 128 uint8 (or float SIFT, scaled by 512). keypoints:
+    N x 2 or wider (x, y first) in pixels; with both given the matches are
+    verified geometrically. cameras: dicts with model ("PINHOLE" or id),
+    width, height, params and has_prior_focal_length (default True), or
+    pycolmap.Camera objects; without them the camera is guessed as COLMAP
+    does and only F/H are estimated. Returns a dict: matches (M x 2 uint32),
+    verified, config, config_name, inlier_matches (K x 2), F, E, H, qvec,
+    tvec.
+    """
+    if options is None and "use_gpu" not in kwargs:
+        kwargs["use_gpu"] = False
+    kp1 = None if keypoints1 is None else np.asarray(keypoints1, dtype=np.float32)
+    kp2 = None if keypoints2 is None else np.asarray(keypoints2, dtype=np.float32)
+    result = _core.match(_descriptors(descriptors1), _descriptors(descriptors2), kp1, kp2, _camera(camera1),
+                         _camera(camera2), make_options(options, **kwargs))
+    result["config_name"] = TWO_VIEW_CONFIGS.get(result["config"], str(result["config"]))
+    return result

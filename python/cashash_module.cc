@@ -1,0 +1,260 @@
+// cashash._core: the C++ calls behind the Python package (cashash/__init__.py
+// adds keyword options and numpy conversions on top).
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <atomic>
+#include <cstring>
+#include <exception>
+#include <optional>
+#include <stdexcept>
+
+#include "cashash/camera_models.h"
+#include "cashash/pair_matching.h"
+#include "colmap_bridge/matching_api.h"
+
+namespace py = pybind11;
+
+namespace cashash {
+namespace {
+
+using colmap::MatcherCommandOptions;
+using U8Array = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>;
+using F32Array = py::array_t<float, py::array::c_style | py::array::forcecast>;
+
+FeatureDescriptors ToDescriptors(const U8Array& array, const char* name) {
+  if (array.ndim() != 2 || array.shape(1) != kDescriptorDim) {
+    throw std::invalid_argument(std::string(name) + ": expected an N x 128 array of SIFT descriptors");
+  }
+  FeatureDescriptors descriptors;
+  descriptors.data.assign(array.data(), array.data() + array.size());
+  return descriptors;
+}
+
+// Rows of x, y (further columns, e.g. COLMAP's affine shape, are ignored:
+// verification needs positions only).
+Keypoints ToKeypoints(const std::optional<F32Array>& array, const char* name) {
+  Keypoints keypoints;
+  if (!array) return keypoints;
+  if (array->ndim() != 2 || array->shape(1) < 2) {
+    throw std::invalid_argument(std::string(name) + ": expected an N x 2 (or wider) array of keypoint positions");
+  }
+  const auto view = array->unchecked<2>();
+  keypoints.resize(static_cast<size_t>(view.shape(0)));
+  for (py::ssize_t i = 0; i < view.shape(0); ++i) {
+    keypoints[i].x = view(i, 0);
+    keypoints[i].y = view(i, 1);
+  }
+  return keypoints;
+}
+
+py::array_t<uint32_t> MatchesToArray(const FeatureMatches& matches) {
+  py::array_t<uint32_t> array({static_cast<py::ssize_t>(matches.size()), py::ssize_t{2}});
+  auto view = array.mutable_unchecked<2>();
+  for (size_t i = 0; i < matches.size(); ++i) {
+    view(i, 0) = matches[i].point2D_idx1;
+    view(i, 1) = matches[i].point2D_idx2;
+  }
+  return array;
+}
+
+template <typename Matrix>
+py::array_t<double> EigenToArray(const Matrix& m) {
+  py::array_t<double> array(m.cols() == 1 ? std::vector<py::ssize_t>{m.rows()}
+                                          : std::vector<py::ssize_t>{m.rows(), m.cols()});
+  auto* out = array.mutable_data();
+  for (Eigen::Index r = 0; r < m.rows(); ++r) {
+    for (Eigen::Index c = 0; c < m.cols(); ++c) out[r * m.cols() + c] = m(r, c);
+  }
+  return array;
+}
+
+py::dict SummaryToDict(const colmap::MatchingSummary& s) {
+  py::dict d;
+  d["pairs_requested"] = s.pairs_requested;
+  d["pairs_skipped"] = s.pairs_skipped;
+  d["pairs_done"] = s.pipeline.pairs_done;
+  d["matcher"] = s.matcher_name;
+  d["raw_matches"] = s.pipeline.raw_matches;
+  d["verified_pairs"] = s.pipeline.verified_pairs;
+  d["inlier_matches"] = s.pipeline.inlier_matches;
+  d["seconds"] = s.pipeline.seconds_total;
+  d["stopped"] = s.pipeline.stopped;
+  return d;
+}
+
+// Runs a database call without the GIL. The progress callback runs on the
+// pipeline's writer thread with the GIL taken back; an exception it raises
+// (KeyboardInterrupt included) stops the run after the chunks in flight and
+// is raised again once the run has returned. (Ctrl-C is only seen by
+// Python's main thread, which is inside this call: raise from the callback
+// to stop a long run early.)
+template <typename Call>
+py::dict RunWithProgress(const py::object& progress, Call call) {
+  std::atomic<bool> stop{false};
+  std::exception_ptr callback_error;
+  colmap::MatchingCallbacks callbacks;
+  callbacks.stop = &stop;
+  callbacks.warning = [](const std::string& text) {
+    py::gil_scoped_acquire gil;
+    PyErr_WarnEx(PyExc_RuntimeWarning, text.c_str(), 1);
+  };
+  callbacks.progress = [&](const PipelineProgress& p) {
+    py::gil_scoped_acquire gil;
+    if (callback_error) return;
+    try {
+      if (!progress.is_none()) progress(p.pairs_done, p.pairs_total);
+    } catch (py::error_already_set&) {
+      callback_error = std::current_exception();
+      stop = true;
+    }
+  };
+  colmap::MatchingSummary summary;
+  {
+    py::gil_scoped_release no_gil;
+    summary = call(callbacks);
+  }
+  if (callback_error) std::rethrow_exception(callback_error);
+  return SummaryToDict(summary);
+}
+
+Camera CameraFromDict(const py::dict& d) {
+  Camera camera;
+  camera.model_id = d["model_id"].cast<int>();
+  camera.width = d["width"].cast<uint64_t>();
+  camera.height = d["height"].cast<uint64_t>();
+  camera.params = d["params"].cast<std::vector<double>>();
+  camera.has_prior_focal_length = d["has_prior_focal_length"].cast<bool>();
+  if (CameraModelNumParams(camera.model_id) != static_cast<int>(camera.params.size())) {
+    throw std::invalid_argument("camera model " + CameraModelIdToName(camera.model_id) + " takes " +
+                                std::to_string(CameraModelNumParams(camera.model_id)) + " parameters, got " +
+                                std::to_string(camera.params.size()));
+  }
+  return camera;
+}
+
+py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
+                       const std::optional<F32Array>& keypoints1, const std::optional<F32Array>& keypoints2,
+                       const std::optional<py::dict>& camera1, const std::optional<py::dict>& camera2,
+                       const MatcherCommandOptions& options) {
+  const FeatureDescriptors d1 = ToDescriptors(descriptors1, "descriptors1");
+  const FeatureDescriptors d2 = ToDescriptors(descriptors2, "descriptors2");
+  const Keypoints k1 = ToKeypoints(keypoints1, "keypoints1");
+  const Keypoints k2 = ToKeypoints(keypoints2, "keypoints2");
+  std::optional<Camera> c1, c2;
+  if (camera1) c1 = CameraFromDict(*camera1);
+  if (camera2) c2 = CameraFromDict(*camera2);
+  PairMatchingOptions pair_options;
+  pair_options.sift = options.sift;
+  pair_options.cashash = options.cashash;
+  pair_options.two_view = options.two_view;
+  pair_options.skip_geometric_verification = options.skip_geometric_verification;
+
+  PairMatchingResult result;
+  {
+    py::gil_scoped_release no_gil;
+    std::unique_ptr<FeatureMatcher> matcher;
+    if (options.use_gpu) {
+      matcher = colmap::CreateMatcherForOptions(options, ComputeMeanDescriptor({&d1, &d2}), nullptr);
+    }
+    result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get());
+  }
+  py::dict out;
+  out["matches"] = MatchesToArray(result.matches);
+  out["verified"] = result.verified;
+  const TwoViewGeometry& g = result.two_view_geometry;
+  out["config"] = g.config;
+  out["inlier_matches"] = MatchesToArray(g.inlier_matches);
+  out["F"] = EigenToArray(g.F);
+  out["E"] = EigenToArray(g.E);
+  out["H"] = EigenToArray(g.H);
+  out["qvec"] = EigenToArray(g.qvec);
+  out["tvec"] = EigenToArray(g.tvec);
+  return out;
+}
+
+void BindOptions(py::module_& m) {
+  py::class_<SiftMatchingOptions>(m, "SiftMatchingOptions")
+      .def(py::init<>())
+      .def_readwrite("num_threads", &SiftMatchingOptions::num_threads)
+      .def_readwrite("max_ratio", &SiftMatchingOptions::max_ratio)
+      .def_readwrite("max_distance", &SiftMatchingOptions::max_distance)
+      .def_readwrite("cross_check", &SiftMatchingOptions::cross_check)
+      .def_readwrite("max_num_matches", &SiftMatchingOptions::max_num_matches);
+  py::class_<CasHashOptions>(m, "CasHashOptions")
+      .def(py::init<>())
+      .def_property(
+          "matcher", [](const CasHashOptions& o) { return MatcherTypeToString(o.matcher); },
+          [](CasHashOptions& o, const std::string& name) {
+            if (!MatcherTypeFromString(name, &o.matcher)) {
+              throw std::invalid_argument("CasHash.matcher must be 'cascade' or 'bruteforce', got '" + name + "'");
+            }
+          })
+      .def_readwrite("num_tables", &CasHashOptions::num_tables)
+      .def_readwrite("bits_per_table", &CasHashOptions::bits_per_table)
+      .def_readwrite("tau", &CasHashOptions::tau)
+      .def_readwrite("top_k", &CasHashOptions::top_k)
+      .def_readwrite("random_seed", &CasHashOptions::random_seed);
+  py::class_<TwoViewGeometryOptions>(m, "TwoViewGeometryOptions")
+      .def(py::init<>())
+      .def_readwrite("min_num_inliers", &TwoViewGeometryOptions::min_num_inliers)
+      .def_readwrite("min_E_F_inlier_ratio", &TwoViewGeometryOptions::min_E_F_inlier_ratio)
+      .def_readwrite("max_H_inlier_ratio", &TwoViewGeometryOptions::max_H_inlier_ratio)
+      .def_readwrite("watermark_min_inlier_ratio", &TwoViewGeometryOptions::watermark_min_inlier_ratio)
+      .def_readwrite("watermark_border_size", &TwoViewGeometryOptions::watermark_border_size)
+      .def_readwrite("detect_watermark", &TwoViewGeometryOptions::detect_watermark)
+      .def_readwrite("max_error", &TwoViewGeometryOptions::max_error)
+      .def_readwrite("confidence", &TwoViewGeometryOptions::confidence)
+      .def_readwrite("min_num_trials", &TwoViewGeometryOptions::min_num_trials)
+      .def_readwrite("max_num_trials", &TwoViewGeometryOptions::max_num_trials)
+      .def_readwrite("min_inlier_ratio", &TwoViewGeometryOptions::min_inlier_ratio)
+      .def_readwrite("random_seed", &TwoViewGeometryOptions::random_seed);
+  py::class_<MatcherCommandOptions>(m, "MatchingOptions")
+      .def(py::init<>())
+      .def_readwrite("sift", &MatcherCommandOptions::sift)
+      .def_readwrite("cashash", &MatcherCommandOptions::cashash)
+      .def_readwrite("two_view", &MatcherCommandOptions::two_view)
+      .def_readwrite("block_size", &MatcherCommandOptions::block_size)
+      .def_readwrite("use_gpu", &MatcherCommandOptions::use_gpu)
+      .def_readwrite("gpu_index", &MatcherCommandOptions::gpu_index)
+      .def_readwrite("skip_geometric_verification", &MatcherCommandOptions::skip_geometric_verification)
+      .def_readwrite("overwrite", &MatcherCommandOptions::overwrite);
+}
+
+}  // namespace
+}  // namespace cashash
+
+PYBIND11_MODULE(_core, m) {
+  using namespace cashash;
+  m.doc() = "Cascade Hashing feature matching for COLMAP databases (C++ core)";
+  BindOptions(m);
+  m.def(
+      "match_exhaustive",
+      [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchExhaustive(database_path, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());
+  m.def(
+      "match_pairs",
+      [](const std::string& database_path, const std::vector<std::pair<std::string, std::string>>& pairs,
+         const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchPairs(database_path, pairs, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("pairs"), py::arg("options"), py::arg("progress") = py::none());
+  m.def("match", &MatchInMemory, py::arg("descriptors1"), py::arg("descriptors2"), py::arg("keypoints1"),
+        py::arg("keypoints2"), py::arg("camera1"), py::arg("camera2"), py::arg("options"));
+  m.def("camera_model_name", &CameraModelIdToName, py::arg("model_id"));
+  m.def("camera_model_num_params", &CameraModelNumParams, py::arg("model_id"));
+  m.attr("with_cuda") =
+#ifdef CASHASH_WITH_CUDA
+      true;
+#else
+      false;
+#endif
+}
