@@ -76,6 +76,7 @@ struct Database::Impl {
   SchemaInfo schema;
   bool write_nulls_for_unset = false;  // 4.x convention
   bool in_transaction = false;
+  std::vector<std::string> tables;  // as found when opening
 
   // Prepared on first use, then reused.
   std::unique_ptr<SqliteStatement> image_name, keypoints, descriptors, num_keypoints,
@@ -138,6 +139,17 @@ struct Database::Impl {
     throw DatabaseError("cannot read database " + path + ": " + message);
   }
 
+  bool has_table(const std::string& name) const {
+    return std::find(tables.begin(), tables.end(), name) != tables.end();
+  }
+
+  void RequireTable(const std::string& table) const {
+    if (!has_table(table)) {
+      throw DatabaseError("database " + path + " has no table '" + table +
+                          "' (is it a COLMAP database with extracted features?)");
+    }
+  }
+
   bool TableHasColumn(const std::string& table, const std::string& column) {
     SqliteStatement s(db, "PRAGMA table_info(" + table + ")");
     while (s.Step()) {
@@ -177,24 +189,13 @@ struct Database::Impl {
       }
     }
 
-    const std::vector<std::string> tables = TableNames();
-    auto has_table = [&](const std::string& name) {
-      for (const std::string& t : tables) {
-        if (t == name) return true;
-      }
-      return false;
-    };
+    tables = TableNames();
     std::vector<std::string> required = {"cameras", "images", "keypoints", "descriptors"};
     if (!read_only) {
       required.push_back("matches");
       required.push_back("two_view_geometries");
     }
-    for (const std::string& table : required) {
-      if (!has_table(table)) {
-        throw DatabaseError("database " + path + " has no table '" + table +
-                            "' (is it a COLMAP database with extracted features?)");
-      }
-    }
+    for (const std::string& table : required) RequireTable(table);
 
     {
       SqliteStatement version(db, "PRAGMA user_version");
@@ -341,6 +342,9 @@ size_t Database::NumDescriptors(image_t image_id) const {
 }
 
 std::unordered_set<pair_t> Database::ReadCompletedPairIds() const {
+  // A read-only connection opens without the match tables.
+  impl_->RequireTable("matches");
+  impl_->RequireTable("two_view_geometries");
   SqliteStatement s(impl_->db,
                     "SELECT matches.pair_id FROM matches JOIN two_view_geometries "
                     "ON matches.pair_id = two_view_geometries.pair_id");
