@@ -352,12 +352,20 @@ def summary_section(results, losses, by_angle, cams):
         for scene, by in cams.items():
             c, o = by.get("cascade"), by.get("colmap")
             if c and o and "position_median" in c and "position_median" in o:
-                ok = c["position_median"] <= 1.1 * o["position_median"] and \
-                    c["rotation_median_deg"] <= 1.1 * o["rotation_median_deg"]
-                lines.append("- %s: median camera position error %.4f (cascade) vs %.4f (COLMAP's matcher), "
-                             "median rotation error %.3f vs %.3f degrees (target: cascade within 10 %%: %s)." % (
-                                 scene, c["position_median"], o["position_median"], c["rotation_median_deg"],
-                                 o["rotation_median_deg"], "met" if ok else "**not met**"))
+                keys = ["position_median", "position_max", "rotation_median_deg", "relative_rotation_median_deg"]
+                ok = c["registered"] >= o["registered"] and all(c[k] <= 1.1 * o[k] for k in keys)
+                lines.append("- %s: %d / %d cameras registered after the cascade (%d after COLMAP's matcher); "
+                             "position error median %.4f / max %.4f (cascade) vs %.4f / %.4f (COLMAP's "
+                             "matcher), %.5f vs %.5f of the scene size; rotation error median %.3f vs %.3f "
+                             "degrees, relative rotation median %.3f vs %.3f degrees (target: cascade no worse "
+                             "than COLMAP's matcher + 10 %%: %s). Matching took %.0f s vs %.0f s (wall, with "
+                             "verification)." % (
+                                 scene, c["registered"], c["gt_images"], o["registered"], c["position_median"],
+                                 c["position_max"], o["position_median"], o["position_max"],
+                                 c["position_median_rel"], o["position_median_rel"], c["rotation_median_deg"],
+                                 o["rotation_median_deg"], c["relative_rotation_median_deg"],
+                                 o["relative_rotation_median_deg"], "met" if ok else "**not met**",
+                                 c["match_wall_s"], o["match_wall_s"]))
             elif c and "position_median" in c:
                 lines.append("- %s: median camera position error %.4f (%.5f of the scene) after the cascade; "
                              "COLMAP's matcher not run on this scene." % (scene, c["position_median"],
