@@ -77,6 +77,7 @@ def make(args):
     base_descriptors = sift_like(rng, args.points)
 
     con = sqlite3.connect(args.path)
+    con.execute(f"PRAGMA page_size={args.page_size}")
     con.executescript(SCHEMA)
     con.execute(f"PRAGMA journal_mode={args.journal}")
     con.execute("PRAGMA user_version=3800")
@@ -198,6 +199,7 @@ def main():
     p.add_argument("--points", type=int, default=600)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--journal", choices=["wal", "delete"], default="wal")
+    p.add_argument("--page_size", type=int, default=4096)
     p = sub.add_parser("check")
     p.add_argument("path")
     p.add_argument("--pairs", type=int)

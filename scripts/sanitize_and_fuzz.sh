@@ -1,0 +1,108 @@
+#!/usr/bin/env bash
+# Reliability checks beyond the normal suite (docs/RELIABILITY.md):
+#  1. the CPU test suite built with AddressSanitizer + UndefinedBehaviorSanitizer
+#     in its own build folder, run without the integration tests;
+#  2. the libFuzzer targets of tests/fuzz built with clang and each run for a
+#     bounded time, seeded from small real-schema databases.
+# No CUDA, no benchmarks. A finding fails the script; libFuzzer leaves the
+# crashing input in the fuzz build folder (crash-*), to replay with
+# `build-fuzz/tests/NAME_fuzz crash-...`.
+#
+# Usage: scripts/sanitize_and_fuzz.sh
+# Environment:
+#   CASHASH_SANITIZE_BUILD_DIR  (default build-sanitize/ in the repo)
+#   CASHASH_FUZZ_BUILD_DIR      (default build-fuzz/ in the repo)
+#   CASHASH_FUZZ_SECONDS        seconds per fuzz target (default 50)
+#   CASHASH_SKIP_SANITIZE=1, CASHASH_SKIP_FUZZ=1  leave a part out
+set -euo pipefail
+
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+SANITIZE_BUILD="${CASHASH_SANITIZE_BUILD_DIR:-$REPO/build-sanitize}"
+FUZZ_BUILD="${CASHASH_FUZZ_BUILD_DIR:-$REPO/build-fuzz}"
+FUZZ_SECONDS="${CASHASH_FUZZ_SECONDS:-50}"
+SHARED="${CASHASH_SHARED_DATA:-$REPO/../shared/data}"
+JOBS="$(nproc)"
+
+log() { echo "[sanitize_and_fuzz] $*"; }
+
+LAUNCHER=()
+if command -v ccache >/dev/null; then LAUNCHER=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+# -O1: sanitized code at -O3 takes several times longer to compile for little
+# gain in test speed.
+COMMON=(-DCASHASH_CUDA=OFF -DCMAKE_BUILD_TYPE=Release "-DCMAKE_CXX_FLAGS_RELEASE=-O1 -DNDEBUG"
+        -DCASHASH_SHARED_DATA="$SHARED" "${LAUNCHER[@]}")
+
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1}"
+export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+
+if [[ "${CASHASH_SKIP_SANITIZE:-0}" != 1 ]]; then
+  log "CPU suite with -fsanitize=address,undefined in $SANITIZE_BUILD"
+  cmake -S "$REPO" -B "$SANITIZE_BUILD" -DCASHASH_SANITIZE=ON "${COMMON[@]}" >/dev/null
+  cmake --build "$SANITIZE_BUILD" -j"$JOBS"
+  (cd "$SANITIZE_BUILD" && ctest --output-on-failure -j"$JOBS" -E integration)
+fi
+
+if [[ "${CASHASH_SKIP_FUZZ:-0}" == 1 ]]; then exit 0; fi
+
+# libFuzzer ships with clang (Debian: clang and libclang-rt-NN-dev).
+probe="$(mktemp -d)"
+trap 'rm -rf "$probe"' EXIT
+echo 'extern "C" int LLVMFuzzerTestOneInput(const char*, unsigned long) { return 0; }' >"$probe/p.cc"
+if ! command -v clang++ >/dev/null || ! clang++ -fsanitize=fuzzer "$probe/p.cc" -o "$probe/p" 2>/dev/null; then
+  log "SKIP fuzzing: clang++ with libFuzzer not found (apt-get install clang libclang-rt-14-dev)"
+  exit 0
+fi
+
+log "fuzz targets with clang in $FUZZ_BUILD"
+CC=clang CXX=clang++ cmake -S "$REPO" -B "$FUZZ_BUILD" -DCASHASH_FUZZ=ON "${COMMON[@]}" >/dev/null
+targets=()
+for source in "$REPO"/tests/fuzz/*_fuzz.cc; do targets+=("$(basename "$source" .cc)"); done
+cmake --build "$FUZZ_BUILD" -j"$JOBS" --target "${targets[@]}"
+
+# Seeds for the database target: small databases (512-byte pages, rollback
+# journal) in COLMAP 3.8's layout with features and matches, and, where the
+# tools exist, empty ones made by COLMAP itself and by pycolmap (4.x).
+SEEDS="$FUZZ_BUILD/seeds/database_fuzz"
+rm -rf "$SEEDS" && mkdir -p "$SEEDS"
+TOOL="$REPO/tests/integration/reliability_db_tool.py"
+if python3 -c "import numpy" 2>/dev/null; then
+  python3 "$TOOL" make "$SEEDS/synthetic.db" --images 3 --features 4 --points 20 --journal delete --page_size 512
+  cp "$SEEDS/synthetic.db" "$SEEDS/matched.db"
+  "$FUZZ_BUILD/colmap_bridge/cashash" exhaustive_matcher --database_path "$SEEDS/matched.db" \
+    --SiftMatching.use_gpu 0 --SiftMatching.min_num_inliers 3 >/dev/null 2>&1 || true
+fi
+if command -v colmap >/dev/null; then
+  QT_QPA_PLATFORM=offscreen colmap database_creator --database_path "$SEEDS/colmap.db" >/dev/null 2>&1 || true
+fi
+python3 "$REPO/scripts/make_colmap4_database.py" "$SEEDS/pycolmap.db" >/dev/null 2>&1 || true
+for db in "$SEEDS"/*.db; do
+  python3 - "$db" <<'PY' || rm -f "$db"
+import sqlite3, sys
+con = sqlite3.connect(sys.argv[1], isolation_level=None)
+con.execute("PRAGMA journal_mode=DELETE")
+con.execute("PRAGMA page_size=512")
+con.execute("VACUUM")
+PY
+done
+rm -f "$SEEDS"/*-wal "$SEEDS"/*-shm "$SEEDS"/*-journal "$FUZZ_BUILD"/tests/cashash 2>/dev/null || true
+
+status=0
+for target in "${targets[@]}"; do
+  name="${target%_fuzz}"
+  corpus="$FUZZ_BUILD/corpus/$target"  # grows from run to run
+  mkdir -p "$corpus"
+  seed_dirs=()
+  [[ -d "$REPO/tests/fuzz/corpus/$name" ]] && seed_dirs+=("$REPO/tests/fuzz/corpus/$name")
+  [[ -d "$FUZZ_BUILD/seeds/$target" ]] && seed_dirs+=("$FUZZ_BUILD/seeds/$target")
+  log "$target for ${FUZZ_SECONDS}s (seeds: ${seed_dirs[*]:-none})"
+  if ! (cd "$FUZZ_BUILD" && "$FUZZ_BUILD/tests/$target" -max_total_time="$FUZZ_SECONDS" -timeout=20 \
+        -rss_limit_mb=2560 -max_len=65536 -print_final_stats=1 "$corpus" "${seed_dirs[@]}" \
+        >"$FUZZ_BUILD/$target.log" 2>&1); then
+    tail -60 "$FUZZ_BUILD/$target.log"
+    log "FAIL: $target found a problem (input saved as $FUZZ_BUILD/crash-* / timeout-* / oom-*)"
+    status=1
+  else
+    grep -E "^stat::number_of_executed_units|^stat::peak_rss_mb|^#[0-9]+ *DONE" "$FUZZ_BUILD/$target.log" || true
+  fi
+done
+exit $status
