@@ -34,6 +34,11 @@ python_missing=()
 python3 -c "import numpy" 2>/dev/null || python_missing+=(numpy)
 python3 -c "import PIL" 2>/dev/null || python_missing+=(pillow)
 python3 -c "import matplotlib" 2>/dev/null || python_missing+=(matplotlib)  # accuracy report plots
+# pybind11 and scikit-build-core build the Python module (pip install .),
+# pytest runs its tests.
+python3 -c "import pybind11" 2>/dev/null || python_missing+=(pybind11)
+python3 -c "import scikit_build_core" 2>/dev/null || python_missing+=(scikit-build-core)
+python3 -c "import pytest" 2>/dev/null || python_missing+=(pytest)
 if ! python3 -c "import pycolmap, sys; sys.exit(pycolmap.__version__ != '4.2.1')" 2>/dev/null; then
   python_missing+=("pycolmap==4.2.1")
 fi

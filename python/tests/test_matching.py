@@ -1,0 +1,93 @@
+"""cashash's Python API: in-memory matching and matching a database."""
+
+import sqlite3
+
+import numpy as np
+import pytest
+
+import cashash
+
+from conftest import FOCAL, HEIGHT, WIDTH
+
+
+def correct_fraction(matches, view1, view2):
+    return np.mean(view1.point_of_row[matches[:, 0]] == view2.point_of_row[matches[:, 1]])
+
+
+def test_match_in_memory_finds_and_verifies_true_matches(views):
+    a, b = views[0], views[1]
+    result = cashash.match(a.descriptors, b.descriptors, a.keypoints, b.keypoints)
+    assert result["matches"].dtype == np.uint32 and result["matches"].shape[1] == 2
+    assert len(result["matches"]) > 400
+    assert correct_fraction(result["matches"], a, b) > 0.98
+    assert result["verified"]
+    assert result["config_name"] == "UNCALIBRATED"  # no intrinsics: F/H only
+    assert len(result["inlier_matches"]) >= 0.95 * len(result["matches"])
+    assert result["F"].shape == (3, 3)
+
+
+def test_match_with_intrinsics_is_calibrated(views):
+    a, b = views[0], views[1]
+    camera = {"model": "PINHOLE", "width": WIDTH, "height": HEIGHT,
+              "params": [FOCAL, FOCAL, WIDTH / 2, HEIGHT / 2]}
+    result = cashash.match(a.descriptors, b.descriptors, a.keypoints, b.keypoints, camera, camera)
+    assert result["config_name"] == "CALIBRATED"
+    assert np.abs(result["E"]).max() > 0  # E is estimated only with intrinsics
+
+
+def test_match_descriptors_only_and_float_descriptors(views):
+    a, b = views[0], views[1]
+    raw = cashash.match(a.descriptors, b.descriptors)
+    assert not raw["verified"] and raw["config_name"] == "UNDEFINED"
+    as_float = cashash.match(a.descriptors / 512.0, b.descriptors / 512.0)
+    np.testing.assert_array_equal(as_float["matches"], raw["matches"])
+
+
+def test_bad_input_raises():
+    with pytest.raises(ValueError, match="N x 128"):
+        cashash.match(np.zeros((4, 64), np.uint8), np.zeros((4, 128), np.uint8))
+    with pytest.raises(ValueError, match="image 1 has 3 keypoints but 4 descriptors"):
+        cashash.match(np.zeros((4, 128), np.uint8), np.zeros((4, 128), np.uint8), np.zeros((3, 2)), np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="CasHash.top_k must be >= 1"):
+        cashash.match(np.zeros((4, 128), np.uint8), np.zeros((4, 128), np.uint8), top_k=0)
+    with pytest.raises(TypeError, match="unknown matching option 'no_such_option'"):
+        cashash.make_options(no_such_option=1)
+
+
+def test_match_exhaustive_writes_every_pair_and_resumes(scene_database):
+    calls = []
+    summary = cashash.match_exhaustive(scene_database, progress=lambda done, total: calls.append((done, total)))
+    assert summary["pairs_requested"] == 3 and summary["pairs_done"] == 3
+    assert summary["verified_pairs"] == 3
+    assert summary["matcher"] == "cpu-cascade"
+    assert calls and calls[-1] == (3, 3)
+    db = sqlite3.connect(str(scene_database))
+    assert db.execute("SELECT COUNT(*) FROM two_view_geometries WHERE rows > 100").fetchone()[0] == 3
+    db.close()
+
+    again = cashash.match_exhaustive(scene_database)
+    assert again["pairs_skipped"] == 3 and again["pairs_done"] == 0
+    redone = cashash.match_exhaustive(scene_database, overwrite=True, matcher="bruteforce")
+    assert redone["pairs_done"] == 3 and redone["matcher"] == "cpu-bruteforce"
+
+
+def test_match_pairs_by_name(scene_database):
+    summary = cashash.match_pairs(scene_database, [("view1.jpg", "view3.jpg"), ("view3.jpg", "view1.jpg")])
+    assert summary["pairs_requested"] == 1 and summary["verified_pairs"] == 1
+    with pytest.raises(RuntimeError, match="image pair 0: image 'nope.jpg' is not in table images"):
+        cashash.match_pairs(scene_database, [("nope.jpg", "view1.jpg")])
+
+
+def test_database_errors_carry_cli_messages(tmp_path, scene_database):
+    with pytest.raises(RuntimeError, match="database file not found: "):
+        cashash.match_exhaustive(tmp_path / "missing.db")
+    with pytest.raises(ValueError, match="--ExhaustiveMatching.block_size must be >= 2"):
+        cashash.match_exhaustive(scene_database, block_size=1)
+
+
+def test_progress_callback_error_stops_and_propagates(scene_database):
+    def fail(done, total):
+        raise KeyError("stop here")
+
+    with pytest.raises(KeyError, match="stop here"):
+        cashash.match_exhaustive(scene_database, progress=fail, block_size=2)

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# Builds the Python package with `pip install .` (CPU backend, module only)
+# into a temporary folder and runs its pytest suite (python/tests), which
+# includes the pycolmap pipeline on sceaux_castle when the data is there.
+# Usage: python_module.sh <cashash binary> <shared data dir>   (exit 77: skipped)
+# The CMake build folder build-python/ in the repo is kept between runs, so
+# only changed files are compiled again.
+set -euo pipefail
+
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+SHARED="${2:-}"
+
+for module in pybind11 scikit_build_core pytest numpy; do
+  if ! python3 -c "import $module" 2>/dev/null; then
+    echo "SKIP: Python module '$module' is missing (scripts/install_deps.sh installs it)"; exit 77
+  fi
+done
+
+WORK="$(mktemp -d "${TMPDIR:-/tmp}/cashash_python.XXXXXX")"
+trap 'rm -rf "$WORK"' EXIT
+
+if command -v ccache > /dev/null; then export CMAKE_CXX_COMPILER_LAUNCHER=ccache; fi
+export CMAKE_BUILD_PARALLEL_LEVEL="${CMAKE_BUILD_PARALLEL_LEVEL:-$(nproc)}"
+start=$SECONDS
+# No build isolation: build with the installed pybind11 and scikit-build-core
+# instead of downloading them for every run.
+(cd "$REPO" && python3 -m pip install --no-build-isolation --no-deps --disable-pip-version-check --quiet \
+  --target "$WORK/site" .) > "$WORK/pip.log" 2>&1 || { tail -40 "$WORK/pip.log"; exit 1; }
+echo "pip install .: $((SECONDS - start)) s"
+
+export PYTHONPATH="$WORK/site"
+if [[ -n "$SHARED" ]]; then export CASHASH_SHARED_DATA="$SHARED"; fi
+set +e
+(cd "$WORK" && python3 -m pytest -q -p no:cacheprovider "$REPO/python/tests")
+code=$?
+set -e
+# pytest exits 5 when it collected no test at all: the suite is broken (a
+# skipped test still counts as collected and exits 0).
+if [[ $code -eq 5 ]]; then
+  echo "FAIL: pytest collected no tests from $REPO/python/tests"
+  exit 1
+fi
+exit $code
