@@ -26,3 +26,6 @@ cmake --build "$BUILD" -j"$JOBS"
 
 cd "$BUILD"
 ctest --output-on-failure -j"$JOBS" "$@"
+
+# Sanitizer build of the CPU suite and bounded fuzzing (docs/RELIABILITY.md).
+[[ "${CASHASH_SKIP_SANITIZE_AND_FUZZ:-0}" == 1 ]] || CASHASH_SHARED_DATA="$SHARED" "$REPO/scripts/sanitize_and_fuzz.sh"
