@@ -1,6 +1,9 @@
 #include "colmap_bridge/database_pipeline_io.h"
 
+#include <cmath>
 #include <iostream>
+
+#include "cashash/camera_models.h"
 
 namespace cashash {
 namespace colmap {
@@ -8,7 +11,10 @@ namespace colmap {
 DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
     : database_(database_path, /*read_only=*/true) {
   images_ = database_.ReadAllImages();
-  for (Camera& camera : database_.ReadAllCameras()) cameras_.emplace(camera.camera_id, std::move(camera));
+  for (Camera& camera : database_.ReadAllCameras()) {
+    CheckCamera(camera);
+    cameras_.emplace(camera.camera_id, std::move(camera));
+  }
   std::unordered_map<std::string, image_t> ids_by_name;
   for (size_t i = 0; i < images_.size(); ++i) {
     image_index_.emplace(images_[i].image_id, i);
@@ -23,6 +29,28 @@ DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
       throw DatabaseError("table images: image " + std::to_string(images_[i].image_id) + " (" + images_[i].name +
                           ") refers to camera " + std::to_string(images_[i].camera_id) +
                           ", which is not in table cameras");
+    }
+  }
+}
+
+void DatabaseFeatureSource::CheckCamera(const Camera& camera) {
+  const std::string label = "table cameras: camera " + std::to_string(camera.camera_id);
+  const int expected = CameraModelNumParams(camera.model_id);
+  if (expected < 0) {
+    // A model of a newer COLMAP, or garbage: verification needs no intrinsics
+    // unless both cameras of a pair have a focal prior.
+    std::cerr << "WARNING: " << label << " has model id " << camera.model_id
+              << ", unknown to cashash; its images are verified with F and H only" << std::endl;
+    return;
+  }
+  if (static_cast<int>(camera.params.size()) != expected) {
+    throw DatabaseError(label + " (" + CameraModelIdToName(camera.model_id) + ") has " +
+                        std::to_string(camera.params.size()) + " params, the model has " +
+                        std::to_string(expected));
+  }
+  for (size_t i = 0; i < camera.params.size(); ++i) {
+    if (!std::isfinite(camera.params[i])) {
+      throw DatabaseError(label + ": param " + std::to_string(i) + " is not finite");
     }
   }
 }

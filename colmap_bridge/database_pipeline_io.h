@@ -40,6 +40,8 @@ class DatabaseFeatureSource : public FeatureSource {
   Database& database() { return database_; }
 
  private:
+  // Throws when the params do not fit a known model; warns for unknown models.
+  static void CheckCamera(const Camera& camera);
   void WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints);
 
   Database database_;

@@ -115,6 +115,11 @@ run_case zero_images 0 WARNING "holds 0 images; nothing to match" $(match "$db")
 db="$(fresh one_image "DELETE FROM images WHERE image_id > 1;")"
 run_case one_image 0 WARNING "holds 1 image; nothing to match" $(match "$db")
 
+db="$(fresh camera_params "UPDATE cameras SET params = zeroblob(8);")"
+run_case camera_params 1 ERROR "table cameras: camera 1 (SIMPLE_RADIAL) has 1 params, the model has 4" $(match "$db")
+db="$(fresh camera_model "UPDATE cameras SET model = 99;")"
+run_case camera_model 0 WARNING "table cameras: camera 1 has model id 99, unknown to cashash" $(match "$db")
+
 db="$(fresh pair_list)"
 printf '# pairs\nimage_001.png image_002.png\n\nimage_001.png image_009.png\n' >"$WORK/unknown.txt"
 run_case pair_list_unknown 1 ERROR "$WORK/unknown.txt:4: image 'image_009.png' is not in table images" \
