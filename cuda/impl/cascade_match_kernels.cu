@@ -61,7 +61,7 @@ struct WarpScratch {
   uint32_t base[kMaxGpuTables];   // entry index of stream position p in slot s: base[s] + p
   uint32_t start[kMaxGpuTables];  // stream position where slot s begins
   // (both are read back into lane s: the compaction goes through here)
-  uint32_t pending[64];           // survivors not yet merged into the ranked list
+  uint32_t pending[64 + 1];       // survivors not yet merged into the ranked list; [64]: discard slot
 };
 
 // Capacity of WarpScratch::pending: two chunks' survivors always fit.
@@ -78,9 +78,14 @@ constexpr int kSerialMergeMax = 6;
 // within tau survives, cost one merge instead of one insertion per survivor.
 struct QueryRanking {
   WarpSortedList ranked;
-  uint32_t kth = WarpSortedList::kEmptyKey;  // k-th ranked key (only ever decreases)
-  int num_pending = 0;                       // same in every lane
+  // Keys below `limit` can still enter the top k: (tau + 1) << 24 (every key
+  // within tau) until k keys are ranked, then the k-th ranked key. One
+  // compare thus does both the tau and the rank test. Only ever decreases.
+  uint32_t limit;
+  int num_pending = 0;  // same in every lane
+  bool ranked_empty = true;  // false once anything may have been ranked
 
+  __device__ __forceinline__ explicit QueryRanking(uint32_t tau) : limit((min(tau, 128u) + 1u) << 24) {}
   __device__ __forceinline__ void Merge(const uint32_t* pending, int top_k) {
     __syncwarp();
     for (int base = 0; base < num_pending; base += 32) {
@@ -88,17 +93,24 @@ struct QueryRanking {
       if (batch <= kSerialMergeMax) {
         for (int i = 0; i < batch; ++i) {
           const uint32_t k = pending[base + i];
-          if (k < kth) {
+          if (k < limit) {
             ranked.Insert(k);
-            kth = ranked.At(top_k - 1);
+            limit = min(limit, ranked.At(top_k - 1));
           }
         }
       } else {
         const uint32_t v =
             LaneId() < static_cast<unsigned>(batch) ? pending[base + LaneId()] : WarpSortedList::kEmptyKey;
-        ranked.MergeSorted(WarpBitonicSort(v));
-        kth = ranked.At(top_k - 1);
+        const uint32_t sorted = WarpBitonicSort(v);
+        // Most queries merge once: into an empty list, which is a copy.
+        if (ranked_empty) {
+          ranked.key = sorted;
+        } else {
+          ranked.MergeSorted(sorted);
+        }
+        limit = min(limit, ranked.At(top_k - 1));
       }
+      ranked_empty = false;
     }
     num_pending = 0;
     __syncwarp();
@@ -112,9 +124,11 @@ struct QueryRanking {
     const int count0 = __popc(ballot0), count = count0 + __popc(ballot1);
     if (count == 0) return;
     if (num_pending + count > kPendingCapacity) Merge(pending, top_k);
+    // Lanes without a key store into the discard slot: no branches.
     const unsigned below = LaneMaskLt();
-    if (key0 != WarpSortedList::kEmptyKey) pending[num_pending + __popc(ballot0 & below)] = key0;
-    if (key1 != WarpSortedList::kEmptyKey) pending[num_pending + count0 + __popc(ballot1 & below)] = key1;
+    pending[key0 != WarpSortedList::kEmptyKey ? num_pending + __popc(ballot0 & below) : kPendingCapacity] = key0;
+    pending[key1 != WarpSortedList::kEmptyKey ? num_pending + count0 + __popc(ballot1 & below) : kPendingCapacity] =
+        key1;
     num_pending += count;
     if (num_pending >= 32) Merge(pending, top_k);
   }
@@ -137,19 +151,20 @@ __device__ __forceinline__ uint32_t ChunkEntryIndex(uint32_t my_start, uint32_t 
   return __shfl_sync(kFullWarpMask, my_base, slot) + min(first + LaneId(), total - 1);
 }
 
-// Ranking key of one bucket entry, or kEmptyKey when it is beyond tau, not
-// below the current k-th key, or a duplicate: a candidate counts only in the
+// Ranking key of one bucket entry, or kEmptyKey when it is not below
+// `limit` (beyond tau, or not better than the k-th ranked key), or a
+// duplicate: a candidate counts only in the
 // first table where it shares the query's bucket, i.e. a duplicate has a zero
 // b-bit field of (signature diff) below its own table. Fields from its table
 // up get their top bit set, then the borrow test finds a zero field exactly
 // (a borrow can only start at a zero field).
 __device__ __forceinline__ uint32_t EntryKey(uint4 c, uint4 s, bool valid, uint64_t signature, ulonglong2 code,
-                                             uint32_t tau, uint32_t kth, const MatchParams& params) {
+                                             uint32_t limit, const MatchParams& params) {
   const uint32_t distance = __popc(uint32_t(code.x) ^ c.x) + __popc(uint32_t(code.x >> 32) ^ c.y) +
                             __popc(uint32_t(code.y) ^ c.z) + __popc(uint32_t(code.y >> 32) ^ c.w);
   const uint32_t candidate = (distance << 24) | s.z;
   uint32_t key = WarpSortedList::kEmptyKey;
-  if (valid && distance <= tau && candidate < kth) {
+  if (valid && candidate < limit) {
     const uint64_t diff = signature ^ (uint64_t(s.y) << 32 | s.x);
     const uint64_t below = (uint64_t{1} << s.w) - 1;
     const uint64_t v = (diff & below) | (params.field_high_bits & ~below);
@@ -204,43 +219,51 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
   const uint32_t my_start = has_slot ? scratch.start[lane] : 0xffffffffu;
   const uint32_t my_base = has_slot ? scratch.base[lane] : 0u;
 
-  QueryRanking ranking;
+  QueryRanking ranking(tau);
   uint32_t slot_before = ~0u;
   for (uint32_t first = 0; first < total; first += 64) {
     const uint32_t pos0 = first + lane, pos1 = pos0 + 32;
-    const uint32_t index0 = ChunkEntryIndex(my_start, my_base, first, total, slot_before);
-    const uint32_t index1 = ChunkEntryIndex(my_start, my_base, first + 32, total, slot_before);
-    const uint4* entry0 = reinterpret_cast<const uint4*>(entries + index0);
-    const uint4* entry1 = reinterpret_cast<const uint4*>(entries + index1);
-    const uint4 c0 = __ldg(entry0), s0 = __ldg(entry0 + 1), c1 = __ldg(entry1), s1 = __ldg(entry1 + 1);
-    ranking.Add(EntryKey(c0, s0, pos0 < total, signature, code, tau, ranking.kth, params),
-                EntryKey(c1, s1, pos1 < total, signature, code, tau, ranking.kth, params), scratch.pending,
+    const uint4* entry0 = reinterpret_cast<const uint4*>(entries + ChunkEntryIndex(my_start, my_base, first, total,
+                                                                                   slot_before));
+    const uint4 c0 = __ldg(entry0), s0 = __ldg(entry0 + 1);
+    // The second chunk of the last step is empty about half of the time:
+    // skipped as a whole (a warp-uniform branch). Its loads still go out
+    // before the first chunk is ranked.
+    uint32_t key1 = WarpSortedList::kEmptyKey;
+    if (first + 32 < total) {
+      const uint4* entry1 = reinterpret_cast<const uint4*>(
+          entries + ChunkEntryIndex(my_start, my_base, first + 32, total, slot_before));
+      const uint4 c1 = __ldg(entry1), s1 = __ldg(entry1 + 1);
+      key1 = EntryKey(c1, s1, pos1 < total, signature, code, ranking.limit, params);
+    }
+    ranking.Add(EntryKey(c0, s0, pos0 < total, signature, code, ranking.limit, params), key1, scratch.pending,
                 params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
   const WarpSortedList& ranked = ranking.ranked;
 
-  // Exact dot products of the ranked candidates: 4 at a time, 8 lanes each,
-  // two rounds per step with both loads issued first.
+  // Exact dot products of the ranked candidates: 8 per pass, 4 lanes of 32
+  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum).
   const int count = min(__popc(__ballot_sync(kFullWarpMask, ranked.key != WarpSortedList::kEmptyKey)), params.top_k);
   if (count == 0) return -1;
-  const unsigned part = lane & 7, group = lane >> 3;
-  const uint4 mine = reinterpret_cast<const uint4*>(query.descriptors + size_t(q) * 128)[part];
+  const unsigned part = lane & 3, group = lane >> 2;
+  const uint4* mine = reinterpret_cast<const uint4*>(query.descriptors + size_t(q) * 128) + 2 * part;
+  const uint4 mine0 = mine[0], mine1 = mine[1];
   int my_dot = 0;
   for (int first = 0; first < count; first += 8) {
-    const int j0 = first + static_cast<int>(group), j1 = j0 + 4;
-    const uint32_t key0 = ranked.At(min(j0, 31)), key1 = ranked.At(min(j1, 31));
-    uint4 other0 = make_uint4(0, 0, 0, 0), other1 = make_uint4(0, 0, 0, 0);
-    if (j0 < count) other0 = reinterpret_cast<const uint4*>(target.descriptors + size_t(key0 & kIndexMask) * 128)[part];
-    if (j1 < count) other1 = reinterpret_cast<const uint4*>(target.descriptors + size_t(key1 & kIndexMask) * 128)[part];
-    const int dot0 = GroupSum<8>(static_cast<int>(Dot16(mine, other0)));
-    const int dot1 = GroupSum<8>(static_cast<int>(Dot16(mine, other1)));
+    const int j = first + static_cast<int>(group);
+    const uint32_t key = ranked.At(min(j, 31));
+    uint4 other0 = make_uint4(0, 0, 0, 0), other1 = other0;
+    if (j < count) {
+      const uint4* other = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
+      other0 = other[0];
+      other1 = other[1];
+    }
+    const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other0) + Dot16(mine1, other1)));
     // Lane L in [first, first + 8) takes the dot of candidate L.
     const int rel = static_cast<int>(lane) - first;
-    const int got0 = __shfl_sync(kFullWarpMask, dot0, (rel * 8) & 31);
-    const int got1 = __shfl_sync(kFullWarpMask, dot1, ((rel - 4) * 8) & 31);
-    if (rel >= 0 && rel < 4) my_dot = got0;
-    if (rel >= 4 && rel < 8) my_dot = got1;
+    const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
+    if (rel >= 0 && rel < 8) my_dot = got;
   }
   // Best by (dot descending, index ascending), second = largest dot of the
   // others (0 when none): three single-instruction warp reductions. Dots of
