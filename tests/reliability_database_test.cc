@@ -474,6 +474,25 @@ TEST(ReliabilityImageTest, UnknownCameraIsNamed) {
             "table images: image 2 (im2.jpg) refers to camera 7, which is not in table cameras");
 }
 
+TEST(ReliabilityImageTest, CameraParamsMustFitTheModel) {
+  TempDir dir;
+  const std::string path = MakeDatabase(dir, "db.db", 2, 5);
+  {
+    RawDb raw(path);
+    const double params[3] = {500.0, 320.0, 240.0};  // SIMPLE_RADIAL has 4
+    raw.ExecWithBlob("UPDATE cameras SET params = ?1", params, sizeof(params));
+  }
+  EXPECT_EQ(ErrorOf([&] { DatabaseFeatureSource source(path); }),
+            "table cameras: camera 1 (SIMPLE_RADIAL) has 3 params, the model has 4");
+  {
+    RawDb raw(path);
+    const double params[4] = {500.0, std::nan(""), 240.0, 0.0};
+    raw.ExecWithBlob("UPDATE cameras SET params = ?1", params, sizeof(params));
+  }
+  EXPECT_EQ(ErrorOf([&] { DatabaseFeatureSource source(path); }),
+            "table cameras: camera 1: param 1 is not finite");
+}
+
 // --- Faults while writing ----------------------------------------------------
 
 // Another writer keeps the lock past the busy timeout: a clear error naming
