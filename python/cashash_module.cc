@@ -97,9 +97,14 @@ py::dict RunWithProgress(const py::object& progress, Call call) {
   std::exception_ptr callback_error;
   colmap::MatchingCallbacks callbacks;
   callbacks.stop = &stop;
-  callbacks.warning = [](const std::string& text) {
+  // Warnings become Python RuntimeWarnings; where a warnings filter turns
+  // them into errors, the run stops and the error is raised.
+  callbacks.warning = [&](const std::string& text) {
     py::gil_scoped_acquire gil;
-    PyErr_WarnEx(PyExc_RuntimeWarning, text.c_str(), 1);
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, text.c_str(), 1) < 0 && !callback_error) {
+      callback_error = std::make_exception_ptr(py::error_already_set());
+      stop = true;
+    }
   };
   callbacks.progress = [&](const PipelineProgress& p) {
     py::gil_scoped_acquire gil;

@@ -91,3 +91,18 @@ def test_progress_callback_error_stops_and_propagates(scene_database):
 
     with pytest.raises(KeyError, match="stop here"):
         cashash.match_exhaustive(scene_database, progress=fail, block_size=2)
+
+
+def test_warnings_become_runtime_warnings(tmp_path, views):
+    import shutil
+
+    from conftest import View, write_database
+
+    if shutil.which("colmap") is None:
+        pytest.skip("colmap is not installed")
+    tiny = View(views[1].keypoints[:1], views[1].descriptors[:1], views[1].point_of_row[:1])
+    path = tmp_path / "tiny.db"
+    write_database(path, [views[0], tiny])
+    with pytest.warns(RuntimeWarning, match=r"image 2 \(view2.jpg\) has 1 feature; its pairs get empty matches"):
+        summary = cashash.match_exhaustive(path)
+    assert summary["pairs_done"] == 1 and summary["verified_pairs"] == 0
