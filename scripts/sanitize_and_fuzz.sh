@@ -86,6 +86,8 @@ PY
 done
 rm -f "$SEEDS"/*-wal "$SEEDS"/*-shm "$SEEDS"/*-journal "$FUZZ_BUILD"/tests/cashash 2>/dev/null || true
 
+# database_fuzz writes each input to a scratch file: in memory where possible.
+if [[ -d /dev/shm && -w /dev/shm ]]; then export TMPDIR=/dev/shm; fi
 status=0
 for target in "${targets[@]}"; do
   name="${target%_fuzz}"
