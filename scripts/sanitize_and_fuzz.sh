@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Reliability checks beyond the normal suite (docs/RELIABILITY.md):
 #  1. the CPU test suite built with AddressSanitizer + UndefinedBehaviorSanitizer
-#     in its own build folder, run without the integration tests;
+#     in its own build folder, run without the integration tests, then the
+#     bad-input integration test on the sanitized binary;
 #  2. the libFuzzer targets of tests/fuzz built with clang and each run for a
 #     bounded time, seeded from small real-schema databases.
 # No CUDA, no benchmarks. A finding fails the script; libFuzzer leaves the
@@ -40,6 +41,9 @@ if [[ "${CASHASH_SKIP_SANITIZE:-0}" != 1 ]]; then
   cmake -S "$REPO" -B "$SANITIZE_BUILD" -DCASHASH_SANITIZE=ON "${COMMON[@]}" >/dev/null
   cmake --build "$SANITIZE_BUILD" -j"$JOBS"
   (cd "$SANITIZE_BUILD" && ctest --output-on-failure -j"$JOBS" -E integration)
+  # The one integration test that is all error paths, on the sanitized binary.
+  log "reliability_bad_input.sh on the sanitized cashash"
+  bash "$REPO/tests/integration/reliability_bad_input.sh" "$SANITIZE_BUILD/colmap_bridge/cashash" "$SHARED"
 fi
 
 if [[ "${CASHASH_SKIP_FUZZ:-0}" == 1 ]]; then exit 0; fi
