@@ -297,10 +297,10 @@ def camera_section(cams):
                 _fmt(s.get("position_max_rel"), 5), _fmt(s.get("rotation_median_deg"), 3),
                 _fmt(s.get("rotation_max_deg"), 3), _fmt(s.get("relative_rotation_median_deg"), 3),
                 _fmt(s.get("relative_rotation_max_deg"), 3), s["match_wall_s"]))
-    lines += ["", "The rotation errors of about half a degree are common to all matchers and cameras: COLMAP keeps "
+    lines += ["", "The rotation errors (a third to a half of a degree) are the same for all matchers: COLMAP keeps "
               "the principal point at the image centre (1536, 1024 for these 3072 x 2048 images), while the "
               "ground-truth K puts it about 15 px left of and 17 px above that (1520.7, 1006.8), 23 px off; "
-              "at a focal length of about 2760 px that alone tilts every camera by atan(23 / 2760) = 0.48 "
+              "at a focal length of about 2760 px that alone tilts a camera by up to atan(23 / 2760) = 0.48 "
               "degrees. Compare the matchers with each other, not with zero. Matching wall times include verification and ran on a "
               "shared 2-core machine.", ""]
     return lines
