@@ -183,11 +183,14 @@ int EssentialFivePoint(const PointPairs& pairs, const int* idx, int count,
   const Eigen::EigenSolver<Eigen::Matrix<double, 10, 10>> eig(action);
   if (eig.info() != Eigen::Success) return 0;
   const int bx = mx - kNumCubic, by = my - kNumCubic, bz = mz - kNumCubic, b1 = m1 - kNumCubic;
+  // eigenvectors() returns a temporary: keep it, a column view of it would
+  // dangle (AddressSanitizer: stack-use-after-scope).
+  const Eigen::Matrix<std::complex<double>, 10, 10> vectors = eig.eigenvectors();
   int num_models = 0;
   for (int k = 0; k < 10; ++k) {
     const std::complex<double> lambda = eig.eigenvalues()(k);
     if (std::fabs(lambda.imag()) > 1e-8 * (1.0 + std::fabs(lambda.real()))) continue;
-    const auto v = eig.eigenvectors().col(k);
+    const auto v = vectors.col(k);
     if (std::abs(v(b1)) < 1e-12) continue;
     const double x = (v(bx) / v(b1)).real();
     const double y = (v(by) / v(b1)).real();
