@@ -239,21 +239,26 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
   for (int i = 1; i < 12; ++i) images.push_back(source.Related(images[i - 1], 3000, 0.4));
   const std::vector<ImagePair> pairs = AllPairs(images.size());
   const MeanDescriptor mean = MeanOf(images);
+  // The budgets below are sized for 7 tables x 8 bits (the per-image bucket
+  // tables grow with the number of tables), not for whatever the defaults are.
+  CasHashOptions options;
+  options.num_tables = 7;
+  options.bits_per_table = 8;
   std::vector<FeatureMatches> unlimited;
   {
-    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
     unlimited = AddAndMatch(gpu.get(), images, pairs);
   }
   {
     // ~1.05 MiB per image of 3000 features: 14 MiB leave well under 1 MiB of
     // scratch per batch, so the 66 pairs run in several batches.
     ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "14");
-    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
     EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), unlimited);
   }
   {
     ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "4");
-    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
     try {
       AddAndMatch(gpu.get(), images, pairs);
       ADD_FAILURE() << "12 images of 3000 features cannot fit in 4 MiB";
