@@ -28,6 +28,9 @@ const std::string& ScratchPath() {
     if (fd >= 0) close(fd);
     return pattern;
   }();
+  // libFuzzer ends with exit(): leave no scratch file behind.
+  static const int registered = std::atexit([] { std::remove(ScratchPath().c_str()); });
+  (void)registered;
   return path;
 }
 
