@@ -50,6 +50,9 @@ def parse_args():
     parser.add_argument("--skip-cameras", action="store_true")
     parser.add_argument("--skip-sweeps", action="store_true")
     parser.add_argument("--sweep-scene", default="fountain-P11", help="scene of the tau timing and recall sweeps")
+    parser.add_argument("--cascade", default="8,7,40,10",
+                        help="cascade setting 'tables,bits,tau,top_k' passed explicitly to every cascade run "
+                             "(the library defaults when this was written)")
     parser.add_argument("--reuse", action="store_true", help="reuse finished steps found in --work-dir")
     return parser.parse_args()
 
@@ -79,20 +82,27 @@ def scene_feature_db(args, scene, log):
     return extracted
 
 
-def homography_matchers(binary, use_gpu):
+def cascade_flags(setting):
+    tables, bits, tau, top_k = setting.split(",")
+    return ["--CasHash.num_tables", tables, "--CasHash.bits_per_table", bits, "--CasHash.tau", tau,
+            "--CasHash.top_k", top_k]
+
+
+def homography_matchers(binary, use_gpu, setting):
     """name -> command prefix that matches the pairs of a list (without database and list)."""
+    flags = cascade_flags(setting)
     matchers = {
-        "cascade": [binary, "matches_importer", "--CasHash.matcher", "cascade", "--SiftMatching.use_gpu", "0"],
+        "cascade": [binary, "matches_importer", "--CasHash.matcher", "cascade", "--SiftMatching.use_gpu", "0"] + flags,
         "bruteforce": [binary, "matches_importer", "--CasHash.matcher", "bruteforce", "--SiftMatching.use_gpu", "0"],
         "colmap": ["colmap", "matches_importer", "--SiftMatching.use_gpu", "0"],
         # The cascade never ranks a missed second best, so its ratio test is
         # laxer than brute force's; a stricter ratio shows what that costs.
         "cascade_r078": [binary, "matches_importer", "--CasHash.matcher", "cascade", "--SiftMatching.use_gpu", "0",
-                         "--SiftMatching.max_ratio", "0.78"],
+                         "--SiftMatching.max_ratio", "0.78"] + flags,
     }
     if use_gpu:
         matchers["cascade_gpu"] = [binary, "matches_importer", "--CasHash.matcher", "cascade",
-                                   "--SiftMatching.use_gpu", "1"]
+                                   "--SiftMatching.use_gpu", "1"] + flags
     return matchers
 
 
@@ -111,7 +121,7 @@ def run_homographies(args, binary, use_gpu):
         homography.extract_features(png, features, os.path.join(work, "logs", name + "_extract.log"))
         dbs[name] = (features, hs)
         results[name] = {}
-        for matcher, prefix in homography_matchers(binary, use_gpu).items():
+        for matcher, prefix in homography_matchers(binary, use_gpu, args.cascade).items():
             database = os.path.join(seq_dir, matcher + ".db")
             timing_path = os.path.join(seq_dir, matcher + ".json")
             if not (args.reuse and os.path.exists(timing_path)):
@@ -144,7 +154,9 @@ def run_sweeps(args, binary, bench, dbs):
     scene_db = scene_feature_db(args, args.sweep_scene, log)
     tau_path, bench_path = os.path.join(work, "tau.json"), os.path.join(work, "topk_bits.json")
     if not (args.reuse and os.path.exists(tau_path)):
-        save_json(tau_path, sweeps.tau_sweep(binary, scene_db, dbs, os.path.join(work, "tau"), 6, log))
+        tables, bits, _, top_k = [int(v) for v in args.cascade.split(",")]
+        save_json(tau_path, sweeps.tau_sweep(binary, scene_db, dbs, os.path.join(work, "tau"), 6, log,
+                                             tables, bits, top_k))
     if not (args.reuse and os.path.exists(bench_path)):
         save_json(bench_path, sweeps.topk_bits_sweep(bench, scene_db, 7, 40, 10, 8, log))
     print("sweeps done", flush=True)
@@ -171,7 +183,8 @@ def run_cameras(args, binary):
                 continue
             if not (args.reuse and os.path.exists(summary_path)):
                 summary = cameras.reconstruct(scene_dir, source, matcher, binary,
-                                              os.path.join(work, scene, matcher), log)
+                                              os.path.join(work, scene, matcher), log,
+                                              cascade_flags(args.cascade) if matcher == "cascade" else [])
                 save_json(summary_path, summary)
             # Errors are recomputed from the stored models, so that a change of
             # the error measures needs no new reconstruction.

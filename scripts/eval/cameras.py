@@ -136,12 +136,13 @@ def largest_model(sparse_dir, work_dir, log):
     return best
 
 
-def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log):
+def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log, extra_flags=()):
     """Copies the feature database, matches with matcher, maps, aligns. Returns the summary."""
     os.makedirs(work_dir, exist_ok=True)
     database = os.path.join(work_dir, "database.db")
     tools.copy_database(source_db, database)
-    match_wall, match_cpu, _ = tools.run_tool(match_command(matcher, cashash_binary, database), log)
+    match_wall, match_cpu, _ = tools.run_tool(match_command(matcher, cashash_binary, database) + list(extra_flags),
+                                              log)
     sparse = os.path.join(work_dir, "sparse")
     os.makedirs(sparse, exist_ok=True)
     map_wall, _, _ = tools.run_tool(["colmap", "mapper", "--database_path", database, "--image_path",

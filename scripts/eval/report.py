@@ -106,13 +106,13 @@ def plot_topk_bits(bench, out_dir, default_bits=8, default_top_k=10):
     return _save(fig, out_dir, "topk_bits_sweep.png")
 
 
-def plot_loss_by_angle(by_angle, out_dir):
+def plot_loss_by_angle(by_angle, out_dir, tables, bits):
     fig, ax = plt.subplots(figsize=(4.8, 3.2))
     centres = [r[0] for r in by_angle]
     ax.plot(centres, [100 * r[2] for r in by_angle], "o-", ms=3, label="measured (correct brute-force matches)")
     theta = np.radians(np.linspace(0, 90, 91))
-    ax.plot(np.degrees(theta), 100 * loss_analysis.collision_probability(theta, 7, 8), "k--",
-            label="P(same bucket in >= 1 of 7 tables of 8 bits)")
+    ax.plot(np.degrees(theta), 100 * loss_analysis.collision_probability(theta, tables, bits), "k--",
+            label="P(same bucket in >= 1 of %d tables of %d bits)" % (tables, bits))
     ax.set_xlabel("angle between mean-centred descriptors (deg)", fontsize=8)
     ax.set_ylabel("kept by the cascade (%)", fontsize=8)
     ax.legend(fontsize=6)
@@ -124,14 +124,14 @@ def _fmt(value, digits=3):
     return "-" if value is None else ("%.*f" % (digits, value))
 
 
-def homography_section(results, use_gpu, eps_list, plot):
+def homography_section(results, use_gpu, eps_list, plot, cascade_text):
     lines = ["## 1. Homography ground truth", "",
              "Features: COLMAP 3.8 CPU SIFT, default settings (images converted to PNG with Pillow first). "
              "Matches: the **raw** `matches` rows, before geometric verification, of pairs 1-2 ... 1-6. "
              "A match is correct when the ground-truth homography maps the keypoint of image 1 to within eps "
              "pixels of its partner in image N (eps = 6 px as in the paper, and 3 px). All matchers use "
-             "COLMAP's defaults (ratio 0.8, max distance 0.7, cross check); the cascade its defaults "
-             "(7 tables x 8 bits, tau 40, top_k 10). hpatches_v_graffiti holds the graf images (pixel for pixel "
+             "COLMAP's defaults (ratio 0.8, max distance 0.7, cross check); the cascade %s." % cascade_text
+             + " hpatches_v_graffiti holds the graf images (pixel for pixel "
              "the same, hence the same matches) with HPatches' own homographies, so only the correct counts "
              "differ. Pixel convention: COLMAP puts the centre of the upper-left pixel at (0.5, 0.5), the "
              "homographies at (0, 0); keypoints are shifted by 0.5 px before mapping (this gives the smallest "
@@ -178,7 +178,7 @@ def homography_section(results, use_gpu, eps_list, plot):
     return lines
 
 
-def loss_section(losses, by_angle, plot):
+def loss_section(losses, by_angle, plot, tables, bits):
     lines = ["## 2. Where the cascade loses matches", "",
              "Correct brute-force matches (6 px) that the cascade does not return, per pair. *replaced*: the "
              "cascade matched the query to another feature (its true nearest neighbour was not among the "
@@ -220,10 +220,11 @@ def loss_section(losses, by_angle, plot):
             total["ok"]))
     lines += ["", "Kept fraction of the correct brute-force matches by descriptor angle (all sequences), "
               "against the probability that two descriptors at that angle share a bucket in at least one "
-              "of the 7 tables of 8 random-hyperplane bits, 1 - (1 - (1 - theta/pi)^8)^7:", "",
+              "of the %d tables of %d random-hyperplane bits, 1 - (1 - (1 - theta/pi)^%d)^%d:" % (
+                 tables, bits, bits, tables), "",
               "| angle (deg) | matches | kept | model |", "|---|---|---|---|"]
     for centre, count, kept in by_angle:
-        model = loss_analysis.collision_probability(np.radians(centre), 7, 8)
+        model = loss_analysis.collision_probability(np.radians(centre), tables, bits)
         lines.append("| %.1f | %d | %.1f %% | %.1f %% |" % (centre, count, 100 * kept, 100 * model))
     lines += ["", "![kept by angle](accuracy/%s)" % plot, ""]
     return lines
@@ -235,7 +236,7 @@ def sweep_section(sweeps, plots, scene):
              "tau: raw matches and matching time (one thread, no verification; the `matching` seconds "
              "cashash prints, wall time on a shared 2-core machine, so +-20 %%) over the 55 pairs of %s, "
              "and precision at 6 px over pairs 1-2 ... 1-6 of each homography sequence "
-             "(7 tables x 8 bits, top_k 10)." % scene, "",
+             "(%d tables x %d bits, top_k %d)." % ((scene,) + tuple(tau[min(tau)].get("setting", [7, 8, 10]))), "",
              "| tau | raw matches (%s) | matching s | process CPU s | " % scene
              + " | ".join("precision %s" % n for n in tau[min(tau)]["precision"]) + " |",
              "|---|---|---|---|" + "---|" * len(tau[min(tau)]["precision"])]
@@ -306,7 +307,7 @@ def camera_section(cams):
     return lines
 
 
-def summary_section(results, losses, by_angle, cams):
+def summary_section(results, losses, by_angle, cams, tables, bits):
     """Targets and the main findings, with the numbers they rest on."""
     lines = ["## Summary against the targets", ""]
     misses, ratios, diffs = [], [], []
@@ -342,13 +343,13 @@ def summary_section(results, losses, by_angle, cams):
     lines.append("- Where matches are lost: %d of %d correct brute-force matches (%.1f %%), %d of them because the "
                  "query got no cascade match at all. Worst pairs (>= 50 correct): %s. The lost matches are the "
                  "dissimilar ones: the kept fraction falls from %.0f %% below 20 degrees between the mean-centred "
-                 "descriptors to %.0f %% at 30-35 degrees, as the first-level bucket collision probability of 7 "
-                 "tables x 8 random-hyperplane bits predicts (table in section 2); pairs with a large viewpoint or "
+                 "descriptors to %.0f %% at 30-35 degrees, as the first-level bucket collision probability of %d "
+                 "tables x %d random-hyperplane bits predicts (table in section 2); pairs with a large viewpoint or "
                  "scale change have more such matches, hence the higher loss rates of the pairs above." % (
                      total_lost, total_bc, 100.0 * total_lost / max(total_bc, 1), absent,
                      ", ".join("%s %s %.1f %% (%d of %d)" % (n, k, 100 * f, r["lost"], r["brute_correct"])
                                for f, n, k, r in worst),
-                     100 * _kept_range(by_angle, 0, 20), 100 * _kept_range(by_angle, 30, 35)))
+                     100 * _kept_range(by_angle, 0, 20), 100 * _kept_range(by_angle, 30, 35), tables, bits))
     reasons = {"ratio": 0, "not_nearest": 0, "other": 0}
     for per_pair in losses.values():
         for r in per_pair.values():
@@ -415,9 +416,12 @@ def write(args, results, losses, by_angle, sweeps, cams, use_gpu, eps_list):
              "`python3 scripts/eval/selftest.py`." % (
                  datetime.date.today().isoformat(), commit, platform.machine(), os.cpu_count(),
                  ", GPU present" if use_gpu else ", no GPU"), ""]
-    lines += summary_section(results, losses, by_angle, cams)
-    lines += homography_section(results, use_gpu, eps_list, plot_homography(results, args.out))
-    lines += loss_section(losses, by_angle, plot_loss_by_angle(by_angle, args.out))
+    tables, bits = int(args.cascade.split(",")[0]), int(args.cascade.split(",")[1])
+    lines += summary_section(results, losses, by_angle, cams, tables, bits)
+    cascade_text = "%s tables x %s bits, tau %s, top_k %s" % tuple(args.cascade.split(","))
+    lines += homography_section(results, use_gpu, eps_list, plot_homography(results, args.out),
+                                "(--CasHash.*) " + cascade_text)
+    lines += loss_section(losses, by_angle, plot_loss_by_angle(by_angle, args.out, tables, bits), tables, bits)
     if sweeps:
         lines += sweep_section(sweeps, [plot_tau(sweeps["tau"], args.out),
                                         plot_topk_bits(sweeps["topk_bits"], args.out)], args.sweep_scene)

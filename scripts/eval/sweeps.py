@@ -30,7 +30,7 @@ def cashash_raw_matches(binary, database, extra, log, pair_list=None):
     return cpu, float(matching.group(1)) if matching else float("nan"), int(raw.group(1)) if raw else -1
 
 
-def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log):
+def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log, tables, bits, top_k):
     """{tau: {scene_cpu_s, scene_matching_s, scene_matches, precision per sequence}}."""
     os.makedirs(work_dir, exist_ok=True)
     scene_copy = os.path.join(work_dir, "scene.db")
@@ -43,10 +43,11 @@ def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log):
     homography.write_pair_list(pair_list)
     results = {}
     for tau in TAUS:
-        extra = ["--CasHash.matcher", "cascade", "--CasHash.tau", str(tau)]
+        extra = ["--CasHash.matcher", "cascade", "--CasHash.tau", str(tau), "--CasHash.num_tables", str(tables),
+                 "--CasHash.bits_per_table", str(bits), "--CasHash.top_k", str(top_k)]
         cpu, matching, raw = cashash_raw_matches(binary, scene_copy, extra, log)
         row = {"scene_cpu_s": cpu, "scene_matching_s": matching, "scene_matches": raw, "precision": {},
-               "correct": {}, "matches": {}}
+               "correct": {}, "matches": {}, "setting": [tables, bits, top_k]}
         for name, (_, hs) in homography_dbs.items():
             cashash_raw_matches(binary, copies[name], extra, log, pair_list)
             evaluated = homography.evaluate_database(copies[name], hs, [eps])
