@@ -8,26 +8,12 @@
 #include <random>
 
 #include "cashash/descriptor_distance.h"
+#include "synthetic_sift.h"
 
 namespace cashash {
 namespace {
 
-// SIFT-like: sparse non-negative values scaled to norm ~512.
-std::vector<uint8_t> RandomSift(std::mt19937* rng) {
-  std::exponential_distribution<double> value(1.0);
-  std::vector<double> v(kDescriptorDim);
-  double norm = 0;
-  for (double& x : v) {
-    x = value(*rng);
-    x *= x;
-    norm += x * x;
-  }
-  std::vector<uint8_t> out(kDescriptorDim);
-  for (int d = 0; d < kDescriptorDim; ++d) {
-    out[d] = static_cast<uint8_t>(std::min(255.0, std::round(512.0 * v[d] / std::sqrt(norm))));
-  }
-  return out;
-}
+using testing_support::RandomSift;
 
 std::vector<uint8_t> Perturb(const std::vector<uint8_t>& desc, int amplitude, std::mt19937* rng) {
   std::uniform_int_distribution<int> noise(-amplitude, amplitude);

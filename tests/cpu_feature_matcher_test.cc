@@ -11,25 +11,12 @@
 #include "cashash/feature_matcher.h"
 #include "cashash/matching_options.h"
 #include "cashash/thread_pool.h"
+#include "synthetic_sift.h"
 
 namespace cashash {
 namespace {
 
-std::vector<uint8_t> RandomSift(std::mt19937* rng) {
-  std::exponential_distribution<double> value(1.0);
-  std::vector<double> v(kDescriptorDim);
-  double norm = 0;
-  for (double& x : v) {
-    x = value(*rng);
-    x *= x;
-    norm += x * x;
-  }
-  std::vector<uint8_t> out(kDescriptorDim);
-  for (int d = 0; d < kDescriptorDim; ++d) {
-    out[d] = static_cast<uint8_t>(std::min(255.0, std::round(512.0 * v[d] / std::sqrt(norm))));
-  }
-  return out;
-}
+using testing_support::RandomSift;
 
 // num_images views of one scene: each image sees a random subset of `scene`
 // points with a little descriptor noise, plus its own clutter.
