@@ -7,6 +7,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "cashash/fallback_feature_matcher.h"
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
 #include "colmap_bridge/database.h"
@@ -190,7 +191,13 @@ std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOpti
     const int gpu_index = FirstGpuIndex(options.gpu_index);
     std::string reason;
     if (cuda::CudaDeviceUsable(gpu_index, &reason)) {
-      return cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, gpu_index);
+      // A run that outgrows the card (device memory) finishes on the CPU.
+      return CreateFallbackFeatureMatcher(
+          cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, gpu_index),
+          [sift = options.sift, cashash = options.cashash, mean]() {
+            return CreateCpuFeatureMatcher(sift, cashash, mean);
+          },
+          IsDeviceMemoryError, warning);
     }
     if (warning) warning("no usable CUDA device (" + reason + "); matching on the CPU");
 #else
