@@ -147,6 +147,8 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   summary.matcher_name = matcher->Name();
   Info(callbacks, "Matcher: " + summary.matcher_name);
   summary.pipeline = pipeline.Run(chunks);
+  // The GPU matcher may have handed over to the CPU on running out of memory.
+  summary.matcher_name = matcher->Name();
   return summary;
 }
 
