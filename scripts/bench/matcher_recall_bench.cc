@@ -127,7 +127,7 @@ size_t CountCommon(const FeatureMatches& a, const FeatureMatches& b) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string database = "/tmp/dbs/sceaux_castle.db";
+  std::string database = "sceaux_castle.db";  // --database: any COLMAP feature database
   size_t max_pairs = static_cast<size_t>(-1);
   int threads = 1;
   uint64_t seed = 0;
