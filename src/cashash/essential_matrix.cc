@@ -75,21 +75,9 @@ Poly Add(const Poly& a, const Poly& b, double sb = 1.0) {
 // The 4-D null space of the epipolar constraints, as 9-vectors (row-major E).
 void NullSpace(const PointPairs& pairs, const int* idx, int count,
                Eigen::Matrix<double, 9, 4>* basis) {
-  auto row_of = [&](int k, double* row) {
-    const double x1 = pairs.x1[k], y1 = pairs.y1[k], x2 = pairs.x2[k], y2 = pairs.y2[k];
-    row[0] = x2 * x1;
-    row[1] = x2 * y1;
-    row[2] = x2;
-    row[3] = y2 * x1;
-    row[4] = y2 * y1;
-    row[5] = y2;
-    row[6] = x1;
-    row[7] = y1;
-    row[8] = 1.0;
-  };
   if (count == 5) {
     Eigen::Matrix<double, 9, 5> At;
-    for (int i = 0; i < 5; ++i) row_of(idx[i], At.col(i).data());
+    for (int i = 0; i < 5; ++i) EpipolarRow(pairs, idx[i], At.col(i).data());
     const Eigen::HouseholderQR<Eigen::Matrix<double, 9, 5>> qr(At);
     const Eigen::Matrix<double, 9, 9> Q = qr.householderQ();
     *basis = Q.rightCols<4>();
@@ -98,7 +86,7 @@ void NullSpace(const PointPairs& pairs, const int* idx, int count,
   Eigen::Matrix<double, 9, 9> AtA = Eigen::Matrix<double, 9, 9>::Zero();
   Eigen::Matrix<double, 9, 1> row;
   for (int i = 0; i < count; ++i) {
-    row_of(idx[i], row.data());
+    EpipolarRow(pairs, idx[i], row.data());
     AtA.selfadjointView<Eigen::Lower>().rankUpdate(row);
   }
   // The least-squares solution is nearest the smallest eigenvector: make it

@@ -7,19 +7,6 @@
 namespace cashash {
 namespace {
 
-// Coefficients of x2^T F x1 in the row-major entries of F.
-inline void EpipolarRow(double x1, double y1, double x2, double y2, double* row) {
-  row[0] = x2 * x1;
-  row[1] = x2 * y1;
-  row[2] = x2;
-  row[3] = y2 * x1;
-  row[4] = y2 * y1;
-  row[5] = y2;
-  row[6] = x1;
-  row[7] = y1;
-  row[8] = 1.0;
-}
-
 Eigen::Matrix3d FromRowMajor(const double* v) {
   Eigen::Matrix3d m;
   m << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
@@ -34,7 +21,7 @@ int FundamentalSevenPoint(const PointPairs& pairs, const int* idx, Eigen::Matrix
   Eigen::Matrix<double, 9, 7> At;
   for (int i = 0; i < 7; ++i) {
     const int k = idx[i];
-    EpipolarRow(pairs.x1[k], pairs.y1[k], pairs.x2[k], pairs.y2[k], At.col(i).data());
+    EpipolarRow(pairs, k, At.col(i).data());
   }
   const Eigen::HouseholderQR<Eigen::Matrix<double, 9, 7>> qr(At);
   const Eigen::Matrix<double, 9, 9> Q = qr.householderQ();
@@ -70,7 +57,7 @@ bool FundamentalEightPoint(const PointPairs& pairs, const std::vector<int>& idx,
   Eigen::Matrix<double, 9, 9> AtA = Eigen::Matrix<double, 9, 9>::Zero();
   Eigen::Matrix<double, 9, 1> row;
   for (const int k : idx) {
-    EpipolarRow(pairs.x1[k], pairs.y1[k], pairs.x2[k], pairs.y2[k], row.data());
+    EpipolarRow(pairs, k, row.data());
     AtA.selfadjointView<Eigen::Lower>().rankUpdate(row);
   }
   // The solver reads only the lower triangle, which is what rankUpdate filled.
