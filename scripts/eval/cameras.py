@@ -8,6 +8,7 @@ import os
 import numpy as np
 
 from eval import tools
+from summarize_model import quaternion_to_rotation as quaternion_to_matrix  # scripts/ is on sys.path
 
 
 def read_gt_cameras(scene_dir):
@@ -23,14 +24,6 @@ def read_gt_cameras(scene_dir):
         centre = np.array(rows[7])
         cameras[os.path.basename(path)[:-len(".camera")]] = (rotation, centre)
     return cameras
-
-
-def quaternion_to_matrix(q):
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def read_model_images(images_txt):
