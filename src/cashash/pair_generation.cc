@@ -11,6 +11,94 @@ void SortUnique(std::vector<image_t>* ids) {
   ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
 }
 
+// The chunk of block pair (bi, bj), bi <= bj: pairs (position i in bi,
+// position j in bj, i < j). Empty for the diagonal pair of a one-image block.
+PairChunk BlockPairChunk(const std::vector<image_t>& image_ids, size_t block_size, int bi, int bj) {
+  const size_t n = image_ids.size();
+  PairChunk chunk;
+  chunk.block_i = bi;
+  chunk.block_j = bj;
+  const size_t i_begin = bi * block_size, i_end = std::min(n, i_begin + block_size);
+  const size_t j_begin = bj * block_size, j_end = std::min(n, j_begin + block_size);
+  for (size_t i = i_begin; i < i_end; ++i) {
+    for (size_t j = std::max(j_begin, i + 1); j < j_end; ++j) {
+      chunk.pairs.emplace_back(image_ids[i], image_ids[j]);
+    }
+  }
+  if (chunk.pairs.empty()) return chunk;
+  for (size_t i = i_begin; i < i_end; ++i) chunk.images.push_back(image_ids[i]);
+  for (size_t j = j_begin; j < j_end; ++j) chunk.images.push_back(image_ids[j]);
+  SortUnique(&chunk.images);
+  return chunk;
+}
+
+// Orders block pairs group pair by group pair (see ScheduledPairChunks).
+// `end_block` is the block the last emitted pair ended on, so that the next
+// group pair can start there.
+class BlockPairOrder {
+ public:
+  BlockPairOrder(int num_blocks, int blocks_per_group)
+      : num_blocks_(num_blocks), per_group_(blocks_per_group) {}
+
+  std::vector<std::pair<int, int>> Build() {
+    const int num_groups = (num_blocks_ + per_group_ - 1) / per_group_;
+    for (int gi = 0; gi < num_groups; ++gi) {
+      Diagonal(gi);
+      for (int gk = num_groups - 1; gk > gi; --gk) Cross(gi, gk);
+    }
+    return order_;
+  }
+
+ private:
+  std::vector<int> BlocksOf(int group) const {
+    std::vector<int> blocks;
+    for (int b = group * per_group_; b < std::min(num_blocks_, (group + 1) * per_group_); ++b) blocks.push_back(b);
+    return blocks;
+  }
+
+  void Emit(int a, int b) {
+    order_.emplace_back(std::min(a, b), std::max(a, b));
+    end_block_ = b;
+  }
+
+  // Row r: (L[r], L[r]) then (L[r], L[c]) for c from the last down to r + 1,
+  // so row r ends on L[r + 1], where row r + 1 starts. Starts on L[0]: the
+  // list is reversed when the previous group pair ended on the last block.
+  void Diagonal(int group) {
+    std::vector<int> blocks = BlocksOf(group);
+    if (end_block_ == blocks.back() && blocks.size() > 1) std::reverse(blocks.begin(), blocks.end());
+    const int m = static_cast<int>(blocks.size());
+    for (int r = 0; r < m; ++r) {
+      Emit(blocks[r], blocks[r]);
+      for (int c = m - 1; c > r; --c) Emit(blocks[r], blocks[c]);
+    }
+  }
+
+  // Rows over gi's blocks, starting from the one the previous pair ended
+  // on; each row walks gk's blocks, alternating direction (a snake). Ends
+  // where the next group pair starts: on the last row's block when gi has
+  // more cross pairs to go, on the last column's block before gk's diagonal.
+  void Cross(int gi, int gk) {
+    std::vector<int> rows = BlocksOf(gi);
+    if (end_block_ != rows.front()) std::reverse(rows.begin(), rows.end());
+    std::vector<int> columns = BlocksOf(gk);
+    int last_column = columns.front();
+    for (int row : rows) {
+      for (int column : columns) {
+        Emit(row, column);
+        last_column = column;
+      }
+      std::reverse(columns.begin(), columns.end());
+    }
+    end_block_ = gk == gi + 1 ? last_column : rows.back();
+  }
+
+  int num_blocks_;
+  int per_group_;
+  int end_block_ = -1;
+  std::vector<std::pair<int, int>> order_;
+};
+
 }  // namespace
 
 std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_ids, int block_size) {
@@ -21,23 +109,32 @@ std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_id
   const int num_blocks = static_cast<int>((n + bs - 1) / bs);
   for (int bi = 0; bi < num_blocks; ++bi) {
     for (int bj = bi; bj < num_blocks; ++bj) {
-      PairChunk chunk;
-      chunk.block_i = bi;
-      chunk.block_j = bj;
-      chunk.num_blocks = num_blocks;
-      const size_t i_begin = bi * bs, i_end = std::min(n, i_begin + bs);
-      const size_t j_begin = bj * bs, j_end = std::min(n, j_begin + bs);
-      for (size_t i = i_begin; i < i_end; ++i) {
-        for (size_t j = std::max(j_begin, i + 1); j < j_end; ++j) {
-          chunk.pairs.emplace_back(image_ids[i], image_ids[j]);
-        }
-      }
+      PairChunk chunk = BlockPairChunk(image_ids, bs, bi, bj);
       if (chunk.pairs.empty()) continue;
-      for (size_t i = i_begin; i < i_end; ++i) chunk.images.push_back(image_ids[i]);
-      for (size_t j = j_begin; j < j_end; ++j) chunk.images.push_back(image_ids[j]);
-      SortUnique(&chunk.images);
+      chunk.num_blocks = num_blocks;
       chunks.push_back(std::move(chunk));
     }
+  }
+  return chunks;
+}
+
+std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
+                                           int blocks_per_group) {
+  std::vector<PairChunk> chunks;
+  const size_t n = image_ids.size();
+  if (n < 2) return chunks;
+  const size_t bs = static_cast<size_t>(std::max(1, block_size));
+  const int num_blocks = static_cast<int>((n + bs - 1) / bs);
+  const int per_group = std::min(num_blocks, std::max(1, blocks_per_group));
+  const int num_groups = (num_blocks + per_group - 1) / per_group;
+  for (const auto& [bi, bj] : BlockPairOrder(num_blocks, per_group).Build()) {
+    PairChunk chunk = BlockPairChunk(image_ids, bs, bi, bj);
+    if (chunk.pairs.empty()) continue;
+    chunk.num_blocks = num_blocks;
+    chunk.group_i = bi / per_group;
+    chunk.group_j = bj / per_group;
+    chunk.num_groups = num_groups;
+    chunks.push_back(std::move(chunk));
   }
   return chunks;
 }
