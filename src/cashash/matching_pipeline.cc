@@ -20,21 +20,6 @@ double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// Mixes the base seed with the pair so that each pair's RANSAC is repeatable
-// whatever thread verifies it and whatever else is in the run.
-uint64_t PairSeed(uint64_t base_seed, const ImagePair& pair) {
-  uint64_t z = base_seed ^ (ImagePairToPairId(pair.first, pair.second) * 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-
-std::vector<Eigen::Vector2d> KeypointPositions(const Keypoints& keypoints) {
-  std::vector<Eigen::Vector2d> points(keypoints.size());
-  for (size_t i = 0; i < keypoints.size(); ++i) points[i] = Eigen::Vector2d(keypoints[i].x, keypoints[i].y);
-  return points;
-}
-
 using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
 
 // What travels from the matching stage to the verification stage.
@@ -89,6 +74,8 @@ void MatchingPipeline::SetProgressCallback(std::function<void(const PipelineProg
 
 void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop; }
 
+void MatchingPipeline::SetBatchVerifier(BatchVerifier* verifier) { verifier_ = verifier; }
+
 PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   PipelineStats stats;
   for (const PairChunk& chunk : chunks) stats.pairs_total += chunk.pairs.size();
@@ -134,8 +121,14 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     }
   });
 
-  // Stage 2: verification, parallel over the pairs of a chunk.
-  std::thread verifier([&]() {
+  // Stage 2: verification of a whole chunk by the batch verifier.
+  std::unique_ptr<BatchVerifier> default_verifier;
+  BatchVerifier* verifier = verifier_;
+  if (verifier == nullptr && !options_.skip_geometric_verification) {
+    default_verifier = CreateCpuBatchVerifier(options_.two_view, options_.num_threads);
+    verifier = default_verifier.get();
+  }
+  std::thread verifier_thread([&]() {
     try {
       while (std::optional<MatchedChunk> item = to_verify.Pop()) {
         const Clock::time_point t0 = Clock::now();
@@ -144,18 +137,32 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         out.started = item->started;
         const std::vector<ImagePair>& pairs = item->chunk->pairs;
         out.results.resize(pairs.size());
-        ParallelFor(pairs.size(), options_.num_threads, [&](size_t k) {
-          PairResult& result = out.results[k];
-          result.pair = pairs[k];
-          result.matches = std::move(item->matches[k]);
-          if (options_.skip_geometric_verification) return;
-          TwoViewGeometryOptions two_view = options_.two_view;
-          two_view.random_seed = PairSeed(options_.two_view.random_seed, pairs[k]);
-          const ImageFeatures& f1 = *item->features.at(pairs[k].first);
-          const ImageFeatures& f2 = *item->features.at(pairs[k].second);
-          result.geometry = VerifyPair(source_->CameraOfImage(pairs[k].first), f1,
-                                       source_->CameraOfImage(pairs[k].second), f2, result.matches, two_view);
-        });
+        for (size_t k = 0; k < pairs.size(); ++k) {
+          out.results[k].pair = pairs[k];
+          out.results[k].matches = std::move(item->matches[k]);
+        }
+        if (!options_.skip_geometric_verification) {
+          // Keypoint positions once per image of the chunk, not once per pair.
+          std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
+          for (const auto& entry : item->features) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
+          std::vector<std::pair<const image_t, std::vector<Eigen::Vector2d>>*> slots;
+          for (auto& entry : positions) slots.push_back(&entry);
+          ParallelFor(slots.size(), options_.num_threads, [&](size_t i) {
+            slots[i]->second = KeypointPositions(item->features.at(slots[i]->first)->keypoints);
+          });
+          std::vector<VerificationPair> tasks(pairs.size());
+          for (size_t k = 0; k < pairs.size(); ++k) {
+            VerificationPair& task = tasks[k];
+            task.camera1 = &source_->CameraOfImage(pairs[k].first);
+            task.camera2 = &source_->CameraOfImage(pairs[k].second);
+            task.points1 = &positions.at(pairs[k].first);
+            task.points2 = &positions.at(pairs[k].second);
+            task.matches = &out.results[k].matches;
+            task.random_seed = PairRandomSeed(options_.two_view.random_seed, pairs[k]);
+          }
+          std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
+          for (size_t k = 0; k < pairs.size(); ++k) out.results[k].geometry = std::move(geometries[k]);
+        }
         {
           std::lock_guard<std::mutex> lock(stats_mutex);
           stats.seconds_verification += SecondsSince(t0);
@@ -218,7 +225,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     error.Set(std::current_exception());
   }
   to_verify.Close();
-  verifier.join();
+  verifier_thread.join();
   writer.join();
   error.RethrowIfAny();
   if (stop_ && stop_->load() && stats.pairs_done < stats.pairs_total) stats.stopped = true;

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "cashash/batch_verifier.h"
 #include "cashash/feature_matcher.h"
 #include "cashash/pair_generation.h"
 #include "cashash/two_view_geometry.h"
@@ -81,6 +82,9 @@ class MatchingPipeline {
   // When the flag becomes true the pipeline finishes the chunks in flight,
   // commits them, and returns with stats.stopped set.
   void SetStopFlag(const std::atomic<bool>* stop);
+  // Verifies each chunk with `verifier` (not owned; e.g. the GPU one)
+  // instead of the default CPU thread pool over options.two_view.
+  void SetBatchVerifier(BatchVerifier* verifier);
 
   PipelineStats Run(const std::vector<PairChunk>& chunks);
 
@@ -91,6 +95,7 @@ class MatchingPipeline {
   ResultSink* sink_;
   std::function<void(const PipelineProgress&)> progress_;
   const std::atomic<bool>* stop_ = nullptr;
+  BatchVerifier* verifier_ = nullptr;
 };
 
 // Verifies one pair (exposed for tests and for the verify-only mode).

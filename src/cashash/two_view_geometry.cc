@@ -18,9 +18,6 @@
 namespace cashash {
 namespace {
 
-// Tags that give each estimator of a pair its own random stream.
-enum SeedTag : uint64_t { kSeedF = 1, kSeedH = 2, kSeedE = 3, kSeedWatermark = 4 };
-
 RansacOptions MakeRansacOptions(const TwoViewGeometryOptions& options, uint64_t tag) {
   RansacOptions r;
   r.max_error = options.max_error;
@@ -77,8 +74,14 @@ bool DetectWatermark(const Camera& camera1, const Camera& camera2, const PointPa
   return ratio >= options.watermark_min_inlier_ratio;
 }
 
-int NumInliers(const RansacReport<Eigen::Matrix3d>& report) {
-  return report.success ? report.support.num_inliers : 0;
+TwoViewModelEstimate ToEstimate(RansacReport<Eigen::Matrix3d>&& report) {
+  TwoViewModelEstimate estimate;
+  estimate.success = report.success;
+  estimate.num_inliers = report.success ? report.support.num_inliers : 0;
+  estimate.num_trials = report.num_trials;
+  estimate.model = report.model;
+  estimate.inlier_mask = std::move(report.inlier_mask);
+  return estimate;
 }
 
 }  // namespace
@@ -127,74 +130,105 @@ TwoViewGeometry TwoViewGeometry::Inverted() const {
   return inv;
 }
 
-TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
-                                        const std::vector<Eigen::Vector2d>& points1,
-                                        const Camera& camera2,
-                                        const std::vector<Eigen::Vector2d>& points2,
-                                        const FeatureMatches& matches,
-                                        const TwoViewGeometryOptions& options) {
-  TwoViewGeometry geometry;
-  const size_t min_num_inliers = static_cast<size_t>(std::max(0, options.min_num_inliers));
-  if (matches.size() < min_num_inliers) {
-    geometry.config = kDegenerate;
-    return geometry;
-  }
-
+TwoViewPoints PrepareTwoViewPoints(const std::vector<Eigen::Vector2d>& points1,
+                                   const std::vector<Eigen::Vector2d>& points2,
+                                   const FeatureMatches& matches) {
+  TwoViewPoints points;
   const size_t n = matches.size();
-  PointPairs pixels;
-  pixels.resize(n);
+  points.pixels.resize(n);
   for (size_t i = 0; i < n; ++i) {
     const Eigen::Vector2d& p1 = points1[matches[i].point2D_idx1];
     const Eigen::Vector2d& p2 = points2[matches[i].point2D_idx2];
-    pixels.Set(i, p1.x(), p1.y(), p2.x(), p2.y());
+    points.pixels.Set(i, p1.x(), p1.y(), p2.x(), p2.y());
   }
   // F and H run on a normalised copy; one common scale makes the errors
   // there exactly scale x the pixel errors.
-  PointPairs normalized;
-  const PairNormalization norm = NormalizePointPairs(pixels, &normalized);
+  points.norm = NormalizePointPairs(points.pixels, &points.normalized);
+  return points;
+}
 
+bool TooFewMatchesForTwoView(size_t num_matches, const TwoViewGeometryOptions& options) {
+  return num_matches < static_cast<size_t>(std::max(0, options.min_num_inliers));
+}
+
+double NormalizedSquaredThreshold(const TwoViewPoints& points, const TwoViewGeometryOptions& options) {
+  const double max_error = options.max_error * points.norm.scale;
+  return max_error * max_error;
+}
+
+Eigen::Matrix3d FundamentalToPixels(const Eigen::Matrix3d& F_normalized, const PairNormalization& norm) {
+  const Eigen::Matrix3d F = norm.T2.transpose() * F_normalized * norm.T1;
+  return F / F.norm();
+}
+
+Eigen::Matrix3d HomographyToPixels(const Eigen::Matrix3d& H_normalized, const PairNormalization& norm) {
+  const Eigen::Matrix3d H = norm.T2.inverse() * H_normalized * norm.T1;
+  return H / H.norm();
+}
+
+TwoViewModelEstimate EstimateFundamental(const TwoViewPoints& points, const TwoViewGeometryOptions& options) {
   RansacOptions f_options = MakeRansacOptions(options, kSeedF);
-  f_options.max_error = options.max_error * norm.scale;
-  const auto F_report = LoRansac(FundamentalEstimator(normalized), f_options);
-  if (F_report.success) {
-    const Eigen::Matrix3d F = norm.T2.transpose() * F_report.model * norm.T1;
-    geometry.F = F / F.norm();
-  }
+  f_options.max_error = options.max_error * points.norm.scale;
+  TwoViewModelEstimate F = ToEstimate(LoRansac(FundamentalEstimator(points.normalized), f_options));
+  F.model = F.success ? FundamentalToPixels(F.model, points.norm) : Eigen::Matrix3d::Zero();
+  return F;
+}
 
+TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options) {
   RansacOptions h_options = MakeRansacOptions(options, kSeedH);
-  h_options.max_error = options.max_error * norm.scale;
-  const auto H_report = LoRansac(HomographyEstimator(normalized), h_options);
-  if (H_report.success) {
-    const Eigen::Matrix3d H = norm.T2.inverse() * H_report.model * norm.T1;
-    geometry.H = H / H.norm();
-  }
+  h_options.max_error = options.max_error * points.norm.scale;
+  TwoViewModelEstimate H = ToEstimate(LoRansac(HomographyEstimator(points.normalized), h_options));
+  H.model = H.success ? HomographyToPixels(H.model, points.norm) : Eigen::Matrix3d::Zero();
+  return H;
+}
 
-  const bool calibrated = camera1.has_prior_focal_length && camera2.has_prior_focal_length &&
-                          CameraModelIsSupported(camera1.model_id) &&
-                          CameraModelIsSupported(camera2.model_id);
-  RansacReport<Eigen::Matrix3d> E_report;
-  if (calibrated) {
-    PointPairs world;
-    world.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-      double u1, v1, u2, v2;
-      CameraImageToWorld(camera1, pixels.x1[i], pixels.y1[i], &u1, &v1);
-      CameraImageToWorld(camera2, pixels.x2[i], pixels.y2[i], &u2, &v2);
-      world.Set(i, u1, v1, u2, v2);
-    }
-    RansacOptions e_options = MakeRansacOptions(options, kSeedE);
-    // The pixel threshold mapped through each camera's focal length, averaged.
-    e_options.max_error = 0.5 * (options.max_error / CameraMeanFocalLength(camera1) +
-                                 options.max_error / CameraMeanFocalLength(camera2));
-    E_report = LoRansac(EssentialEstimator(world), e_options);
-    if (E_report.success) geometry.E = E_report.model;
-  }
+bool TwoViewIsCalibrated(const Camera& camera1, const Camera& camera2) {
+  return camera1.has_prior_focal_length && camera2.has_prior_focal_length &&
+         CameraModelIsSupported(camera1.model_id) && CameraModelIsSupported(camera2.model_id);
+}
 
-  const int num_F = NumInliers(F_report);
-  const int num_H = NumInliers(H_report);
-  const int num_E = NumInliers(E_report);
-  const int min_inliers = static_cast<int>(min_num_inliers);
-  if ((!F_report.success && !H_report.success && !E_report.success) ||
+TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                                       const TwoViewGeometryOptions& options) {
+  const size_t n = pixels.size();
+  PointPairs world;
+  world.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    double u1, v1, u2, v2;
+    CameraImageToWorld(camera1, pixels.x1[i], pixels.y1[i], &u1, &v1);
+    CameraImageToWorld(camera2, pixels.x2[i], pixels.y2[i], &u2, &v2);
+    world.Set(i, u1, v1, u2, v2);
+  }
+  RansacOptions e_options = MakeRansacOptions(options, kSeedE);
+  // The pixel threshold mapped through each camera's focal length, averaged.
+  e_options.max_error = 0.5 * (options.max_error / CameraMeanFocalLength(camera1) +
+                               options.max_error / CameraMeanFocalLength(camera2));
+  TwoViewModelEstimate E = ToEstimate(LoRansac(EssentialEstimator(world), e_options));
+  if (!E.success) E.model = Eigen::Matrix3d::Zero();
+  return E;
+}
+
+TwoViewGeometry DecideTwoViewGeometry(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                                      const FeatureMatches& matches, bool calibrated,
+                                      const TwoViewModelEstimate& F, const TwoViewModelEstimate& H,
+                                      const TwoViewModelEstimate& E_estimate,
+                                      const TwoViewGeometryOptions& options) {
+  TwoViewGeometry geometry;
+  if (TooFewMatchesForTwoView(matches.size(), options)) {
+    geometry.config = kDegenerate;
+    return geometry;
+  }
+  // E takes part only for calibrated pairs.
+  static const TwoViewModelEstimate kNoEstimate;
+  const TwoViewModelEstimate& E = calibrated ? E_estimate : kNoEstimate;
+  if (F.success) geometry.F = F.model;
+  if (H.success) geometry.H = H.model;
+  if (E.success) geometry.E = E.model;
+
+  const int num_F = F.success ? F.num_inliers : 0;
+  const int num_H = H.success ? H.num_inliers : 0;
+  const int num_E = E.success ? E.num_inliers : 0;
+  const int min_inliers = std::max(0, options.min_num_inliers);
+  if ((!F.success && !H.success && !E.success) ||
       (num_F < min_inliers && num_H < min_inliers && num_E < min_inliers)) {
     geometry.config = kDegenerate;
     return geometry;
@@ -208,31 +242,30 @@ TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
 
   const std::vector<char>* mask = nullptr;
   int num_inliers = 0;
-  auto use = [&](const RansacReport<Eigen::Matrix3d>& report) {
-    mask = &report.inlier_mask;
-    num_inliers = report.support.num_inliers;
+  auto use = [&](const TwoViewModelEstimate& estimate) {
+    mask = &estimate.inlier_mask;
+    num_inliers = estimate.num_inliers;
   };
-  if (calibrated && E_report.success && E_F_ratio > options.min_E_F_inlier_ratio &&
-      num_E >= min_inliers) {
+  if (calibrated && E.success && E_F_ratio > options.min_E_F_inlier_ratio && num_E >= min_inliers) {
     // Calibrated: keep whichever of E and F explains more matches.
-    use(num_E >= num_F ? E_report : F_report);
+    use(num_E >= num_F ? E : F);
     if (H_E_ratio > options.max_H_inlier_ratio) {
       geometry.config = kPlanarOrPanoramic;
-      if (num_H > num_inliers) use(H_report);
+      if (num_H > num_inliers) use(H);
     } else {
       geometry.config = kCalibrated;
     }
-  } else if (F_report.success && num_F >= min_inliers) {
-    use(F_report);
+  } else if (F.success && num_F >= min_inliers) {
+    use(F);
     if (H_F_ratio > options.max_H_inlier_ratio) {
       geometry.config = kPlanarOrPanoramic;
       // COLMAP 4 keeps H's inliers on a tie; 3.8 kept F's in this branch.
-      if (num_H >= num_F) use(H_report);
+      if (num_H >= num_F) use(H);
     } else {
       geometry.config = kUncalibrated;
     }
-  } else if (H_report.success && num_H >= min_inliers) {
-    use(H_report);
+  } else if (H.success && num_H >= min_inliers) {
+    use(H);
     geometry.config = kPlanarOrPanoramic;
   } else {
     geometry.config = kDegenerate;
@@ -245,6 +278,26 @@ TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
     geometry.config = kWatermark;
   }
   return geometry;
+}
+
+TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
+                                        const std::vector<Eigen::Vector2d>& points1,
+                                        const Camera& camera2,
+                                        const std::vector<Eigen::Vector2d>& points2,
+                                        const FeatureMatches& matches,
+                                        const TwoViewGeometryOptions& options) {
+  if (TooFewMatchesForTwoView(matches.size(), options)) {
+    TwoViewGeometry geometry;
+    geometry.config = kDegenerate;
+    return geometry;
+  }
+  const TwoViewPoints points = PrepareTwoViewPoints(points1, points2, matches);
+  const TwoViewModelEstimate F = EstimateFundamental(points, options);
+  const TwoViewModelEstimate H = EstimateHomography(points, options);
+  const bool calibrated = TwoViewIsCalibrated(camera1, camera2);
+  const TwoViewModelEstimate E =
+      calibrated ? EstimateEssential(camera1, camera2, points.pixels, options) : TwoViewModelEstimate();
+  return DecideTwoViewGeometry(camera1, camera2, points.pixels, matches, calibrated, F, H, E, options);
 }
 
 }  // namespace cashash

@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 
+#include "cashash/point_pairs.h"
 #include "cashash/types.h"
 
 namespace cashash {
@@ -65,11 +66,81 @@ struct TwoViewGeometry {
 
 // Verifies `matches` between two images. points1/points2 are the keypoint
 // positions (pixels) of the two images, indexed by the match indices.
+// Equivalent to PrepareTwoViewPoints, EstimateFundamental,
+// EstimateHomography, EstimateEssential (calibrated pairs only) and
+// DecideTwoViewGeometry in a row; a batch verifier (the GPU one) runs the
+// same steps with F and H estimated elsewhere.
 TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
                                         const std::vector<Eigen::Vector2d>& points1,
                                         const Camera& camera2,
                                         const std::vector<Eigen::Vector2d>& points2,
                                         const FeatureMatches& matches,
                                         const TwoViewGeometryOptions& options);
+
+// ---------------------------------------------------------------------------
+// The steps of EstimateTwoViewGeometry, for verifiers that estimate some of
+// the models themselves and must still decide exactly as the CPU path does.
+
+// Tags that give each estimator of a pair its own random stream
+// (DeriveSeed(options.random_seed, tag)).
+enum TwoViewSeedTag : uint64_t { kSeedF = 1, kSeedH = 2, kSeedE = 3, kSeedWatermark = 4 };
+
+// The matched pixels of a pair (match order) and their normalised copy: each
+// image centred, both scaled by one factor, so normalised errors are exactly
+// norm.scale x pixel errors.
+struct TwoViewPoints {
+  PointPairs pixels;
+  PointPairs normalized;
+  PairNormalization norm;
+};
+
+TwoViewPoints PrepareTwoViewPoints(const std::vector<Eigen::Vector2d>& points1,
+                                   const std::vector<Eigen::Vector2d>& points2,
+                                   const FeatureMatches& matches);
+
+// A pair with fewer matches than min_num_inliers is DEGENERATE without any
+// estimation.
+bool TooFewMatchesForTwoView(size_t num_matches, const TwoViewGeometryOptions& options);
+
+// One estimated model of a pair, as the decision reads it.
+struct TwoViewModelEstimate {
+  bool success = false;
+  int num_inliers = 0;
+  int num_trials = 0;
+  // F and H in pixel coordinates (unit Frobenius norm); E in normalised
+  // camera coordinates.
+  Eigen::Matrix3d model = Eigen::Matrix3d::Zero();
+  std::vector<char> inlier_mask;  // per match, when success
+};
+
+// COLMAP's RANSAC threshold of F and H in the normalised coordinates of
+// `points`, squared (the value inlier residuals are compared against, in
+// float).
+double NormalizedSquaredThreshold(const TwoViewPoints& points, const TwoViewGeometryOptions& options);
+
+// F and H by LO-RANSAC on the CPU.
+TwoViewModelEstimate EstimateFundamental(const TwoViewPoints& points, const TwoViewGeometryOptions& options);
+TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options);
+
+// Models found in normalised coordinates, mapped back to pixels and scaled
+// to unit norm (as EstimateFundamental / EstimateHomography report them).
+Eigen::Matrix3d FundamentalToPixels(const Eigen::Matrix3d& F_normalized, const PairNormalization& norm);
+Eigen::Matrix3d HomographyToPixels(const Eigen::Matrix3d& H_normalized, const PairNormalization& norm);
+
+// Both cameras have a focal prior and a model we can undistort: E is
+// estimated and may decide the configuration.
+bool TwoViewIsCalibrated(const Camera& camera1, const Camera& camera2);
+
+// E by 5-point LO-RANSAC on undistorted, normalised camera coordinates.
+TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                                       const TwoViewGeometryOptions& options);
+
+// COLMAP's configuration decision from the three estimates (E unused unless
+// `calibrated`), then the inlier matches and the watermark test. F, H and E
+// of the result are those of the estimates that succeeded.
+TwoViewGeometry DecideTwoViewGeometry(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                                      const FeatureMatches& matches, bool calibrated,
+                                      const TwoViewModelEstimate& F, const TwoViewModelEstimate& H,
+                                      const TwoViewModelEstimate& E, const TwoViewGeometryOptions& options);
 
 }  // namespace cashash
