@@ -4,10 +4,12 @@
 #include "cashash/feature_cache.h"
 
 #include <algorithm>
+#include <chrono>
 #include <map>
 #include <mutex>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -24,9 +26,14 @@ constexpr size_t kImageBytes = kFeaturesPerImage * (kDescriptorDim + sizeof(Keyp
 // loads, and checks no two threads read it at once.
 class CountingSource : public FeatureSource {
  public:
-  explicit CountingSource(int broken_image = -1) : broken_image_(broken_image) { camera_.params = {100, 50, 50}; }
+  explicit CountingSource(int broken_image = -1, int delay_us = 0) : broken_image_(broken_image), delay_us_(delay_us) {
+    camera_.params = {100, 50, 50};
+  }
   ImageFeatures LoadFeatures(image_t image_id) override {
     std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
+    // A slow disk: the pipeline then waits for the loader instead of the
+    // loader waiting for the pipeline; reads must not change.
+    if (delay_us_ > 0) std::this_thread::sleep_for(std::chrono::microseconds(delay_us_));
     EXPECT_TRUE(busy.owns_lock()) << "source read from two threads at once";
     if (static_cast<int>(image_id) == broken_image_) throw std::runtime_error("image is broken");
     ++loads[image_id];
@@ -43,6 +50,7 @@ class CountingSource : public FeatureSource {
   std::mutex busy_;
   Camera camera_;
   int broken_image_;
+  int delay_us_;
 };
 
 // Matches (k, k) for every feature, after checking each image's bytes are
@@ -106,13 +114,15 @@ struct Layout {
   int blocks_per_group;
 };
 
-TEST(GroupFeatureCache, LoadsAsPredictedAndHoldsAtMostThreeGroups) {
+class GroupFeatureCacheLoads : public ::testing::TestWithParam<int> {};
+
+TEST_P(GroupFeatureCacheLoads, AsPredictedAndAtMostThreeGroupsHeld) {
   for (const Layout& l : {Layout{24, 3, 2}, Layout{25, 3, 2}, Layout{30, 4, 3}, Layout{7, 2, 1}, Layout{12, 5, 10},
                           Layout{40, 2, 3}}) {
     SCOPED_TRACE("n=" + std::to_string(l.n) + " block_size=" + std::to_string(l.block_size) +
                  " blocks_per_group=" + std::to_string(l.blocks_per_group));
     const std::vector<PairChunk> chunks = ScheduledPairChunks(Ids(l.n), l.block_size, l.blocks_per_group);
-    CountingSource source;
+    CountingSource source(-1, GetParam());
     CollectingSink sink;
     const FeatureCacheStats stats = RunPipeline(&source, chunks, &sink);
     EXPECT_EQ(sink.pairs.size(), l.n * (l.n - 1) / 2);
@@ -160,6 +170,10 @@ TEST(GroupFeatureCache, LoadsAsPredictedAndHoldsAtMostThreeGroups) {
     EXPECT_GT(stats.peak_bytes, 0u);
   }
 }
+
+// Source reads taking no time (the loader runs ahead) and 300 us (the
+// pipeline waits for it).
+INSTANTIATE_TEST_SUITE_P(SourceDelayMicroseconds, GroupFeatureCacheLoads, ::testing::Values(0, 300));
 
 TEST(GroupFeatureCache, ResumedScheduleStillMatchesEveryPairOnce) {
   std::vector<PairChunk> chunks = ScheduledPairChunks(Ids(30), 3, 2);

@@ -65,9 +65,12 @@ void GroupFeatureCache::LoaderLoop() {
     if (stopping_) break;
     s = std::max(s, current_step_);  // the pipeline skipped ahead
     if (s >= num_steps) break;
-    const std::unordered_set<image_t>& current = step_sets_[current_step_];
+    // Keep steps s - 1 and s (the pipeline is on one of them), whether the
+    // loader runs ahead of the pipeline or behind it, so that what is read
+    // again does not depend on timing.
+    const std::unordered_set<image_t>* previous = s > 0 ? &step_sets_[s - 1] : nullptr;
     for (auto it = held_.begin(); it != held_.end();) {
-      if (current.count(it->first) || step_sets_[s].count(it->first)) {
+      if ((previous && previous->count(it->first)) || step_sets_[s].count(it->first)) {
         ++it;
       } else {
         held_bytes_ -= FeatureBytes(*it->second);
