@@ -1,0 +1,72 @@
+// Block and group sizes of the three-level scheduling from memory caps:
+// blocks are what the matcher holds (device memory on the GPU), groups of
+// blocks what the feature cache holds in host memory (see feature_cache.h
+// and ScheduledPairChunks in pair_generation.h).
+//
+// What is held at once, and what the sizes are chosen for:
+//   matcher:  the images of two consecutive chunks, at most 4 blocks (3 in
+//             the scheduled order, 4 after resume removed pairs);
+//   pipeline: features of the chunks in flight between its stages, at most
+//             kPipelineBlocks blocks;
+//   cache:    the current group pair and the next one's new group, 3 groups.
+// Sizes use the largest image of the run, so no block or group can exceed
+// its share whatever images fall into it.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace cashash {
+
+// "4096" (MiB), "512M", "16G", "1.5G", "2T" (powers of 1024, case-blind,
+// an optional trailing "B" or "iB"). False for anything else or zero.
+bool ParseMemorySize(const std::string& text, size_t* bytes);
+// "12.0 GiB", "512 MiB".
+std::string FormatMemorySize(size_t bytes);
+// Physical memory of this machine (0 when unknown).
+size_t PhysicalMemoryBytes();
+
+constexpr int kMatcherBlocks = 4;
+// The loader's current and next chunk, two chunks queued for verification,
+// one being verified, one waiting to be queued: 6 chunks of 2 blocks.
+constexpr int kPipelineBlocks = 12;
+constexpr int kCacheGroups = 3;
+// Blocks are never made larger than COLMAP's default on their own: a chunk
+// (block_size^2 pairs) is the unit of progress and of commits.
+constexpr int kMaxDerivedBlockSize = 50;
+
+struct ScheduleLimits {
+  size_t max_host_bytes = 0;
+  // 0: the matcher keeps its images in host memory (CPU backend), which
+  // then counts against max_host_bytes.
+  size_t max_gpu_bytes = 0;
+  // Share of max_gpu_bytes for the images; the GPU matcher's batch buffers
+  // use the rest.
+  double gpu_image_share = 0.75;
+  int block_size = 0;  // 0: derive, at most kMaxDerivedBlockSize
+  int max_num_matches = 32768;  // rows per image the matcher keeps
+  int num_tables = 8;           // cascade hash tables (matcher memory)
+};
+
+struct ScheduleSizes {
+  int block_size = 0;
+  int blocks_per_group = 0;
+  size_t host_bytes_per_image = 0;     // features of the largest image
+  size_t matcher_bytes_per_image = 0;  // what the matcher keeps of it
+  size_t predicted_host_bytes = 0;     // cache + pipeline (+ matcher on CPU)
+  size_t predicted_gpu_bytes = 0;      // images held by the GPU matcher
+  std::string warning;                 // set when a user block size exceeds the GPU cap
+};
+
+// Host bytes of one image's features (keypoints and descriptors).
+size_t HostBytesPerImage(size_t num_features);
+// What a cascade matcher keeps of one image (codes, bucket tables,
+// descriptors), estimated from the GPU layout, the larger of the two backends.
+size_t MatcherBytesPerImage(size_t num_features, int num_tables);
+
+// Throws std::invalid_argument naming --max_host_memory when even blocks of
+// two images in groups of one block do not fit.
+ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image, const ScheduleLimits& limits);
+
+}  // namespace cashash
