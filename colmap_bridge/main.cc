@@ -4,6 +4,7 @@
 #include <string>
 
 #include "colmap_bridge/matching_commands.h"
+#include "colmap_bridge/verify_command.h"
 
 namespace {
 
@@ -11,7 +12,8 @@ void PrintUsage() {
   std::cout << "cashash -- Cascade Hashing feature matching for COLMAP databases\n\n"
                "Usage:\n"
                "  cashash exhaustive_matcher --database_path DB [options]\n"
-               "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n\n"
+               "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
+               "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n\n"
                "Run 'cashash COMMAND --help' for the options of a command (COLMAP's option names\n"
                "of 3.8 and 4.x are accepted, plus --CasHash.*)."
             << std::endl;
@@ -28,6 +30,7 @@ int main(int argc, char** argv) {
   const std::string command = argv[1];
   if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
   if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
+  if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
   std::cerr << "ERROR: unknown command '" << command << "'" << std::endl;
   PrintUsage();
   return EXIT_FAILURE;

@@ -13,6 +13,7 @@
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/pair_list.h"
+#include "colmap_bridge/verifier_selection.h"
 #ifdef CASHASH_WITH_CUDA
 #include "cashash_cuda/gpu_feature_matcher.h"
 #endif
@@ -144,6 +145,13 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   MatchingPipeline pipeline(pipeline_options, &source, matcher.get(), &sink);
   if (callbacks.progress) pipeline.SetProgressCallback(callbacks.progress);
   if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
+  // Verification on the GPU too when use_gpu is set (the matcher has
+  // already warned when no GPU can be used).
+  std::unique_ptr<BatchVerifier> verifier;
+  if (!options.skip_geometric_verification) {
+    verifier = CreateBatchVerifierForOptions(options, nullptr);
+    pipeline.SetBatchVerifier(verifier.get());
+  }
   summary.matcher_name = matcher->Name();
   Info(callbacks, "Matcher: " + summary.matcher_name);
   summary.pipeline = pipeline.Run(chunks);

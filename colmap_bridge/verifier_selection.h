@@ -1,0 +1,20 @@
+// Which BatchVerifier a run uses: the GPU one when use_gpu is set, CUDA was
+// built and a device is usable, else the CPU thread pool.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "cashash/batch_verifier.h"
+#include "colmap_bridge/command_options.h"
+
+namespace cashash {
+namespace colmap {
+
+// `warning` hears why the GPU was not used when it was asked for.
+std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
+                                                             const std::function<void(const std::string&)>& warning);
+
+}  // namespace colmap
+}  // namespace cashash

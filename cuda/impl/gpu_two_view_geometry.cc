@@ -1,0 +1,247 @@
+// Host side of the GPU verification: packs a batch of pairs' normalised
+// correspondences, runs the F and H kernels, and turns their outputs into
+// the estimates the CPU path's decision reads.
+#include "cashash_cuda/gpu_two_view_geometry.h"
+
+#include <chrono>
+#include <stdexcept>
+
+#include "cashash/random_sampler.h"
+#include "cashash/ransac.h"
+#include "cashash/thread_pool.h"
+#include "cashash_cuda/gpu_feature_matcher.h"
+#include "impl/device_memory.cuh"
+#include "impl/ransac_kernels.cuh"
+#include "utils/cuda_check.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+// Grows a device buffer geometrically so that chunk after chunk reuses it.
+void Reserve(DeviceBuffer* buffer, size_t bytes, const char* what) {
+  if (buffer->bytes() >= bytes) return;
+  buffer->Allocate(bytes + bytes / 2, what);
+}
+
+Eigen::Matrix3d FromRowMajor(const double* v) {
+  Eigen::Matrix3d m;
+  m << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
+  return m;
+}
+
+}  // namespace
+
+struct GpuTwoViewRansac::Impl {
+  TwoViewGeometryOptions options;
+  int device = 0;
+  cudaStream_t stream = nullptr;
+  cudaEvent_t start = nullptr, stop = nullptr;
+  DeviceBuffer points, inputs, outputs, masks;
+  GpuRansacStats stats;
+};
+
+GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index)
+    : impl_(std::make_unique<Impl>()) {
+  std::string reason;
+  if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+  impl_->options = options;
+  impl_->device = gpu_index;
+  CUDA_CHECK(cudaSetDevice(gpu_index));
+  CUDA_CHECK(cudaStreamCreateWithFlags(&impl_->stream, cudaStreamNonBlocking));
+  CUDA_CHECK(cudaEventCreate(&impl_->start));
+  CUDA_CHECK(cudaEventCreate(&impl_->stop));
+}
+
+GpuTwoViewRansac::~GpuTwoViewRansac() {
+  cudaSetDevice(impl_->device);
+  if (impl_->start != nullptr) cudaEventDestroy(impl_->start);
+  if (impl_->stop != nullptr) cudaEventDestroy(impl_->stop);
+  if (impl_->stream != nullptr) cudaStreamDestroy(impl_->stream);
+}
+
+const GpuRansacStats& GpuTwoViewRansac::stats() const { return impl_->stats; }
+
+void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
+                                std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,
+                                const std::function<void()>& while_running) {
+  if (seeds.size() != pairs.size()) throw std::invalid_argument("GpuTwoViewRansac::Estimate: one seed per pair");
+  const auto t0 = std::chrono::steady_clock::now();
+  Impl& d = *impl_;
+  CUDA_CHECK(cudaSetDevice(d.device));
+  const size_t num_pairs = pairs.size();
+  F->assign(num_pairs, TwoViewModelEstimate());
+  H->assign(num_pairs, TwoViewModelEstimate());
+  if (num_pairs == 0) {
+    if (while_running) while_running();
+    return;
+  }
+
+  // Inputs: F's pairs first, then H's, over one shared point array.
+  std::vector<RansacPairInput> inputs(2 * num_pairs);
+  size_t total = 0;
+  int max_count = 0;
+  for (size_t k = 0; k < num_pairs; ++k) {
+    const size_t n = pairs[k]->normalized.size();
+    if (total + n > static_cast<size_t>(INT32_MAX)) throw std::runtime_error("GPU verification batch too large");
+    RansacPairInput& f = inputs[k];
+    f.offset = static_cast<int>(total);
+    f.count = static_cast<int>(n);
+    f.squared_threshold = static_cast<float>(NormalizedSquaredThreshold(*pairs[k], d.options));
+    f.seed = DeriveSeed(seeds[k], kSeedF);
+    RansacPairInput& h = inputs[num_pairs + k];
+    h = f;
+    h.seed = DeriveSeed(seeds[k], kSeedH);
+    total += n;
+    max_count = std::max(max_count, f.count);
+  }
+  std::vector<float4> host_points(total);
+  for (size_t k = 0; k < num_pairs; ++k) {
+    const PointPairs& p = pairs[k]->normalized;
+    float4* out = host_points.data() + inputs[k].offset;
+    for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
+  }
+
+  Reserve(&d.points, total * sizeof(float4), "RANSAC points");
+  Reserve(&d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
+  Reserve(&d.outputs, inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
+  Reserve(&d.masks, 2 * total, "RANSAC inlier masks");
+
+  CUDA_CHECK(cudaEventRecord(d.start, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points.data(), total * sizeof(float4),
+                             cudaMemcpyHostToDevice, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.inputs.as<RansacPairInput>(), inputs.data(), inputs.size() * sizeof(RansacPairInput),
+                             cudaMemcpyHostToDevice, d.stream));
+  RansacOptions ransac;
+  ransac.confidence = d.options.confidence;
+  ransac.min_num_trials = d.options.min_num_trials;
+  ransac.max_num_trials = d.options.max_num_trials;
+  ransac.min_inlier_ratio = d.options.min_inlier_ratio;
+  RansacLaunch launch;
+  launch.points = d.points.as<float4>();
+  launch.num_pairs = static_cast<int>(num_pairs);
+  launch.min_trials = d.options.min_num_trials;
+  launch.confidence = d.options.confidence;
+  launch.trials_multiplier = ransac.num_trials_multiplier;
+  launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
+
+  launch.pairs = d.inputs.as<RansacPairInput>();
+  launch.outputs = d.outputs.as<RansacPairOutput>();
+  launch.masks = d.masks.as<uint8_t>();
+  launch.max_trials = RansacMaxTrials(ransac, 7);
+  LaunchFundamentalRansac(launch, d.stream);
+
+  launch.pairs = d.inputs.as<RansacPairInput>() + num_pairs;
+  launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
+  launch.masks = d.masks.as<uint8_t>() + total;
+  launch.max_trials = RansacMaxTrials(ransac, 4);
+  LaunchHomographyRansac(launch, d.stream);
+
+  std::vector<RansacPairOutput> outputs(inputs.size());
+  std::vector<uint8_t> masks(2 * total);
+  CUDA_CHECK(cudaMemcpyAsync(outputs.data(), d.outputs.as<RansacPairOutput>(),
+                             outputs.size() * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(masks.data(), d.masks.as<uint8_t>(), masks.size(), cudaMemcpyDeviceToHost, d.stream));
+  CUDA_CHECK(cudaEventRecord(d.stop, d.stream));
+  // Pageable copies return once queued data is staged; the kernels run on.
+  if (while_running) while_running();
+  CUDA_CHECK(cudaStreamSynchronize(d.stream));
+  float gpu_ms = 0;
+  CUDA_CHECK(cudaEventElapsedTime(&gpu_ms, d.start, d.stop));
+
+  for (size_t k = 0; k < num_pairs; ++k) {
+    for (int model = 0; model < 2; ++model) {
+      const RansacPairOutput& out = outputs[model * num_pairs + k];
+      TwoViewModelEstimate& e = model == 0 ? (*F)[k] : (*H)[k];
+      e.success = out.success != 0;
+      e.num_inliers = e.success ? out.num_inliers : 0;
+      e.num_trials = out.num_trials;
+      if (e.success) {
+        const Eigen::Matrix3d m = FromRowMajor(out.model);
+        e.model = model == 0 ? FundamentalToPixels(m, pairs[k]->norm) : HomographyToPixels(m, pairs[k]->norm);
+        const uint8_t* mask = masks.data() + model * total + inputs[k].offset;
+        e.inlier_mask.assign(mask, mask + inputs[k].count);
+      }
+      (model == 0 ? d.stats.trials_F : d.stats.trials_H) += out.num_trials;
+      (model == 0 ? d.stats.local_refits_F : d.stats.local_refits_H) += out.num_local_refits;
+    }
+  }
+  d.stats.pairs += num_pairs;
+  d.stats.points += total;
+  d.stats.seconds_gpu += gpu_ms / 1000.0;
+  d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+namespace {
+
+class GpuBatchVerifier : public BatchVerifier {
+ public:
+  GpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index, int num_threads)
+      : options_(options), num_threads_(num_threads), ransac_(options, gpu_index) {}
+
+  std::string Name() const override { return "gpu"; }
+
+  std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+    const size_t n = pairs.size();
+    std::vector<TwoViewGeometry> geometries(n);
+    std::vector<TwoViewPoints> points(n);
+    std::vector<char> estimated(n, 0), calibrated(n, 0);
+    ParallelFor(n, num_threads_, [&](size_t k) {
+      const VerificationPair& pair = pairs[k];
+      if (TooFewMatchesForTwoView(pair.matches->size(), options_)) return;
+      points[k] = PrepareTwoViewPoints(*pair.points1, *pair.points2, *pair.matches);
+      estimated[k] = 1;
+      calibrated[k] = TwoViewIsCalibrated(*pair.camera1, *pair.camera2);
+    });
+    std::vector<size_t> batch;
+    std::vector<const TwoViewPoints*> batch_points;
+    std::vector<uint64_t> batch_seeds;
+    std::vector<size_t> calibrated_pairs;
+    for (size_t k = 0; k < n; ++k) {
+      if (!estimated[k]) continue;
+      batch.push_back(k);
+      batch_points.push_back(&points[k]);
+      batch_seeds.push_back(pairs[k].random_seed);
+      if (calibrated[k]) calibrated_pairs.push_back(k);
+    }
+    std::vector<TwoViewModelEstimate> F, H, E(n);
+    // E (calibrated pairs) on the CPU while the GPU estimates F and H.
+    ransac_.Estimate(batch_points, batch_seeds, &F, &H, [&]() {
+      ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
+        const size_t k = calibrated_pairs[i];
+        E[k] = EstimateEssential(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, PairOptions(pairs[k]));
+      });
+    });
+    ParallelFor(batch.size(), num_threads_, [&](size_t i) {
+      const size_t k = batch[i];
+      geometries[k] = DecideTwoViewGeometry(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels,
+                                            *pairs[k].matches, calibrated[k] != 0, F[i], H[i], E[k],
+                                            PairOptions(pairs[k]));
+    });
+    for (size_t k = 0; k < n; ++k) {
+      if (!estimated[k]) geometries[k].config = kDegenerate;
+    }
+    return geometries;
+  }
+
+ private:
+  TwoViewGeometryOptions PairOptions(const VerificationPair& pair) const {
+    TwoViewGeometryOptions options = options_;
+    options.random_seed = pair.random_seed;
+    return options;
+  }
+
+  TwoViewGeometryOptions options_;
+  int num_threads_;
+  GpuTwoViewRansac ransac_;
+};
+
+}  // namespace
+
+std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
+                                                      int num_threads) {
+  return std::make_unique<GpuBatchVerifier>(options, gpu_index, num_threads);
+}
+
+}  // namespace cuda
+}  // namespace cashash

@@ -1,0 +1,329 @@
+// Batched LO-RANSAC for F and H. Per pair (one block), per round: every
+// thread draws its own sample from a stream keyed by (pair seed, trial
+// index), solves it and scores its models over all correspondences; the
+// block picks the round's best (more inliers, then smaller residual sum,
+// then lower trial index, so the result never depends on timing); when it
+// beats the pair's best, the block refits it on its inliers (8-point or
+// DLT, the CPU path's local optimisation) while the inlier set grows; then
+// COLMAP's adaptive stopping rule decides whether another round is needed.
+#include "impl/ransac_kernels.cuh"
+
+#include <cfloat>
+
+#include "impl/ransac_solvers.cuh"
+#include "utils/cuda_check.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+using namespace ransac;  // NOLINT: the solvers of this kernel
+
+constexpr int kWarps = kRansacThreads / 32;
+constexpr int kMaxLocalIterations = 10;
+
+struct FundamentalModel {
+  static constexpr int kSampleSize = 7;
+  static constexpr int kMaxModels = 3;
+  static constexpr int kMinLocalSize = 8;
+  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
+    return FundamentalSevenPoint(sample, models);
+  }
+  __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
+  __device__ static void AddRows(float4 p, double* upper) {
+    double row[9];
+    EpipolarRow(p, row);
+    AddOuter(row, upper);
+  }
+  __device__ static bool FinishLocal(double* m) { return ProjectRankTwo(m); }
+};
+
+struct HomographyModel {
+  static constexpr int kSampleSize = 4;
+  static constexpr int kMaxModels = 1;
+  static constexpr int kMinLocalSize = 4;
+  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
+    return HomographyFourPoint(sample, models[0]) ? 1 : 0;
+  }
+  __device__ static float Residual(const float* m, float4 p) { return TransferSquared(m, p); }
+  __device__ static void AddRows(float4 p, double* upper) {
+    double r1[9], r2[9];
+    HomographyRows(p, r1, r2);
+    AddOuter(r1, upper);
+    AddOuter(r2, upper);
+  }
+  __device__ static bool FinishLocal(double* m) { return NormalizeModel(m); }
+};
+
+// Orders supports: more inliers first, then the smaller residual sum
+// (non-negative floats order as their bit patterns). 0 = no model.
+__device__ inline unsigned long long SupportKey(int count, float sum) {
+  return (static_cast<unsigned long long>(count) << 32) |
+         (0xFFFFFFFFull - static_cast<unsigned long long>(__float_as_uint(sum)));
+}
+
+struct BlockScratch {
+  unsigned long long warp_key[kWarps];
+  int warp_tid[kWarps];
+  int warp_count[kWarps];
+  double warp_sum[kWarps];
+  double warp_upper[kWarps][45];
+  double upper[45];
+  double best_model[9];
+  double local_model[9];
+  unsigned long long best_key;
+  int best_count;
+  int winner;
+  int local_ok;
+  int improved;  // the round's winner beat the pair's best
+  int num_local_refits;
+};
+
+// Block-wide argmax of (key, lowest thread); every thread gets the winner.
+__device__ inline int BlockArgMax(unsigned long long key, BlockScratch& s) {
+  int tid = threadIdx.x;
+  for (int offset = 16; offset > 0; offset >>= 1) {
+    const unsigned long long other_key = __shfl_down_sync(0xffffffffu, key, offset);
+    const int other_tid = __shfl_down_sync(0xffffffffu, tid, offset);
+    if (other_key > key || (other_key == key && other_tid < tid)) {
+      key = other_key;
+      tid = other_tid;
+    }
+  }
+  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
+  if (lane == 0) {
+    s.warp_key[warp] = key;
+    s.warp_tid[warp] = tid;
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    int best = 0;
+    for (int w = 1; w < kWarps; ++w) {
+      if (s.warp_key[w] > s.warp_key[best]) best = w;  // lower warps hold lower threads
+    }
+    s.winner = s.warp_key[best] == 0 ? -1 : s.warp_tid[best];
+  }
+  __syncthreads();
+  return s.winner;
+}
+
+// Inlier count and residual sum of one model over the pair, by the block.
+template <typename Model>
+__device__ void BlockScore(const float* m, const float4* points, int n, float threshold, BlockScratch& s, int* count,
+                           float* sum) {
+  int c = 0;
+  float r_sum = 0;
+  for (int i = threadIdx.x; i < n; i += kRansacThreads) {
+    const float r = Model::Residual(m, points[i]);
+    if (r <= threshold) {
+      ++c;
+      r_sum += r;
+    }
+  }
+  double d_sum = r_sum;
+  for (int offset = 16; offset > 0; offset >>= 1) {
+    c += __shfl_down_sync(0xffffffffu, c, offset);
+    d_sum += __shfl_down_sync(0xffffffffu, d_sum, offset);
+  }
+  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
+  if (lane == 0) {
+    s.warp_count[warp] = c;
+    s.warp_sum[warp] = d_sum;
+  }
+  __syncthreads();
+  int total = 0;
+  double total_sum = 0;
+  for (int w = 0; w < kWarps; ++w) {
+    total += s.warp_count[w];
+    total_sum += s.warp_sum[w];
+  }
+  __syncthreads();  // the scratch may be reused at once
+  *count = total;
+  *sum = static_cast<float>(total_sum);
+}
+
+// Least-squares refit of the best model on its inliers: the block sums the
+// normal matrix, thread 0 takes its smallest eigenvector.
+template <typename Model>
+__device__ void BlockLocalSolve(const float* best, const float4* points, int n, float threshold, BlockScratch& s) {
+  double upper[45];
+  for (int k = 0; k < 45; ++k) upper[k] = 0;
+  for (int i = threadIdx.x; i < n; i += kRansacThreads) {
+    const float4 p = points[i];
+    if (Model::Residual(best, p) <= threshold) Model::AddRows(p, upper);
+  }
+  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
+  for (int k = 0; k < 45; ++k) {
+    double v = upper[k];
+    for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
+    if (lane == 0) s.warp_upper[warp][k] = v;
+  }
+  __syncthreads();
+  if (threadIdx.x < 45) {
+    double v = 0;
+    for (int w = 0; w < kWarps; ++w) v += s.warp_upper[w][threadIdx.x];
+    s.upper[threadIdx.x] = v;
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    double full[81];
+    ExpandNormalMatrix(s.upper, full);
+    SmallestEigenvector<9>(full, s.local_model);
+    s.local_ok = Model::FinishLocal(s.local_model) ? 1 : 0;
+    ++s.num_local_refits;
+  }
+  __syncthreads();
+}
+
+template <typename Model>
+__global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch launch) {
+  extern __shared__ float4 cached_points[];
+  __shared__ BlockScratch s;
+  const RansacPairInput input = launch.pairs[blockIdx.x];
+  const int n = input.count;
+  const float threshold = input.squared_threshold;
+  const float4* points = launch.points + input.offset;
+  if (n <= launch.shared_points) {
+    for (int i = threadIdx.x; i < n; i += kRansacThreads) cached_points[i] = points[i];
+    points = cached_points;
+  }
+  if (threadIdx.x == 0) {
+    s.best_key = 0;
+    s.best_count = 0;
+    s.improved = 0;
+    s.num_local_refits = 0;
+  }
+  __syncthreads();
+  RansacPairOutput* output = launch.outputs + blockIdx.x;
+  if (n < Model::kSampleSize) {
+    if (threadIdx.x == 0) {
+      output->success = 0;
+      output->num_inliers = 0;
+      output->num_trials = 0;
+      output->num_local_refits = 0;
+    }
+    return;
+  }
+
+  int dyn_max_trials = launch.max_trials;
+  int trials_done = 0;
+  for (int round = 0;; ++round) {
+    const int must_reach = s.best_count;
+    const int trial = round * kRansacThreads + threadIdx.x;
+    unsigned long long my_key = 0;
+    double models[Model::kMaxModels][9];
+    int my_model = -1;
+    if (trial < launch.max_trials) {
+      DeviceSplitMix64 rng = TrialRng(input.seed, static_cast<uint32_t>(trial));
+      int idx[Model::kSampleSize];
+      SampleDistinct<Model::kSampleSize>(rng, static_cast<uint32_t>(n), idx);
+      float4 sample[Model::kSampleSize];
+      for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
+      const int num_models = Model::Minimal(sample, models);
+      for (int m = 0; m < num_models; ++m) {
+        float f[9];
+        for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
+        int count = 0;
+        float sum = 0;
+        bool gave_up = false;
+        for (int i = 0; i < n; ++i) {
+          const float r = Model::Residual(f, points[i]);
+          if (r <= threshold) {
+            ++count;
+            sum += r;
+          }
+          // Give up once the pair's best so far is out of reach.
+          if ((i & 63) == 63 && count + (n - 1 - i) < must_reach) {
+            gave_up = true;
+            break;
+          }
+        }
+        if (gave_up) continue;
+        const unsigned long long key = SupportKey(count, sum);
+        if (key > my_key) {
+          my_key = key;
+          my_model = m;
+        }
+      }
+    }
+    const int winner = BlockArgMax(my_key, s);
+    if (winner >= 0 && threadIdx.x == winner && my_key > s.best_key) {
+      for (int k = 0; k < 9; ++k) s.best_model[k] = models[my_model][k];
+      s.best_key = my_key;
+      s.best_count = static_cast<int>(my_key >> 32);
+      s.improved = 1;
+    }
+    __syncthreads();
+    if (s.improved) {
+      // Local optimisation, as the CPU path: refit while the inlier set grows.
+      if (s.best_count > Model::kSampleSize && s.best_count >= Model::kMinLocalSize) {
+        for (int it = 0; it < kMaxLocalIterations; ++it) {
+          const int previous = s.best_count;
+          float f[9];
+          for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
+          BlockLocalSolve<Model>(f, points, n, threshold, s);
+          if (s.local_ok == 1) {
+            float lf[9];
+            for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_model[k]);
+            int count;
+            float sum;
+            BlockScore<Model>(lf, points, n, threshold, s, &count, &sum);
+            const unsigned long long key = SupportKey(count, sum);
+            if (threadIdx.x == 0 && key > s.best_key) {
+              for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_model[k];
+              s.best_key = key;
+              s.best_count = count;
+            }
+          }
+          __syncthreads();
+          if (s.best_count <= previous) break;
+        }
+      }
+      dyn_max_trials = RequiredTrials(s.best_count, n, launch.confidence, launch.trials_multiplier,
+                                      Model::kSampleSize);
+      __syncthreads();
+      if (threadIdx.x == 0) s.improved = 0;
+    }
+    trials_done = min((round + 1) * kRansacThreads, launch.max_trials);
+    __syncthreads();
+    if (trials_done >= launch.max_trials || (trials_done >= dyn_max_trials && trials_done >= launch.min_trials)) {
+      break;
+    }
+  }
+
+  const bool success = s.best_key != 0 && s.best_count >= Model::kSampleSize;
+  uint8_t* mask = launch.masks + input.offset;
+  float f[9];
+  for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
+  for (int i = threadIdx.x; i < n; i += kRansacThreads) {
+    mask[i] = success && Model::Residual(f, points[i]) <= threshold ? 1 : 0;
+  }
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < 9; ++k) output->model[k] = s.best_model[k];
+    output->success = success ? 1 : 0;
+    output->num_inliers = s.best_count;
+    output->num_trials = trials_done;
+    output->num_local_refits = s.num_local_refits;
+  }
+}
+
+template <typename Model>
+void Launch(const RansacLaunch& launch, cudaStream_t stream) {
+  if (launch.num_pairs == 0) return;
+  const size_t shared_bytes = static_cast<size_t>(launch.shared_points) * sizeof(float4);
+  LoRansacKernel<Model><<<launch.num_pairs, kRansacThreads, shared_bytes, stream>>>(launch);
+  CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace
+
+void LaunchFundamentalRansac(const RansacLaunch& launch, cudaStream_t stream) {
+  Launch<FundamentalModel>(launch, stream);
+}
+
+void LaunchHomographyRansac(const RansacLaunch& launch, cudaStream_t stream) {
+  Launch<HomographyModel>(launch, stream);
+}
+
+}  // namespace cuda
+}  // namespace cashash

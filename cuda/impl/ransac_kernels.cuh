@@ -1,0 +1,53 @@
+// Launch interface of the batched LO-RANSAC kernels (plain structs, so the
+// host side can be ordinary C++): one thread block per pair, each thread one
+// hypothesis per round, the block scoring the local refits together.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+namespace cashash {
+namespace cuda {
+
+// One pair's correspondences: points[offset, offset + count) as
+// (x1, y1, x2, y2) in the pair's normalised coordinates.
+struct RansacPairInput {
+  int offset = 0;
+  int count = 0;
+  float squared_threshold = 0;  // compared against float residuals, as on the CPU
+  int unused = 0;
+  uint64_t seed = 0;            // DeriveSeed(pair seed, model tag)
+};
+
+struct RansacPairOutput {
+  double model[9];              // row-major, unit norm, normalised coordinates
+  int success;
+  int num_inliers;
+  int num_trials;
+  int num_local_refits;
+};
+
+struct RansacLaunch {
+  const float4* points = nullptr;
+  const RansacPairInput* pairs = nullptr;
+  RansacPairOutput* outputs = nullptr;
+  uint8_t* masks = nullptr;     // one byte per correspondence, same offsets as points
+  int num_pairs = 0;
+  int max_trials = 0;           // RansacMaxTrials of the CPU path
+  int min_trials = 0;
+  double confidence = 0.999;
+  double trials_multiplier = 3.0;
+  int shared_points = 0;        // pairs with at most this many points are cached in shared memory
+};
+
+constexpr int kRansacThreads = 128;
+
+// Largest shared-memory point cache a launch may ask for (48 KiB of float4).
+constexpr int kRansacMaxSharedPoints = 3072;
+
+void LaunchFundamentalRansac(const RansacLaunch& launch, cudaStream_t stream);
+void LaunchHomographyRansac(const RansacLaunch& launch, cudaStream_t stream);
+
+}  // namespace cuda
+}  // namespace cashash
