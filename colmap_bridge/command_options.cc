@@ -5,6 +5,8 @@
 
 #include <boost/program_options.hpp>
 
+#include "cashash/schedule_sizing.h"
+
 namespace po = boost::program_options;
 
 namespace cashash {
@@ -91,7 +93,12 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Border band for the watermark test, relative to the image diagonal");
   table.Add({"TwoViewGeometry.detect_watermark"}, &o.two_view.detect_watermark, "Run the watermark test");
 
-  table.Add({"ExhaustiveMatching.block_size"}, &o.block_size, "Images per block");
+  table.Add({"ExhaustiveMatching.block_size"}, &o.block_size,
+            "Images per block (default: from the memory caps, at most 50)");
+  table.Add({"max_host_memory"}, &o.max_host_memory,
+            "Host memory for features, e.g. 16G or 4096 (MiB); default half the physical memory");
+  table.Add({"max_gpu_memory"}, &o.max_gpu_memory,
+            "GPU memory for matching, e.g. 8G or 4096 (MiB); default the device's free memory");
 
   std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
   table.Add({"CasHash.matcher"}, &matcher_name, "cascade | bruteforce (exact reference)");
@@ -117,6 +124,7 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
               << std::endl;
     return ParseOutcome::kError;
   }
+  o.block_size_from_memory = vm.count("ExhaustiveMatching.block_size") == 0;
   o.cashash.random_seed = o.random_seed;
   o.two_view.random_seed = o.random_seed;
   return ParseOutcome::kRun;
@@ -125,6 +133,13 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.database_path.empty()) return "--database_path is required";
   if (o.block_size < 2) return "--ExhaustiveMatching.block_size must be >= 2";
+  for (const auto& [name, text] : {std::make_pair("--max_host_memory", &o.max_host_memory),
+                                   std::make_pair("--max_gpu_memory", &o.max_gpu_memory)}) {
+    size_t bytes = 0;
+    if (!text->empty() && !ParseMemorySize(*text, &bytes)) {
+      return std::string(name) + " must be a size such as 16G, 512M or 4096 (MiB), got '" + *text + "'";
+    }
+  }
   if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
   std::string message = o.sift.Check();
   if (!message.empty()) return message;

@@ -19,6 +19,15 @@ struct MatcherCommandOptions {
   CasHashOptions cashash;
   TwoViewGeometryOptions two_view;
   int block_size = 50;  // ExhaustiveMatching.block_size
+  // Exhaustive matching derives the block size from the memory caps (at
+  // most block_size) instead; the command line sets it unless
+  // --ExhaustiveMatching.block_size is given.
+  bool block_size_from_memory = false;
+  // Memory caps of the three-level scheduling ("16G", "512M", plain numbers
+  // are MiB); "" = default: half the machine's physical memory, the GPU's
+  // free memory.
+  std::string max_host_memory;
+  std::string max_gpu_memory;
   bool use_gpu = true;  // COLMAP's default; falls back to the CPU with a warning
   std::string gpu_index = "-1";
   bool skip_geometric_verification = false;

@@ -1,6 +1,7 @@
 #include "colmap_bridge/matching_api.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <stdexcept>
@@ -8,10 +9,13 @@
 #include <unordered_set>
 
 #include "cashash/fallback_feature_matcher.h"
+#include "cashash/feature_cache.h"
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
+#include "cashash/schedule_sizing.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
+#include "colmap_bridge/gpu_memory_query.h"
 #include "colmap_bridge/pair_list.h"
 #include "colmap_bridge/verifier_selection.h"
 #ifdef CASHASH_WITH_CUDA
@@ -106,9 +110,12 @@ std::vector<image_t> ImagesOfPairs(const std::vector<ImagePair>& pairs) {
 
 // Runs the pipeline over `chunks`, leaving out pairs already in the database
 // unless options.overwrite is set.
+// With `cache_groups` (chunks of ScheduledPairChunks) features are read
+// through a GroupFeatureCache: one group pair in host memory, the next one
+// loaded meanwhile.
 MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
                             const std::vector<image_t>& image_ids, std::vector<PairChunk> chunks,
-                            size_t num_pairs_requested, const MatchingCallbacks& callbacks) {
+                            size_t num_pairs_requested, bool cache_groups, const MatchingCallbacks& callbacks) {
   MatchingSummary summary;
   summary.pairs_requested = num_pairs_requested;
   if (!options.overwrite) {
@@ -142,7 +149,11 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   pipeline_options.num_threads = options.sift.num_threads;
   pipeline_options.skip_geometric_verification = options.skip_geometric_verification;
   pipeline_options.two_view = options.two_view;
-  MatchingPipeline pipeline(pipeline_options, &source, matcher.get(), &sink);
+  // Made last: its loading thread reads the database from here on.
+  std::unique_ptr<GroupFeatureCache> cache;
+  if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, chunks);
+  FeatureSource* features = cache ? static_cast<FeatureSource*>(cache.get()) : &source;
+  MatchingPipeline pipeline(pipeline_options, features, matcher.get(), &sink);
   if (callbacks.progress) pipeline.SetProgressCallback(callbacks.progress);
   if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
   // Verification on the GPU too when use_gpu is set (the matcher has
@@ -158,6 +169,65 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   // The GPU matcher may have handed over to the CPU on running out of memory.
   summary.matcher_name = matcher->Name();
   return summary;
+}
+
+// The device the matcher will run on, or -1 for the CPU.
+int GpuIndexForRun(const MatcherCommandOptions& options) {
+#ifdef CASHASH_WITH_CUDA
+  if (!options.use_gpu) return -1;
+  const int gpu_index = FirstGpuIndex(options.gpu_index);
+  std::string reason;
+  return cuda::CudaDeviceUsable(gpu_index, &reason) ? gpu_index : -1;
+#else
+  (void)options;
+  return -1;
+#endif
+}
+
+// Block and group sizes for the three-level scheduling from the memory caps
+// (options or defaults) and the images' feature counts (row counts only, no
+// descriptors are read). A --max_gpu_memory also caps the GPU matcher
+// (CASHASH_GPU_MEMORY_LIMIT_MB, unless that is set already).
+ScheduleSizes ChooseSizesForRun(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
+                                const std::vector<image_t>& image_ids, const MatchingCallbacks& callbacks) {
+  ScheduleLimits limits;
+  if (options.max_host_memory.empty()) {
+    const size_t physical = PhysicalMemoryBytes();
+    limits.max_host_bytes = physical > 0 ? physical / 2 : (size_t{8} << 30);
+  } else {
+    ParseMemorySize(options.max_host_memory, &limits.max_host_bytes);  // checked with the options
+  }
+  const int gpu_index = GpuIndexForRun(options);
+  if (gpu_index >= 0) {
+    if (options.max_gpu_memory.empty()) {
+      limits.max_gpu_bytes = GpuFreeMemoryBytes(gpu_index);
+    } else {
+      ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);
+      if (std::getenv("CASHASH_GPU_MEMORY_LIMIT_MB") == nullptr) {
+        setenv("CASHASH_GPU_MEMORY_LIMIT_MB", std::to_string(limits.max_gpu_bytes >> 20).c_str(), 1);
+      }
+    }
+  }
+  limits.block_size = options.block_size_from_memory ? 0 : options.block_size;
+  limits.max_num_matches = options.sift.max_num_matches;
+  limits.num_tables = options.cashash.num_tables;
+  std::vector<size_t> features;
+  for (image_t image_id : image_ids) features.push_back(source.database().NumDescriptors(image_id));
+  ScheduleSizes sizes = ChooseScheduleSizes(features, limits);
+  if (options.block_size_from_memory) sizes.block_size = std::min(sizes.block_size, options.block_size);
+  if (!sizes.warning.empty()) Warn(callbacks, sizes.warning);
+  const size_t num_blocks = (image_ids.size() + sizes.block_size - 1) / sizes.block_size;
+  const size_t num_groups = (num_blocks + sizes.blocks_per_group - 1) / sizes.blocks_per_group;
+  Info(callbacks, "Schedule: blocks of " + std::to_string(sizes.block_size) + " images, groups of " +
+                      std::to_string(sizes.blocks_per_group) + " blocks (" + std::to_string(num_blocks) +
+                      " blocks, " + std::to_string(num_groups) + " groups); host memory " +
+                      FormatMemorySize(sizes.predicted_host_bytes) + " of " +
+                      FormatMemorySize(limits.max_host_bytes) +
+                      (limits.max_gpu_bytes > 0 ? ", GPU memory for images " +
+                                                      FormatMemorySize(sizes.predicted_gpu_bytes) + " of " +
+                                                      FormatMemorySize(limits.max_gpu_bytes)
+                                                : std::string()));
+  return sizes;
 }
 
 // Pairs of image ids for pairs of names, checked as a pair list file is:
@@ -188,7 +258,8 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
                              const std::vector<ImagePair>& pairs, const MatchingCallbacks& callbacks) {
   const size_t block = static_cast<size_t>(options.block_size);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
-  return MatchChunks(options, source, ImagesOfPairs(pairs), std::move(chunks), pairs.size(), callbacks);
+  return MatchChunks(options, source, ImagesOfPairs(pairs), std::move(chunks), pairs.size(), /*cache_groups=*/false,
+                     callbacks);
 }
 
 }  // namespace
@@ -228,9 +299,11 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
                         (image_ids.size() == 1 ? "" : "s") + "; nothing to match");
     return MatchingSummary();
   }
-  std::vector<PairChunk> chunks = ExhaustivePairChunks(image_ids, checked.block_size);
+  const ScheduleSizes sizes = ChooseSizesForRun(checked, source, image_ids, callbacks);
+  std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
   const size_t n = image_ids.size();
-  return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, callbacks);
+  return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
+                     callbacks);
 }
 
 MatchingSummary MatchPairs(const std::string& database_path,
