@@ -1,9 +1,11 @@
 #include "colmap_bridge/matching_api.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
+#include <mutex>
 #include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
@@ -16,6 +18,8 @@
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/gpu_memory_query.h"
+#include "colmap_bridge/mpi_distributed.h"
+#include "colmap_bridge/mpi_world.h"
 #include "colmap_bridge/pair_list.h"
 #include "colmap_bridge/verifier_selection.h"
 #ifdef CASHASH_WITH_CUDA
@@ -108,14 +112,34 @@ std::vector<image_t> ImagesOfPairs(const std::vector<ImagePair>& pairs) {
   return image_ids;
 }
 
+// Adds the statistics of another rank's pipeline to rank 0's: counts add
+// up, times are the longest rank's.
+void MergeStats(const PipelineStats& other, PipelineStats* stats) {
+  stats->pairs_total += other.pairs_total;
+  stats->pairs_done += other.pairs_done;
+  stats->raw_matches += other.raw_matches;
+  stats->verified_pairs += other.verified_pairs;
+  stats->inlier_matches += other.inlier_matches;
+  stats->seconds_total = std::max(stats->seconds_total, other.seconds_total);
+  stats->seconds_loading = std::max(stats->seconds_loading, other.seconds_loading);
+  stats->seconds_matching = std::max(stats->seconds_matching, other.seconds_matching);
+  stats->seconds_verification = std::max(stats->seconds_verification, other.seconds_verification);
+  stats->seconds_writing = std::max(stats->seconds_writing, other.seconds_writing);
+  stats->stopped = stats->stopped || other.stopped;
+}
+
 // Runs the pipeline over `chunks`, leaving out pairs already in the database
-// unless options.overwrite is set.
-// With `cache_groups` (chunks of ScheduledPairChunks) features are read
-// through a GroupFeatureCache: one group pair in host memory, the next one
-// loaded meanwhile.
+// unless options.overwrite is set. With `cache_groups` (chunks of
+// ScheduledPairChunks) features are read through a GroupFeatureCache: one
+// group pair in host memory, the next one loaded meanwhile.
+//
+// Under MPI every rank computes the same chunk list (the database is read
+// by all, read-only, before rank 0 opens it for writing) and matches its
+// share (ChunksOfRank); rank 0 writes everything (mpi_distributed.h).
 MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
                             const std::vector<image_t>& image_ids, std::vector<PairChunk> chunks,
                             size_t num_pairs_requested, bool cache_groups, const MatchingCallbacks& callbacks) {
+  const int rank = MpiRank(), num_ranks = MpiSize();
   MatchingSummary summary;
   summary.pairs_requested = num_pairs_requested;
   if (!options.overwrite) {
@@ -125,6 +149,14 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
         return done.count(ImagePairToPairId(pair.first, pair.second)) > 0;
       });
     }
+  }
+  if (num_ranks > 1) {
+    const uint64_t checksum = ChunkListChecksum(chunks);
+    if (MpiMin(checksum) != MpiMax(checksum)) {
+      throw std::runtime_error("MPI ranks disagree on the pairs to match (same database and options on every rank?)");
+    }
+    // Every rank has read the completed pairs: rank 0 may start writing.
+    MpiBarrier();
   }
   size_t num_pairs = 0;
   for (const PairChunk& chunk : chunks) num_pairs += chunk.pairs.size();
@@ -138,12 +170,35 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     Info(callbacks, "Nothing to match.");
     return summary;
   }
-  WarnAboutSmallImages(source, image_ids, callbacks);
+  if (rank == 0) WarnAboutSmallImages(source, image_ids, callbacks);
 
+  MatcherCommandOptions run_options = options;
+#ifdef CASHASH_WITH_CUDA
+  // Ranks sharing a machine share its GPUs unless a device is named.
+  if (num_ranks > 1 && options.gpu_index == "-1") {
+    const int devices = cuda::NumCudaDevices();
+    if (devices > 1) run_options.gpu_index = std::to_string(MpiLocalRank() % devices);
+  }
+#endif
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
   std::unique_ptr<FeatureMatcher> matcher =
-      CreateMatcherForOptions(options, mean, [&](const std::string& text) { Warn(callbacks, text); });
-  DatabaseResultSink sink(options.database_path, !options.skip_geometric_verification);
+      CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); });
+  const std::vector<PairChunk> my_chunks = num_ranks > 1 ? ChunksOfRank(chunks, rank, num_ranks) : chunks;
+
+  // Rank 0 alone opens the database for writing (and takes the writer
+  // lock); the other ranks send their results to it.
+  std::unique_ptr<DatabaseResultSink> database_sink;
+  std::unique_ptr<LockedSink> locked_sink;
+  std::unique_ptr<MpiResultSender> sender;
+  ResultSink* sink = nullptr;
+  if (rank == 0) {
+    database_sink = std::make_unique<DatabaseResultSink>(options.database_path, !options.skip_geometric_verification);
+    locked_sink = std::make_unique<LockedSink>(database_sink.get());
+    sink = locked_sink.get();
+  } else {
+    sender = std::make_unique<MpiResultSender>(my_chunks);
+    sink = sender.get();
+  }
 
   PipelineOptions pipeline_options;
   pipeline_options.num_threads = options.sift.num_threads;
@@ -151,23 +206,60 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   pipeline_options.two_view = options.two_view;
   // Made last: its loading thread reads the database from here on.
   std::unique_ptr<GroupFeatureCache> cache;
-  if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, chunks);
+  if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, my_chunks);
   FeatureSource* features = cache ? static_cast<FeatureSource*>(cache.get()) : &source;
-  MatchingPipeline pipeline(pipeline_options, features, matcher.get(), &sink);
-  if (callbacks.progress) pipeline.SetProgressCallback(callbacks.progress);
+  MatchingPipeline pipeline(pipeline_options, features, matcher.get(), sink);
+
+  // Progress counts the pairs of every rank written so far.
+  std::mutex progress_mutex;
+  const auto run_start = std::chrono::steady_clock::now();
+  auto report_progress = [&](PipelineProgress progress) {
+    if (!callbacks.progress || locked_sink == nullptr) return;
+    std::lock_guard<std::mutex> lock(progress_mutex);
+    progress.pairs_done = locked_sink->pairs_written();
+    progress.pairs_total = num_pairs;
+    progress.elapsed_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - run_start).count();
+    callbacks.progress(progress);
+  };
+  if (callbacks.progress) pipeline.SetProgressCallback(report_progress);
   if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
   // Verification on the GPU too when use_gpu is set (the matcher has
   // already warned when no GPU can be used).
   std::unique_ptr<BatchVerifier> verifier;
   if (!options.skip_geometric_verification) {
-    verifier = CreateBatchVerifierForOptions(options, nullptr);
+    verifier = CreateBatchVerifierForOptions(run_options, nullptr);
     pipeline.SetBatchVerifier(verifier.get());
   }
   summary.matcher_name = matcher->Name();
   Info(callbacks, "Matcher: " + summary.matcher_name);
-  summary.pipeline = pipeline.Run(chunks);
-  // The GPU matcher may have handed over to the CPU on running out of memory.
+  if (num_ranks == 1) {
+    summary.pipeline = pipeline.Run(my_chunks);
+    // The GPU matcher may have handed over to the CPU on running out of memory.
+    summary.matcher_name = matcher->Name();
+    return summary;
+  }
+
+  if (rank > 0) {
+    RankReport report;
+    report.stats = pipeline.Run(my_chunks);
+    report.matcher_name = matcher->Name();
+    MpiResultSender::SendReport(report);
+    return MatchingSummary();  // rank 0 reports the run
+  }
+  MpiResultReceiver receiver(sink, [&](const PairChunk& chunk) {
+    PipelineProgress progress;
+    progress.chunk = &chunk;
+    report_progress(progress);
+  });
+  try {
+    summary.pipeline = pipeline.Run(my_chunks);
+  } catch (const std::exception& e) {
+    MpiAbortJob(e.what());  // the other ranks cannot be told otherwise
+  }
+  for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
   summary.matcher_name = matcher->Name();
+  Info(callbacks, "Matched by " + std::to_string(num_ranks) + " MPI processes");
   return summary;
 }
 
@@ -208,6 +300,9 @@ ScheduleSizes ChooseSizesForRun(const MatcherCommandOptions& options, DatabaseFe
       }
     }
   }
+  // Ranks must cut the same blocks and groups: the smallest caps of all.
+  limits.max_host_bytes = MpiMin(limits.max_host_bytes);
+  limits.max_gpu_bytes = MpiMin(limits.max_gpu_bytes);
   limits.block_size = options.block_size_from_memory ? 0 : options.block_size;
   limits.max_num_matches = options.sift.max_num_matches;
   limits.num_tables = options.cashash.num_tables;
@@ -288,43 +383,80 @@ std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOpti
   return CreateCpuFeatureMatcher(options.sift, options.cashash, mean);
 }
 
-MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
-                                const MatchingCallbacks& callbacks) {
-  const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-  DatabaseFeatureSource source(database_path);
-  if (callbacks.database_opened) callbacks.database_opened();
-  const std::vector<image_t> image_ids = ImageIds(source);
-  if (image_ids.size() < 2) {
-    Warn(callbacks, "table images of " + database_path + " holds " + std::to_string(image_ids.size()) + " image" +
-                        (image_ids.size() == 1 ? "" : "s") + "; nothing to match");
-    return MatchingSummary();
+namespace {
+
+// What ranks > 0 tell the user: warnings only, marked with their rank; rank
+// 0 reports the run.
+MatchingCallbacks CallbacksOfRank(const MatchingCallbacks& callbacks) {
+  if (MpiRank() == 0) return callbacks;
+  MatchingCallbacks quiet;
+  quiet.stop = callbacks.stop;
+  quiet.warning = [rank = MpiRank()](const std::string& text) {
+    std::cerr << "WARNING: [rank " << rank << "] " << text << std::endl;
+  };
+  return quiet;
+}
+
+// Under MPI an error on one rank must end them all: the others would wait
+// for it in a collective or a receive forever.
+template <typename Body>
+MatchingSummary EndAllRanksOnError(Body body) {
+  if (MpiSize() == 1) return body();
+  try {
+    return body();
+  } catch (const std::exception& e) {
+    MpiAbortJob(e.what());
   }
-  const ScheduleSizes sizes = ChooseSizesForRun(checked, source, image_ids, callbacks);
-  std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
-  const size_t n = image_ids.size();
-  return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
-                     callbacks);
+}
+
+}  // namespace
+
+MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& all_callbacks) {
+  return EndAllRanksOnError([&]() {
+    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
+    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+    DatabaseFeatureSource source(database_path);
+    if (callbacks.database_opened) callbacks.database_opened();
+    const std::vector<image_t> image_ids = ImageIds(source);
+    if (image_ids.size() < 2) {
+      Warn(callbacks, "table images of " + database_path + " holds " + std::to_string(image_ids.size()) + " image" +
+                          (image_ids.size() == 1 ? "" : "s") + "; nothing to match");
+      return MatchingSummary();
+    }
+    const ScheduleSizes sizes = ChooseSizesForRun(checked, source, image_ids, callbacks);
+    std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
+    const size_t n = image_ids.size();
+    return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
+                       callbacks);
+  });
 }
 
 MatchingSummary MatchPairs(const std::string& database_path,
                            const std::vector<std::pair<std::string, std::string>>& image_name_pairs,
-                           const MatcherCommandOptions& options, const MatchingCallbacks& callbacks) {
-  const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-  DatabaseFeatureSource source(database_path);
-  if (callbacks.database_opened) callbacks.database_opened();
-  return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), callbacks);
+                           const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
+  return EndAllRanksOnError([&]() {
+    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
+    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+    DatabaseFeatureSource source(database_path);
+    if (callbacks.database_opened) callbacks.database_opened();
+    return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), callbacks);
+  });
 }
 
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
-                              const MatcherCommandOptions& options, const MatchingCallbacks& callbacks) {
-  const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-  DatabaseFeatureSource source(database_path);
-  if (callbacks.database_opened) callbacks.database_opened();
-  std::unordered_map<std::string, image_t> ids_by_name;
-  for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
-  std::ifstream file(match_list_path);
-  if (!file) throw std::runtime_error("cannot open --match_list_path " + match_list_path);
-  return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), callbacks);
+                              const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
+  return EndAllRanksOnError([&]() {
+    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
+    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+    DatabaseFeatureSource source(database_path);
+    if (callbacks.database_opened) callbacks.database_opened();
+    std::unordered_map<std::string, image_t> ids_by_name;
+    for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
+    std::ifstream file(match_list_path);
+    if (!file) throw std::runtime_error("cannot open --match_list_path " + match_list_path);
+    return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), callbacks);
+  });
 }
 
 }  // namespace colmap
