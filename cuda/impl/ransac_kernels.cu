@@ -311,6 +311,11 @@ template <typename Model>
 void Launch(const RansacLaunch& launch, cudaStream_t stream) {
   if (launch.num_pairs == 0) return;
   const size_t shared_bytes = static_cast<size_t>(launch.shared_points) * sizeof(float4);
+  // The point cache plus the static scratch may pass the default 48 KiB.
+  static const cudaError_t opt_in = cudaFuncSetAttribute(
+      LoRansacKernel<Model>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+      static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
+  CUDA_CHECK(opt_in);
   LoRansacKernel<Model><<<launch.num_pairs, kRansacThreads, shared_bytes, stream>>>(launch);
   CUDA_CHECK_LAUNCH();
 }

@@ -1,0 +1,192 @@
+// Geometric verification of the same matches by the CPU batch verifier (all
+// cores) and the GPU one (F and H on the device, E and the decision on the
+// CPU), printed as a table. Pairs come from a verification pairs file
+// (scripts/bench/dump_verification_pairs) or, without one, from synthetic
+// scenes; --replicate K verifies every pair K times under different seeds, to
+// give the GPU a full chunk's worth of pairs.
+//
+// Usage: verification_bench_gpu [--pairs FILE] [--replicate K] [--repeats R]
+//                               [--threads T] [--no-priors] [--cpu-max-pairs N]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "../../tests/synthetic_two_view.h"
+#include "cashash/batch_verifier.h"
+#include "cashash/pair_id.h"
+#include "cashash/thread_pool.h"
+#include "cashash/verification_pairs_file.h"
+#include "cashash_cuda/gpu_feature_matcher.h"
+#include "cashash_cuda/gpu_two_view_geometry.h"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::vector<cashash::StoredVerificationPair> SyntheticPairs() {
+  std::vector<cashash::StoredVerificationPair> pairs;
+  for (int k = 0; k < 60; ++k) {
+    cashash::testing_support::SceneOptions o;
+    o.seed = static_cast<unsigned>(k + 1);
+    o.num_inliers = 300 + 60 * (k % 20);
+    o.outlier_ratio = 0.1 + 0.1 * (k % 8);
+    o.planar = k % 7 == 3;
+    const cashash::testing_support::SyntheticScene s = cashash::testing_support::MakeScene(o);
+    cashash::StoredVerificationPair p;
+    p.pair = {1, static_cast<cashash::image_t>(k + 2)};
+    p.camera1 = p.camera2 = s.MakeCamera(k % 2 == 0);
+    p.points1 = s.points1;
+    p.points2 = s.points2;
+    p.matches = s.matches;
+    pairs.push_back(std::move(p));
+  }
+  return pairs;
+}
+
+struct Agreement {
+  int same_config = 0, verified = 0, close_inliers = 0;
+};
+
+Agreement Compare(const std::vector<cashash::TwoViewGeometry>& cpu, const std::vector<cashash::TwoViewGeometry>& gpu) {
+  Agreement a;
+  for (size_t k = 0; k < cpu.size(); ++k) {
+    a.same_config += cpu[k].config == gpu[k].config;
+    if (cpu[k].config >= cashash::kCalibrated && cpu[k].config == gpu[k].config) {
+      ++a.verified;
+      const double c = static_cast<double>(cpu[k].inlier_matches.size());
+      const double g = static_cast<double>(gpu[k].inlier_matches.size());
+      a.close_inliers += std::abs(c - g) <= std::max(5.0, 0.05 * c);
+    }
+  }
+  return a;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string pairs_path;
+  int replicate = 1, repeats = 3, threads = -1;
+  size_t cpu_max_pairs = 0;
+  bool no_priors = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto next = [&]() -> const char* {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s needs a value\n", arg.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (arg == "--pairs") pairs_path = next();
+    else if (arg == "--replicate") replicate = std::max(1, std::atoi(next()));
+    else if (arg == "--repeats") repeats = std::max(1, std::atoi(next()));
+    else if (arg == "--threads") threads = std::atoi(next());
+    else if (arg == "--cpu-max-pairs") cpu_max_pairs = std::strtoull(next(), nullptr, 10);
+    else if (arg == "--no-priors") no_priors = true;
+    else {
+      std::fprintf(stderr,
+                   "usage: %s [--pairs FILE] [--replicate K] [--repeats R] [--threads T] [--no-priors] "
+                   "[--cpu-max-pairs N]\n",
+                   argv[0]);
+      return 2;
+    }
+  }
+  std::string reason;
+  if (cashash::cuda::NumCudaDevices() == 0 || !cashash::cuda::CudaDeviceUsable(0, &reason)) {
+    std::printf("no usable CUDA device (%s); nothing to compare\n", reason.c_str());
+    return 0;
+  }
+  std::vector<cashash::StoredVerificationPair> stored =
+      pairs_path.empty() ? SyntheticPairs() : cashash::ReadVerificationPairsFile(pairs_path);
+  if (no_priors) {
+    for (auto& p : stored) p.camera1.has_prior_focal_length = p.camera2.has_prior_focal_length = false;
+  }
+  std::vector<cashash::VerificationPair> pairs;
+  size_t matches = 0, calibrated = 0;
+  for (int r = 0; r < replicate; ++r) {
+    for (const auto& p : stored) {
+      pairs.push_back(p.View(cashash::PairRandomSeed(static_cast<uint64_t>(r), p.pair)));
+      matches += p.matches.size();
+      calibrated += cashash::TwoViewIsCalibrated(p.camera1, p.camera2);
+    }
+  }
+  const int num_threads = cashash::ResolveNumThreads(threads);
+  std::printf("%zu pairs (%zu stored x %d), %zu matches, %zu calibrated pairs (E on the CPU), %d CPU threads\n",
+              pairs.size(), stored.size(), replicate, matches, calibrated, num_threads);
+
+  const cashash::TwoViewGeometryOptions options;
+  auto cpu = cashash::CreateCpuBatchVerifier(options, threads);
+  auto gpu = cashash::cuda::CreateGpuBatchVerifier(options, 0, threads);
+  // The CPU may verify a subset only (it is slow); its time is scaled up.
+  std::vector<cashash::VerificationPair> cpu_pairs = pairs;
+  if (cpu_max_pairs > 0 && cpu_pairs.size() > cpu_max_pairs) cpu_pairs.resize(cpu_max_pairs);
+  const double cpu_scale = static_cast<double>(pairs.size()) / static_cast<double>(cpu_pairs.size());
+
+  gpu->Verify(std::vector<cashash::VerificationPair>(pairs.begin(), pairs.begin() + std::min<size_t>(pairs.size(), 8)));
+  std::vector<cashash::TwoViewGeometry> cpu_result, gpu_result;
+  double cpu_best = 1e30, gpu_best = 1e30;
+  for (int r = 0; r < repeats; ++r) {
+    auto t0 = Clock::now();
+    cpu_result = cpu->Verify(cpu_pairs);
+    cpu_best = std::min(cpu_best, Seconds(t0) * cpu_scale);
+    t0 = Clock::now();
+    gpu_result = gpu->Verify(pairs);
+    gpu_best = std::min(gpu_best, Seconds(t0));
+  }
+  // The GPU's F and H alone (no E, no decision), and E alone on the CPU.
+  std::vector<cashash::TwoViewPoints> points(pairs.size());
+  cashash::ParallelFor(pairs.size(), threads, [&](size_t k) {
+    points[k] = cashash::PrepareTwoViewPoints(*pairs[k].points1, *pairs[k].points2, *pairs[k].matches);
+  });
+  std::vector<const cashash::TwoViewPoints*> pointers;
+  std::vector<uint64_t> seeds;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    pointers.push_back(&points[k]);
+    seeds.push_back(pairs[k].random_seed);
+  }
+  cashash::cuda::GpuTwoViewRansac ransac(options, 0);
+  std::vector<cashash::TwoViewModelEstimate> F, H;
+  auto t0 = Clock::now();
+  ransac.Estimate(pointers, seeds, &F, &H);
+  const double gpu_fh = Seconds(t0);
+  t0 = Clock::now();
+  cashash::ParallelFor(cpu_pairs.size(), threads, [&](size_t k) {
+    cashash::TwoViewGeometryOptions o = options;
+    o.random_seed = cpu_pairs[k].random_seed;
+    cashash::EstimateFundamental(points[k], o);
+    cashash::EstimateHomography(points[k], o);
+  });
+  const double cpu_fh = Seconds(t0) * cpu_scale;
+  t0 = Clock::now();
+  cashash::ParallelFor(cpu_pairs.size(), threads, [&](size_t k) {
+    if (!cashash::TwoViewIsCalibrated(*cpu_pairs[k].camera1, *cpu_pairs[k].camera2)) return;
+    cashash::TwoViewGeometryOptions o = options;
+    o.random_seed = cpu_pairs[k].random_seed;
+    cashash::EstimateEssential(*cpu_pairs[k].camera1, *cpu_pairs[k].camera2, points[k].pixels, o);
+  });
+  const double cpu_e = Seconds(t0) * cpu_scale;
+  const cashash::cuda::GpuRansacStats& st = ransac.stats();
+
+  std::vector<cashash::TwoViewGeometry> gpu_subset(gpu_result.begin(), gpu_result.begin() + cpu_result.size());
+  const Agreement a = Compare(cpu_result, gpu_subset);
+  std::printf("\n| step | CPU (%d threads) s | GPU s | speed-up | GPU pairs/s |\n|---|---|---|---|---|\n", num_threads);
+  std::printf("| whole verification (F, H, E, decision) | %.3f | %.3f | %.1fx | %.0f |\n", cpu_best, gpu_best,
+              cpu_best / gpu_best, pairs.size() / gpu_best);
+  std::printf("| F and H only | %.3f | %.3f | %.1fx | %.0f |\n", cpu_fh, gpu_fh, cpu_fh / gpu_fh,
+              pairs.size() / gpu_fh);
+  std::printf("| E only (calibrated pairs, CPU in both) | %.3f | - | - | - |\n", cpu_e);
+  std::printf("\nGPU F/H: %.3f s on the device (upload + kernels + download), mean trials F %.0f H %.0f, "
+              "local refits per pair F %.1f H %.1f\n",
+              st.seconds_gpu, static_cast<double>(st.trials_F) / st.pairs, static_cast<double>(st.trials_H) / st.pairs,
+              static_cast<double>(st.local_refits_F) / st.pairs, static_cast<double>(st.local_refits_H) / st.pairs);
+  std::printf("agreement on %zu pairs: same config %d, verified with inlier counts within 5%%: %d/%d%s\n",
+              cpu_result.size(), a.same_config, a.close_inliers, a.verified,
+              cpu_scale > 1 ? " (CPU ran a subset; its times are scaled up)" : "");
+  return 0;
+}
