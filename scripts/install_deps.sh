@@ -19,6 +19,8 @@ apt_packages=(
   googletest libgtest-dev
   colmap
   python3
+  # MPI: several processes (or machines) split one matching run
+  openmpi-bin libopenmpi-dev
 )
 
 missing=()
