@@ -85,6 +85,30 @@ Keypoints DecodeKeypoints(const MatrixBlob& blob, const std::string& owner) {
   return keypoints;
 }
 
+std::vector<float> EncodeKeypoints(const Keypoints& keypoints, int num_columns) {
+  if (num_columns != 2 && num_columns != 4 && num_columns != 6) {
+    throw DatabaseError("keypoints are stored with 2, 4 or 6 columns, not " + std::to_string(num_columns));
+  }
+  const size_t cols = static_cast<size_t>(num_columns);
+  std::vector<float> values(keypoints.size() * cols);
+  for (size_t i = 0; i < keypoints.size(); ++i) {
+    const Keypoint& kp = keypoints[i];
+    float* v = values.data() + i * cols;
+    v[0] = kp.x;
+    v[1] = kp.y;
+    if (cols == 4) {
+      v[2] = kp.ComputeScale();
+      v[3] = std::atan2(kp.a21, kp.a11);
+    } else if (cols == 6) {
+      v[2] = kp.a11;
+      v[3] = kp.a12;
+      v[4] = kp.a21;
+      v[5] = kp.a22;
+    }
+  }
+  return values;
+}
+
 FeatureDescriptors DecodeSiftDescriptors(const MatrixBlob& blob, const std::string& owner) {
   if (blob.cols != kDescriptorDim) {
     throw DatabaseError(owner + ": expected uint8 x " + std::to_string(kDescriptorDim) +

@@ -36,6 +36,10 @@ constexpr int64_t kSiftDescriptorType = 0;
 // `owner` names the row in errors, e.g. "keypoints of image 3 (a.jpg)".
 Keypoints DecodeKeypoints(const MatrixBlob& blob, const std::string& owner);
 
+// The inverse of DecodeKeypoints: 2 (x, y), 4 (x, y, scale, orientation,
+// from the affine part) or 6 columns, row-major float32 values.
+std::vector<float> EncodeKeypoints(const Keypoints& keypoints, int num_columns);
+
 // uint8 x 128 SIFT descriptors; anything else (other width, float data, a
 // size that does not match rows x cols) throws naming `owner`.
 FeatureDescriptors DecodeSiftDescriptors(const MatrixBlob& blob, const std::string& owner);

@@ -80,7 +80,8 @@ struct Database::Impl {
 
   // Prepared on first use, then reused.
   std::unique_ptr<SqliteStatement> image_name, keypoints, descriptors, num_keypoints,
-      num_descriptors, matches, geometry, write_matches, write_geometry;
+      num_descriptors, matches, geometry, write_matches, write_geometry, write_camera,
+      write_image, write_keypoints, write_descriptors, keypoint_columns;
 
   ~Impl() {
     if (db == nullptr) return;
@@ -442,6 +443,63 @@ void Database::ClearMatchesAndGeometries() {
     throw;
   }
   if (own_transaction) Commit();
+}
+
+camera_t Database::WriteCamera(const Camera& camera) {
+  impl_->RequireWritable();
+  StatementScope s(impl_->Prepared(
+      impl_->write_camera,
+      "INSERT INTO cameras(model, width, height, params, prior_focal_length) VALUES (?, ?, ?, ?, ?)"));
+  s->BindInt64(1, camera.model_id);
+  s->BindInt64(2, static_cast<int64_t>(camera.width));
+  s->BindInt64(3, static_cast<int64_t>(camera.height));
+  s->BindBlob(4, camera.params.data(), camera.params.size() * sizeof(double));
+  s->BindInt64(5, camera.has_prior_focal_length ? 1 : 0);
+  s->Execute();
+  return static_cast<camera_t>(sqlite3_last_insert_rowid(impl_->db));
+}
+
+image_t Database::WriteImage(const std::string& name, camera_t camera_id) {
+  impl_->RequireWritable();
+  StatementScope s(impl_->Prepared(impl_->write_image, "INSERT INTO images(name, camera_id) VALUES (?, ?)"));
+  s->BindText(1, name);
+  s->BindInt64(2, camera_id);
+  s->Execute();
+  return static_cast<image_t>(sqlite3_last_insert_rowid(impl_->db));
+}
+
+void Database::WriteKeypoints(image_t image_id, const Keypoints& keypoints, int num_columns) {
+  impl_->RequireWritable();
+  const std::vector<float> values = EncodeKeypoints(keypoints, num_columns);
+  StatementScope s(impl_->Prepared(
+      impl_->write_keypoints, "INSERT OR REPLACE INTO keypoints(image_id, rows, cols, data) VALUES (?, ?, ?, ?)"));
+  s->BindInt64(1, image_id);
+  s->BindInt64(2, static_cast<int64_t>(keypoints.size()));
+  s->BindInt64(3, num_columns);
+  s->BindBlob(4, values.data(), values.size() * sizeof(float));
+  s->Execute();
+}
+
+void Database::WriteDescriptors(image_t image_id, const FeatureDescriptors& descriptors) {
+  impl_->RequireWritable();
+  const bool typed = impl_->schema.descriptors_have_type;
+  StatementScope s(impl_->Prepared(
+      impl_->write_descriptors,
+      typed ? "INSERT OR REPLACE INTO descriptors(image_id, rows, cols, data, type) VALUES (?, ?, ?, ?, ?)"
+            : "INSERT OR REPLACE INTO descriptors(image_id, rows, cols, data) VALUES (?, ?, ?, ?)"));
+  s->BindInt64(1, image_id);
+  s->BindInt64(2, static_cast<int64_t>(descriptors.rows()));
+  s->BindInt64(3, kDescriptorDim);
+  s->BindBlob(4, descriptors.data.data(), descriptors.data.size());
+  if (typed) s->BindInt64(5, kSiftDescriptorType);
+  s->Execute();
+}
+
+int Database::KeypointColumns(image_t image_id) const {
+  StatementScope s(
+      impl_->Prepared(impl_->keypoint_columns, "SELECT cols FROM keypoints WHERE image_id = ?"));
+  s->BindInt64(1, image_id);
+  return s->Step() ? static_cast<int>(s->ColumnInt64(0)) : 0;
 }
 
 void Database::BeginTransaction() {

@@ -72,6 +72,17 @@ class Database {
   // exhaustive run).
   void ClearMatchesAndGeometries();
 
+  // Rows of the feature tables, for databases that cashash itself creates
+  // (generate_database). Cameras and images get the next free id, returned.
+  camera_t WriteCamera(const Camera& camera);
+  image_t WriteImage(const std::string& name, camera_t camera_id);
+  // Stored with `num_columns` 2, 4 or 6 float32 columns (see EncodeKeypoints).
+  void WriteKeypoints(image_t image_id, const Keypoints& keypoints, int num_columns);
+  // uint8 x 128; SIFT type (0) where the table has a type column.
+  void WriteDescriptors(image_t image_id, const FeatureDescriptors& descriptors);
+  // Float32 columns (2, 4 or 6) of an image's keypoints row; 0 when it has none.
+  int KeypointColumns(image_t image_id) const;
+
   void BeginTransaction();
   void Commit();
   void Rollback();

@@ -3,6 +3,7 @@
 #include <iostream>
 #include <string>
 
+#include "colmap_bridge/generate_database_command.h"
 #include "colmap_bridge/matching_commands.h"
 #include "colmap_bridge/verify_command.h"
 
@@ -13,7 +14,8 @@ void PrintUsage() {
                "Usage:\n"
                "  cashash exhaustive_matcher --database_path DB [options]\n"
                "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
-               "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n\n"
+               "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n"
+               "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n\n"
                "Run 'cashash COMMAND --help' for the options of a command (COLMAP's option names\n"
                "of 3.8 and 4.x are accepted, plus --CasHash.*)."
             << std::endl;
@@ -31,6 +33,7 @@ int main(int argc, char** argv) {
   if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
   if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
   if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
+  if (command == "generate_database") return cashash::colmap::RunGenerateDatabase(argc - 1, argv + 1);
   std::cerr << "ERROR: unknown command '" << command << "'" << std::endl;
   PrintUsage();
   return EXIT_FAILURE;

@@ -1,0 +1,74 @@
+// `cashash generate_database`: a COLMAP database of any size whose features
+// behave like real ones, to measure matching at 5,000 to 20,000 images.
+// The geometry is a SyntheticStreetScene; every 3D point carries a real SIFT
+// descriptor of the source database (values reordered per stretch of street,
+// see RandomDescriptorPermutation), each image observes its points with
+// pixel noise and its own descriptor noise, and real descriptors at random
+// places fill each image up to exactly num_features (what a detector finds
+// on clutter, sky, cars). Images are generated and written one at a time:
+// memory does not grow with the number of images.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+namespace cashash {
+namespace colmap {
+
+struct DatabaseGeneratorOptions {
+  std::string database_path;         // created; must not exist
+  std::string source_database_path;  // COLMAP database with SIFT features
+  int num_images = 0;
+  int num_features = 8192;  // per image, exactly
+  // 3D points of the whole scene; 0 chooses enough for every image to see
+  // num_features x (1 - distractor_ratio) of them.
+  int64_t num_points = 0;
+  uint64_t random_seed = 0;
+  int image_width = 1600;
+  int image_height = 1200;
+  std::string camera_model = "SIMPLE_RADIAL";  // or PINHOLE; focal prior known
+  double focal_length_factor = 1.2;  // focal = factor x max(width, height), COLMAP's guess
+  double distractor_ratio = 0.3;     // share of features that are no 3D point
+  double keypoint_noise = 0.5;       // pixels (standard deviation)
+  // Stored uint8 units; each feature draws its own standard deviation
+  // between 0.25 and 1.5 times this.
+  double descriptor_noise = 8.0;
+  int images_per_transaction = 50;
+  // Source images whose descriptors are used (spread evenly over the source).
+  // Views of one point in several of them are kept once; finding those costs
+  // a matching of every pair of them.
+  int source_max_images = 24;
+
+  // "" or a message naming the option at fault (--name as on the command line).
+  std::string Check() const;
+};
+
+struct GeneratorProgress {
+  int images_done = 0;
+  int images_total = 0;
+  double elapsed_seconds = 0;
+};
+
+struct GeneratorSummary {
+  int num_images = 0;
+  int64_t num_features = 0;      // all images together
+  int64_t num_scene_points = 0;  // 3D points of the scene
+  int64_t observed_features = 0;  // features that are projections of 3D points
+  int images_short_of_points = 0;  // saw fewer points than planned (filled up with distractors)
+  int keypoint_columns = 6;
+  size_t source_images = 0;       // source images read
+  size_t source_descriptors = 0;  // their descriptors
+  size_t pool_descriptors = 0;    // left after repeated views of a point
+  uint64_t file_bytes = 0;
+  double seconds = 0;
+};
+
+// Throws std::invalid_argument for bad options and std::runtime_error
+// (DatabaseError included) for an unusable source or output; a partly
+// written output is removed.
+GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
+                                  const std::function<void(const GeneratorProgress&)>& progress = {});
+
+}  // namespace colmap
+}  // namespace cashash
