@@ -4,10 +4,11 @@ centres with a similarity transform and measure position and rotation errors.
 """
 import glob
 import os
+import shutil
 
 import numpy as np
 
-from eval import tools
+from eval import colmap_db, tools
 from summarize_model import quaternion_to_rotation as quaternion_to_matrix  # scripts/ is on sys.path
 
 
@@ -132,6 +133,10 @@ def largest_model(sparse_dir, work_dir, log):
 def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log, extra_flags=()):
     """Copies the feature database, matches with matcher, maps, aligns. Returns the summary."""
     os.makedirs(work_dir, exist_ok=True)
+    # A model of an earlier run (another setting) must not be read as this one's.
+    for stale in glob.glob(os.path.join(work_dir, "txt_*")) + [os.path.join(work_dir, "sparse")]:
+        if os.path.isdir(stale):
+            shutil.rmtree(stale)
     database = os.path.join(work_dir, "database.db")
     tools.copy_database(source_db, database)
     match_wall, match_cpu, _ = tools.run_tool(match_command(matcher, cashash_binary, database) + list(extra_flags),
@@ -156,3 +161,17 @@ def evaluate_existing(scene_dir, work_dir, summary):
             best = cameras
     summary.update(camera_errors(read_gt_cameras(scene_dir), best))
     return summary
+
+
+def verified_inliers_kept(reference_db, other_db):
+    """Share of the reference's verified inlier matches (two_view_geometries
+    rows, all pairs) that the other database also verifies."""
+    reference, other = colmap_db.Database(reference_db), colmap_db.Database(other_db)
+    try:
+        ref_rows, other_rows = reference.all_inlier_rows(), other.all_inlier_rows()
+    finally:
+        reference.close()
+        other.close()
+    total = sum(len(rows) for rows in ref_rows.values())
+    kept = sum(len(rows & other_rows.get(pair, set())) for pair, rows in ref_rows.items())
+    return kept / total if total else float("nan")

@@ -47,3 +47,12 @@ class Database:
 
     def inlier_matches(self, id1, id2):
         return self._pair_rows("two_view_geometries", id1, id2)
+
+    def all_inlier_rows(self):
+        """{pair_id: {(idx in the smaller image id, idx in the larger)}} of every verified pair."""
+        out = {}
+        for pid, rows, data in self.conn.execute("SELECT pair_id, rows, data FROM two_view_geometries"):
+            if rows and data is not None:
+                m = np.frombuffer(data, dtype=np.uint32).reshape(rows, 2)
+                out[pid] = set(zip(m[:, 0].tolist(), m[:, 1].tolist()))
+        return out

@@ -83,13 +83,21 @@ def plot_tau(tau, out_dir):
     return _save(fig, out_dir, "tau_sweep.png")
 
 
-def plot_topk_bits(bench, out_dir, default_bits=8, default_top_k=10):
+def plot_topk_bits(bench, out_dir, setting):
+    """Recall and CPU time per pair when one of top_k, bits per table, number
+    of tables moves away from setting = (tables, bits, tau, top_k)."""
+    tables, bits, tau, top_k = setting
     rows = bench["rows"]
-    by_k = sorted((r for r in rows if r["bits"] == default_bits), key=lambda r: r["top_k"])
-    by_b = sorted((r for r in rows if r["top_k"] == default_top_k), key=lambda r: r["bits"])
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2))
-    for ax, sel, key, title in ((axes[0], by_k, "top_k", "(a) top_k (7 x 8 bits, tau 40)"),
-                                (axes[1], by_b, "bits", "(b) bits per table (7 tables, tau 40, top_k 10)")):
+    series = [
+        ("top_k", sorted((r for r in rows if (r["tables"], r["bits"]) == (tables, bits)), key=lambda r: r["top_k"]),
+         "(a) top_k (%d x %d bits, tau %d)" % (tables, bits, tau)),
+        ("bits", sorted((r for r in rows if r["tables"] == tables and r["top_k"] == top_k), key=lambda r: r["bits"]),
+         "(b) bits per table (%d tables, top_k %d)" % (tables, top_k)),
+        ("tables", sorted((r for r in rows if r["bits"] == bits and r["top_k"] == top_k), key=lambda r: r["tables"]),
+         "(c) tables (%d bits, top_k %d)" % (bits, top_k)),
+    ]
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
+    for ax, (key, sel, title) in zip(axes, series):
         x = [r[key] for r in sel]
         ax.plot(x, [100 * r["recall"] for r in sel], "o-", color="tab:blue", ms=3)
         ax.set_ylabel("recall vs brute force (%)", fontsize=8, color="tab:blue")
@@ -98,11 +106,12 @@ def plot_topk_bits(bench, out_dir, default_bits=8, default_top_k=10):
         twin = ax.twinx()
         twin.plot(x, [1000.0 / r["pairs_per_cpu_s"] for r in sel], "s--", color="tab:red", ms=3)
         twin.set_ylabel("CPU ms per pair", fontsize=8, color="tab:red")
+        twin.set_ylim(bottom=0)
         ax.tick_params(labelsize=7)
         twin.tick_params(labelsize=7)
     axes[0].set_xscale("log")
-    axes[0].set_xticks([r["top_k"] for r in by_k])
-    axes[0].set_xticklabels([str(r["top_k"]) for r in by_k])
+    axes[0].set_xticks([r["top_k"] for r in series[0][1]])
+    axes[0].set_xticklabels([str(r["top_k"]) for r in series[0][1]])
     return _save(fig, out_dir, "topk_bits_sweep.png")
 
 
@@ -124,7 +133,40 @@ def _fmt(value, digits=3):
     return "-" if value is None else ("%.*f" % (digits, value))
 
 
-def homography_section(results, use_gpu, eps_list, plot, cascade_text):
+def gpu_paragraph(results, gpu_info, cascade_setting):
+    """What the GPU rows are (device, options, where they ran) and how they agree with the CPU cascade."""
+    ran_on = gpu_info["ran_on"]
+    on_gpu = all(m == "gpu-cascade" for m in ran_on.values())
+    lines = ["The GPU cascade rows come from `--gpu-results`: `--export-gpu-inputs DIR` wrote the feature databases "
+             "of the sequences and `run.sh`, which matched each with `cashash exhaustive_matcher "
+             "--FeatureMatching.use_gpu 1` at the binary's defaults on the GPU machine (%s). Matcher that finished "
+             "each run: %s." % (gpu_info["device"] or "device not recorded",
+                                ", ".join("%s %s" % (n, m) for n, m in ran_on.items()))]
+    if not on_gpu:
+        lines[-1] += (" **Not a GPU measurement**: at least one run finished on the CPU (no GPU, or a fallback), so "
+                      "these rows only check the export, run.sh and the read-back path.")
+    defaults = gpu_info["defaults"]
+    if defaults != cascade_setting:
+        lines[-1] += (" **Setting mismatch**: the binary's defaults (tables, bits, tau, top_k) are %s, the CPU "
+                      "cascade ran with %s, so the rows below need not agree." % (defaults, cascade_setting))
+    else:
+        lines[-1] += " The binary's defaults (tables, bits, tau, top_k = %s) equal the CPU cascade's setting." % defaults
+    lines += ["", "Agreement with the CPU cascade (identical (idx1, idx2) rows of the raw matches):", "",
+              "| sequence | CPU matches | GPU matches | identical rows | pairs with identical lists | "
+              "GPU matching s (15 pairs) |", "|---|---|---|---|---|---|"]
+    for name, per_pair in gpu_info["agreement"].items():
+        cpu = sum(r["cpu"] for r in per_pair.values())
+        gpu = sum(r["gpu"] for r in per_pair.values())
+        same = sum(1 for r in per_pair.values() if r["same"])
+        seconds = results[name]["cascade_gpu"]["timing"].get("matching_s")
+        lines.append("| %s | %d | %d | %d (%.2f %%) | %d / %d | %s |" % (
+            name, cpu, gpu, sum(r["identical"] for r in per_pair.values()),
+            100.0 * sum(r["identical"] for r in per_pair.values()) / max(cpu, 1), same, len(per_pair),
+            _fmt(seconds, 3)))
+    return lines + [""]
+
+
+def homography_section(results, use_gpu, eps_list, plot, cascade_text, gpu_info=None, cascade_setting=None):
     lines = ["## 1. Homography ground truth", "",
              "Features: COLMAP 3.8 CPU SIFT, default settings (images converted to PNG with Pillow first). "
              "Matches: the **raw** `matches` rows, before geometric verification, of pairs 1-2 ... 1-6. "
@@ -136,9 +178,15 @@ def homography_section(results, use_gpu, eps_list, plot, cascade_text):
              "differ. Pixel convention: COLMAP puts the centre of the upper-left pixel at (0.5, 0.5), the "
              "homographies at (0, 0); keypoints are shifted by 0.5 px before mapping (this gives the smallest "
              "median error on graf 1-2, 0.50 px against 0.56 px without the shift).", ""]
-    if not use_gpu:
-        lines += ["The GPU cascade column is **not run here**: this machine has no GPU "
-                  "(the GPU cascade is checked against the CPU cascade by its own tests).", ""]
+    gpu_rows = use_gpu or gpu_info is not None
+    if gpu_info is not None:
+        lines += gpu_paragraph(results, gpu_info, cascade_setting)
+    elif not use_gpu:
+        lines += ["The GPU cascade column is **not run here**: this machine has no GPU (the GPU cascade is checked "
+                  "against the CPU cascade by its own tests). To fill it from a GPU machine without COLMAP or the "
+                  "data: `scripts/evaluate_accuracy.py --export-gpu-inputs DIR` (the five feature databases and "
+                  "`run.sh`, about 25 MB), there `DIR/run.sh <cashash binary>`, and back here the usual command "
+                  "with `--reuse --gpu-results DIR`.", ""]
     lines += ["### Totals per sequence (pairs 1-2 ... 1-6) and the targets", "",
               "| sequence | matcher | matches | correct 6 px | precision 6 px | correct 3 px | precision 3 px |",
               "|---|---|---|---|---|---|---|"]
@@ -149,10 +197,10 @@ def homography_section(results, use_gpu, eps_list, plot, cascade_text):
             _, c3, p3 = _totals(by, matcher, 3)
             lines.append("| %s | %s | %d | %d | %.1f %% | %d | %.1f %% |" % (name, LABELS[matcher], m, c6, 100 * p6,
                                                                            c3, 100 * p3))
-        if not use_gpu:
+        if not gpu_rows:
             lines.append("| %s | %s | not run here | | | | |" % (name, LABELS["cascade_gpu"]))
         _, bc, bp = _totals(by, "bruteforce", 6)
-        for variant in ("cascade", "cascade_r078"):
+        for variant in ("cascade", "cascade_gpu", "cascade_r078"):
             if variant in by:
                 _, cc, cp = _totals(by, variant, 6)
                 checks.append((name, variant, 100 * (cp - bp), cc / bc if bc else 0.0))
@@ -230,46 +278,97 @@ def loss_section(losses, by_angle, plot, tables, bits):
     return lines
 
 
-def sweep_section(sweeps, plots, scene):
+def settings_lines(rows, results, setting):
+    """The table behind the choice of the defaults: precision and correct
+    matches against brute force per sequence, and the scene's matching time."""
+    names = list(rows[0]["matches"])
+    brute = {n: _totals(results[n], "bruteforce", 6) for n in names if n in results}
+    base = next((r for r in rows if r["setting"] == [8, 7, 40, 10, 0]), None)
+    lines = ["| tables x bits | tau | top_k | seed | " + " | ".join("%s: precision - brute force, correct / brute "
+                                                                    "force" % n for n in names)
+             + " | target met | matching s, 1 thread (least of 3) | vs 8 x 7 / 40 / 10 |",
+             "|---|---|---|---|" + "---|" * len(names) + "---|---|---|"]
+    for r in rows:
+        tables, bits, tau, top_k, seed = r["setting"]
+        cells, met = [], True
+        for n in names:
+            _, bc, bp = brute[n]
+            m, c = r["matches"][n], r["correct"][n]
+            dp, ratio = 100 * ((c / m if m else 0.0) - bp), c / bc if bc else 0.0
+            met = met and abs(dp) <= 2 and ratio >= 0.9
+            cells.append("%+.2f, %.1f %%" % (dp, 100 * ratio))
+        time_cells = ["-", "-"]
+        if "scene_matching_s" in r:
+            time_cells = ["%.2f" % r["scene_matching_s"],
+                          "%+.0f %%" % (100 * (r["scene_matching_s"] / base["scene_matching_s"] - 1)) if base else "-"]
+        bold = "**" if [tables, bits, tau, top_k] == list(setting) and seed == 0 else ""
+        lines.append("| %s%d x %d%s | %d | %d | %d | %s | %s | %s |" % (
+            bold, tables, bits, bold, tau, top_k, seed, " | ".join(cells), "yes" if met else "**no**",
+            " | ".join(time_cells)))
+    return lines
+
+
+def sweep_section(sweeps, plots, scene, setting, results):
+    tables, bits, tau0, top_k = setting
     tau, bench = sweeps["tau"], sweeps["topk_bits"]
-    lines = ["## 3. Parameter sweeps (the paper's tau figure, top_k and bits per table)", "",
-             "tau: raw matches and matching time (one thread, no verification; the `matching` seconds "
-             "cashash prints, wall time on a shared 2-core machine, so +-20 %%) over the 55 pairs of %s, "
-             "and precision at 6 px over pairs 1-2 ... 1-6 of each homography sequence "
-             "(%d tables x %d bits, top_k %d)." % ((scene,) + tuple(tau[min(tau)].get("setting", [7, 8, 10]))), "",
-             "| tau | raw matches (%s) | matching s | process CPU s | " % scene
-             + " | ".join("precision %s" % n for n in tau[min(tau)]["precision"]) + " |",
-             "|---|---|---|---|" + "---|" * len(tau[min(tau)]["precision"])]
+    names = list(tau[min(tau)]["precision"])
+    lines = ["## 3. Parameter sweeps (the paper's tau figure, top_k, bits per table, tables)", ""]
+    if sweeps.get("settings"):
+        lines += ["### Choice of tau and top_k", "",
+                  "At 8 x 7 / tau 40 / top_k 10 the cascade missed the precision target on graf and "
+                  "hpatches_v_graffiti, because it accepts ambiguous matches whose close second best it never "
+                  "ranked (section 2). Only numbers change here, not what the options mean: each row is the "
+                  "cascade at one setting on every homography sequence (precision at 6 px minus brute force's, "
+                  "correct matches as a share of brute force's) and its matching time on the 55 pairs of %s "
+                  "(the `matching` seconds cashash prints: hashing and matching, one thread, no verification; "
+                  "the least of three runs on a shared 2-core machine, still +-10 %%). Seeds 1 and 2 draw other "
+                  "random projections." % scene, ""]
+        lines += settings_lines(sweeps["settings"], results, setting) + [""]
+    lines += ["### tau", "",
+              "Raw matches and matching time (one thread, no verification; the `matching` seconds cashash prints, "
+              "wall time on a shared 2-core machine, so +-20 %%) over the 55 pairs of %s, and precision at 6 px "
+              "over pairs 1-2 ... 1-6 of each homography sequence (%d tables x %d bits, top_k %d); the last row "
+              "is brute force." % (scene, tables, bits, top_k), "",
+              "| tau | raw matches (%s) | matching s | process CPU s | " % scene
+              + " | ".join("precision %s" % n for n in names) + " |",
+              "|---|---|---|---|" + "---|" * len(names)]
     for t in sorted(tau):
         r = tau[t]
-        lines.append("| %d | %d | %.2f | %.1f | " % (t, r["scene_matches"], r["scene_matching_s"], r["scene_cpu_s"])
+        mark = "**" if t == tau0 else ""
+        lines.append("| %s%d%s | %d | %.2f | %.1f | " % (mark, t, mark, r["scene_matches"], r["scene_matching_s"],
+                                                     r["scene_cpu_s"])
                      + " | ".join("%.1f %%" % (100 * v) for v in r["precision"].values()) + " |")
+    lines.append("| brute force | | | | " + " | ".join("%.1f %%" % (100 * _totals(results[n], "bruteforce", 6)[2])
+                                                     for n in names) + " |")
     top = max(tau)
     same = [t for t in sorted(tau) if tau[t]["scene_matches"] == tau[top]["scene_matches"]]
     mean_precision = {t: 100 * np.mean(list(tau[t]["precision"].values())) for t in tau}
-    lines += ["", "From tau = %d on, the raw matches equal those of tau = %d (%d); at tau = 40 they are %d and the "
-              "mean precision is %.1f %% against %.1f %% at tau = %d. Below 40 the candidate lists get so short "
-              "that the ratio test loses its second best: more raw matches (%d at tau = %d) but far lower "
+    most = max(tau, key=lambda t: tau[t]["scene_matches"])
+    lines += ["", "From tau = %d on, the raw matches equal those of tau = %d (%d); at tau = %d they are %d and the "
+              "mean precision is %.1f %% against %.1f %% at tau = %d. Below about 36 the candidate lists get so "
+              "short that the ratio test loses its second best: more raw matches (%d at tau = %d) but far lower "
               "precision (%.1f %%). Process CPU time (load, hash, match; noisy on the shared machine) %.1f s at "
-              "tau = 40 against %.1f s at tau = %d." % (
-                  same[0], top, tau[top]["scene_matches"], tau[40]["scene_matches"] if 40 in tau else -1,
-                  mean_precision.get(40, float("nan")), mean_precision[top], top,
-                  max(r["scene_matches"] for r in tau.values()),
-                  max(tau, key=lambda t: tau[t]["scene_matches"]),
-                  mean_precision[max(tau, key=lambda t: tau[t]["scene_matches"])],
-                  tau[40]["scene_cpu_s"] if 40 in tau else float("nan"), tau[top]["scene_cpu_s"], top)]
+              "tau = %d against %.1f s at tau = %d." % (
+                  same[0], top, tau[top]["scene_matches"], tau0, tau[tau0]["scene_matches"] if tau0 in tau else -1,
+                  mean_precision.get(tau0, float("nan")), mean_precision[top], top,
+                  tau[most]["scene_matches"], most, mean_precision[most],
+                  tau[tau0]["scene_cpu_s"] if tau0 in tau else float("nan"), tau0, tau[top]["scene_cpu_s"], top)]
     lines += ["", "![tau sweep](accuracy/%s)" % plots[0], "",
-              "top_k and bits per table: `matcher_recall_bench` (recall = share of the exact brute-force matches "
-              "that the cascade returns; CPU time per pair, one thread) on %s; brute force runs at %s pairs "
-              "per CPU second." % (scene, _fmt(bench["brute_force_pairs_per_cpu_s"], 2)), "",
+              "### top_k, bits per table, tables", "",
+              "`matcher_recall_bench` on %s, one parameter at a time around %d x %d / tau %d / top_k %d (recall = "
+              "share of the exact brute-force matches that the cascade returns; min pair recall over the pairs "
+              "with >= 100 of them; CPU time per pair of the matching alone, one thread); brute force runs at %s "
+              "pairs per CPU second. The GPU backend needs tables x bits <= 64 and top_k <= 32." % (
+                  scene, tables, bits, tau0, top_k, _fmt(bench["brute_force_pairs_per_cpu_s"], 2)), "",
               "| tables x bits | tau | top_k | recall | min pair recall | precision vs brute force | "
               "candidates within tau | ranked | pairs per CPU s |",
               "|---|---|---|---|---|---|---|---|---|"]
     for r in bench["rows"]:
-        lines.append("| %d x %d | %d | %d | %.4f | %.4f | %.4f | %.1f | %.2f | %.1f |" % (
-            r["tables"], r["bits"], r["tau"], r["top_k"], r["recall"], r["min_pair_recall"], r["precision"],
-            r["within_tau"], r["ranked"], r["pairs_per_cpu_s"]))
-    lines += ["", "![top_k and bits](accuracy/%s)" % plots[1], ""]
+        mark = "**" if [r["tables"], r["bits"], r["tau"], r["top_k"]] == list(setting) else ""
+        lines.append("| %s%d x %d%s | %d | %d | %.4f | %.4f | %.4f | %.1f | %.2f | %.1f |" % (
+            mark, r["tables"], r["bits"], mark, r["tau"], r["top_k"], r["recall"], r["min_pair_recall"],
+            r["precision"], r["within_tau"], r["ranked"], r["pairs_per_cpu_s"]))
+    lines += ["", "![top_k, bits and tables](accuracy/%s)" % plots[1], ""]
     return lines
 
 
@@ -307,7 +406,45 @@ def camera_section(cams):
     return lines
 
 
-def summary_section(results, losses, by_angle, cams, tables, bits):
+def _setting_row_text(row, results):
+    """'graf -2.60 / 99.3 %, ...' for one row of the settings sweep."""
+    parts = []
+    for n in row["matches"]:
+        _, bc, bp = _totals(results[n], "bruteforce", 6)
+        m, c = row["matches"][n], row["correct"][n]
+        parts.append("%s %+.2f points / %.1f %%" % (n, 100 * ((c / m if m else 0.0) - bp), 100.0 * c / max(bc, 1)))
+    return ", ".join(parts)
+
+
+def defaults_lines(sweeps, results, setting, scene):
+    """The summary's account of the defaults change, from the settings sweep."""
+    rows = (sweeps or {}).get("settings") or []
+    find = {tuple(r["setting"]): r for r in rows}
+    old, new = find.get((8, 7, 40, 10, 0)), find.get(tuple(setting) + (0,))
+    if not old or not new or old is new:
+        return []
+    line = ("- Defaults: tau %d and top_k %d (were 40 and 10; 8 tables x 7 bits unchanged). Precision - brute force "
+            "and correct / brute force before: %s; after: %s. Matching time on %s, one thread: %.2f s against "
+            "%.2f s (%+.0f %%)." % (setting[2], setting[3], _setting_row_text(old, results),
+                                    _setting_row_text(new, results), scene, new["scene_matching_s"],
+                                    old["scene_matching_s"],
+                                    100 * (new["scene_matching_s"] / old["scene_matching_s"] - 1)))
+    top_k_only = [r for r in rows if r["setting"][2] == 40 and r["setting"][3] > 10 and r["setting"][4] == 0]
+    if top_k_only:
+        worst = []
+        for r in top_k_only:
+            deltas = []
+            for n in r["matches"]:
+                _, _, bp = _totals(results[n], "bruteforce", 6)
+                deltas.append(100 * (r["correct"][n] / max(r["matches"][n], 1) - bp))
+            worst.append("top_k %d: %+.2f" % (r["setting"][3], min(deltas)))
+        line += (" A larger top_k alone is cheap but not enough (worst sequence, points: %s): the missing second "
+                 "bests lie beyond tau 40 in Hamming distance or in no shared bucket at all." % ", ".join(worst))
+    return [line]
+
+
+def summary_section(results, losses, by_angle, cams, tables, bits, sweeps=None, setting=None, gpu_info=None,
+                    scene=None):
     """Targets and the main findings, with the numbers they rest on."""
     lines = ["## Summary against the targets", ""]
     misses, ratios, diffs = [], [], []
@@ -369,6 +506,16 @@ def summary_section(results, losses, by_angle, cams, tables, bits):
             m, c, _ = _totals(by, "cascade_r078", 6)
             wrong += m - c
         lines[-1] += " With max_ratio 0.78 the cascade returns %d wrong matches." % wrong
+    if setting:
+        lines += defaults_lines(sweeps, results, setting, scene)
+    if gpu_info:
+        cpu = sum(r["cpu"] for p in gpu_info["agreement"].values() for r in p.values())
+        same = sum(r["identical"] for p in gpu_info["agreement"].values() for r in p.values())
+        gpu = sum(r["gpu"] for p in gpu_info["agreement"].values() for r in p.values())
+        on_gpu = all(m == "gpu-cascade" for m in gpu_info["ran_on"].values())
+        lines.append("- GPU cascade%s: %d raw matches against the CPU cascade's %d, %d rows identical (%.2f %%)." % (
+            "" if on_gpu else " (**CPU fallback stand-in, not a GPU measurement**)", gpu, cpu, same,
+            100.0 * same / max(cpu, 1)))
     if cams:
         for scene, by in cams.items():
             c, o = by.get("cascade"), by.get("colmap")
@@ -387,6 +534,9 @@ def summary_section(results, losses, by_angle, cams, tables, bits):
                                  o["rotation_median_deg"], c["relative_rotation_median_deg"],
                                  o["relative_rotation_median_deg"], "met" if ok else "**not met**",
                                  c["match_wall_s"], o["match_wall_s"]))
+                if c.get("inliers_kept_vs_bruteforce") is not None:
+                    lines[-1] += (" The cascade verifies %.1f %% of the inlier matches that brute force verifies "
+                                  "(target >= 95 %%)." % (100 * c["inliers_kept_vs_bruteforce"]))
             elif c and "position_median" in c:
                 b = by.get("bruteforce") or {}
                 lines.append("- %s: median camera position error %.4f (%.5f of the scene) after the cascade, "
@@ -403,7 +553,7 @@ def _kept_range(by_angle, lo, hi):
     return sum(r[1] * r[2] for r in rows) / count if count else float("nan")
 
 
-def write(args, results, losses, by_angle, sweeps, cams, use_gpu, eps_list):
+def write(args, results, losses, by_angle, sweeps, cams, use_gpu, eps_list, gpu_info=None):
     os.makedirs(args.out, exist_ok=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                             stdout=subprocess.PIPE, text=True).stdout.strip()
@@ -417,14 +567,17 @@ def write(args, results, losses, by_angle, sweeps, cams, use_gpu, eps_list):
                  datetime.date.today().isoformat(), commit, platform.machine(), os.cpu_count(),
                  ", GPU present" if use_gpu else ", no GPU"), ""]
     tables, bits = int(args.cascade.split(",")[0]), int(args.cascade.split(",")[1])
-    lines += summary_section(results, losses, by_angle, cams, tables, bits)
+    lines += summary_section(results, losses, by_angle, cams, tables, bits, sweeps,
+                             [int(v) for v in args.cascade.split(",")], gpu_info, args.sweep_scene)
     cascade_text = "%s tables x %s bits, tau %s, top_k %s" % tuple(args.cascade.split(","))
     lines += homography_section(results, use_gpu, eps_list, plot_homography(results, args.out),
-                                "(--CasHash.*) " + cascade_text)
+                                "(--CasHash.*) " + cascade_text, gpu_info, args.cascade)
     lines += loss_section(losses, by_angle, plot_loss_by_angle(by_angle, args.out, tables, bits), tables, bits)
     if sweeps:
+        setting = [int(v) for v in args.cascade.split(",")]
         lines += sweep_section(sweeps, [plot_tau(sweeps["tau"], args.out),
-                                        plot_topk_bits(sweeps["topk_bits"], args.out)], args.sweep_scene)
+                                        plot_topk_bits(sweeps["topk_bits"], args.out, setting)], args.sweep_scene,
+                               setting, results)
     if cams:
         lines += camera_section(cams)
     with open(args.report, "w") as f:

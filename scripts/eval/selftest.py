@@ -11,7 +11,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-from eval import cameras, homography, loss_analysis  # noqa: E402
+from eval import cameras, gpu_column, homography, loss_analysis  # noqa: E402
 
 
 def check_umeyama_recovers_similarity(rng):
@@ -82,6 +82,28 @@ def check_extra_match_reasons():
     assert counts["not_nearest"]["wrong"] == 1, counts
 
 
+def check_gpu_column_reading(tmp):
+    # Option help as boost prints it: a default may wrap onto the next line.
+    with open(os.path.join(tmp, "options.txt"), "w") as f:
+        f.write("  --CasHash.num_tables arg              First-level hash tables (=8)\n"
+                "  --CasHash.bits_per_table arg          Bits per first-level table (=7)\n"
+                "  --CasHash.tau arg                     Largest 128-bit remap Hamming distance \n"
+                "                                        ranked (=43)\n"
+                "  --CasHash.top_k arg                   Candidates per query whose exact \n"
+                "                                        distance is computed (=16)\n"
+                "  --CasHash.matcher arg                 cascade | bruteforce\n")
+    assert gpu_column.binary_defaults(tmp) == "8,7,43,16", gpu_column.binary_defaults(tmp)
+    with open(os.path.join(tmp, "graf.log"), "w") as f:
+        f.write("WARNING: no CUDA device; matching on the CPU\n"
+                "Summary: 15 pairs in 2.4 s (6.2 pairs/s) with cpu-cascade; 10770 raw matches\n"
+                "Time: loading 0.3 s, matching 1.447 s, verification 0.6 s, writing 0.01 s\n")
+    assert gpu_column.run_summary(tmp, "graf") == ("cpu-cascade", 1.447)
+    cpu = {"1-2": {"pairs": np.array([[0, 1], [2, 3], [4, 5]])}}
+    gpu = {"1-2": {"pairs": np.array([[0, 1], [2, 7]])}}
+    assert gpu_column.agreement(cpu, gpu)["1-2"] == {"cpu": 3, "gpu": 2, "identical": 1, "same": False}
+    assert gpu_column.agreement(cpu, cpu)["1-2"]["same"]
+
+
 def main():
     import tempfile
     rng = np.random.default_rng(7)
@@ -89,6 +111,8 @@ def main():
     check_camera_errors(rng)
     with tempfile.TemporaryDirectory() as tmp:
         check_images_txt_centres(tmp)
+    with tempfile.TemporaryDirectory() as tmp:
+        check_gpu_column_reading(tmp)
     check_reprojection_convention()
     check_collision_probability()
     check_extra_match_reasons()

@@ -10,9 +10,10 @@ import re
 
 from eval import homography, tools
 
-TAUS = [20, 24, 28, 32, 36, 40, 48, 64, 128]
-TOP_KS = [1, 2, 3, 5, 10, 20]
-BITS = [6, 7, 8, 9, 10, 11]
+TAUS = [20, 24, 28, 32, 36, 40, 42, 44, 48, 64, 128]
+TOP_KS = [1, 2, 3, 5, 10, 12, 16, 20, 32]
+BITS = [5, 6, 7, 8, 9, 10, 11]
+TABLES = [4, 6, 7, 8, 9, 10, 12]
 
 
 def cashash_raw_matches(binary, database, extra, log, pair_list=None):
@@ -30,8 +31,9 @@ def cashash_raw_matches(binary, database, extra, log, pair_list=None):
     return cpu, float(matching.group(1)) if matching else float("nan"), int(raw.group(1)) if raw else -1
 
 
-def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log, tables, bits, top_k):
-    """{tau: {scene_cpu_s, scene_matching_s, scene_matches, precision per sequence}}."""
+def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log, tables, bits, top_k, default_tau):
+    """{tau: {scene_cpu_s, scene_matching_s, scene_matches, precision per sequence}} over TAUS and
+    the default tau."""
     os.makedirs(work_dir, exist_ok=True)
     scene_copy = os.path.join(work_dir, "scene.db")
     tools.copy_database(scene_db, scene_copy)
@@ -42,7 +44,7 @@ def tau_sweep(binary, scene_db, homography_dbs, work_dir, eps, log, tables, bits
     pair_list = os.path.join(work_dir, "pairs.txt")
     homography.write_pair_list(pair_list)
     results = {}
-    for tau in TAUS:
+    for tau in sorted(set(TAUS + [default_tau])):
         extra = ["--CasHash.matcher", "cascade", "--CasHash.tau", str(tau), "--CasHash.num_tables", str(tables),
                  "--CasHash.bits_per_table", str(bits), "--CasHash.top_k", str(top_k)]
         cpu, matching, raw = cashash_raw_matches(binary, scene_copy, extra, log)
@@ -79,7 +81,42 @@ def recall_bench(bench_binary, database, settings, log):
     return {"rows": rows, "brute_force_pairs_per_cpu_s": float(brute.group(3)) if brute else None}
 
 
-def topk_bits_sweep(bench_binary, database, tables, tau, default_top_k, default_bits, log):
-    settings = [(tables, default_bits, tau, k) for k in TOP_KS]
-    settings += [(tables, b, tau, default_top_k) for b in BITS if b != default_bits]
+def topk_bits_sweep(bench_binary, database, tables, bits, tau, top_k, log):
+    """One parameter at a time around the setting (tables, bits, tau, top_k):
+    top_k, bits per table, number of tables. The setting itself is measured
+    once, in the top_k series."""
+    settings = [(tables, bits, tau, k) for k in sorted(set(TOP_KS + [top_k]))]
+    settings += [(tables, b, tau, top_k) for b in BITS if b != bits]
+    settings += [(t, bits, tau, top_k) for t in TABLES if t != tables]
     return recall_bench(bench_binary, database, settings, log)
+
+
+def setting_sweep(binary, scene_db, homography_dbs, work_dir, eps, log, settings, repeats=3):
+    """How the defaults were chosen: per (tables, bits, tau, top_k, seed), the
+    precision and correct matches at eps px on every homography sequence, and
+    the matching time on the scene (one thread, no verification; the least of
+    `repeats` runs, because the shared machine only ever adds time)."""
+    os.makedirs(work_dir, exist_ok=True)
+    scene_copy = os.path.join(work_dir, "scene.db")
+    tools.copy_database(scene_db, scene_copy)
+    pair_list = os.path.join(work_dir, "pairs.txt")
+    homography.write_pair_list(pair_list)
+    rows = []
+    for tables, bits, tau, top_k, seed in settings:
+        extra = ["--CasHash.matcher", "cascade", "--CasHash.num_tables", str(tables), "--CasHash.bits_per_table",
+                 str(bits), "--CasHash.tau", str(tau), "--CasHash.top_k", str(top_k), "--random_seed", str(seed)]
+        row = {"setting": [tables, bits, tau, top_k, seed], "matches": {}, "correct": {}}
+        if seed == 0:
+            runs = [cashash_raw_matches(binary, scene_copy, extra, log) for _ in range(repeats)]
+            row["scene_cpu_s"] = min(r[0] for r in runs)
+            row["scene_matching_s"] = min(r[1] for r in runs)
+            row["scene_matches"] = runs[0][2]
+        for name, (features_db, hs) in homography_dbs.items():
+            copy = os.path.join(work_dir, name + ".db")
+            tools.copy_database(features_db, copy)
+            cashash_raw_matches(binary, copy, extra, log, pair_list)
+            evaluated = homography.evaluate_database(copy, hs, [eps])
+            row["matches"][name] = sum(p["matches"] for p in evaluated.values())
+            row["correct"][name] = sum(p["correct"][str(eps)] for p in evaluated.values())
+        rows.append(row)
+    return rows
