@@ -1,11 +1,13 @@
 // Batched LO-RANSAC for F and H. Per pair (one block), per round: every
 // thread draws its own sample from a stream keyed by (pair seed, trial
-// index), solves it and scores its models over all correspondences; the
-// block picks the round's best (more inliers, then smaller residual sum,
-// then lower trial index, so the result never depends on timing); when it
-// beats the pair's best, the block refits it on its inliers (8-point or
-// DLT, the CPU path's local optimisation) while the inlier set grows; then
-// COLMAP's adaptive stopping rule decides whether another round is needed.
+// index), solves it and scores its models over all correspondences (the
+// hypotheses in parallel); then the block walks the round's trials in trial
+// order exactly as the CPU loop walks its trials: a trial that beats the
+// best so far (more inliers, then a smaller residual sum) becomes the best
+// and the block refits it on its inliers (8-point or DLT, the CPU path's
+// local optimisation) while the inlier set grows. COLMAP's adaptive
+// stopping rule is evaluated after each round. Every decision depends on
+// the trial order only, never on timing, so a seed gives one result.
 #include "impl/ransac_kernels.cuh"
 
 #include <cfloat>
@@ -63,8 +65,8 @@ __device__ inline unsigned long long SupportKey(int count, float sum) {
 }
 
 struct BlockScratch {
-  unsigned long long warp_key[kWarps];
-  int warp_tid[kWarps];
+  unsigned long long keys[kRansacThreads];  // each trial's best support this round
+  double models[kRansacThreads][9];         // and its model
   int warp_count[kWarps];
   double warp_sum[kWarps];
   double warp_upper[kWarps][45];
@@ -73,39 +75,9 @@ struct BlockScratch {
   double local_model[9];
   unsigned long long best_key;
   int best_count;
-  int winner;
   int local_ok;
-  int improved;  // the round's winner beat the pair's best
   int num_local_refits;
 };
-
-// Block-wide argmax of (key, lowest thread); every thread gets the winner.
-__device__ inline int BlockArgMax(unsigned long long key, BlockScratch& s) {
-  int tid = threadIdx.x;
-  for (int offset = 16; offset > 0; offset >>= 1) {
-    const unsigned long long other_key = __shfl_down_sync(0xffffffffu, key, offset);
-    const int other_tid = __shfl_down_sync(0xffffffffu, tid, offset);
-    if (other_key > key || (other_key == key && other_tid < tid)) {
-      key = other_key;
-      tid = other_tid;
-    }
-  }
-  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
-  if (lane == 0) {
-    s.warp_key[warp] = key;
-    s.warp_tid[warp] = tid;
-  }
-  __syncthreads();
-  if (threadIdx.x == 0) {
-    int best = 0;
-    for (int w = 1; w < kWarps; ++w) {
-      if (s.warp_key[w] > s.warp_key[best]) best = w;  // lower warps hold lower threads
-    }
-    s.winner = s.warp_key[best] == 0 ? -1 : s.warp_tid[best];
-  }
-  __syncthreads();
-  return s.winner;
-}
 
 // Inlier count and residual sum of one model over the pair, by the block.
 template <typename Model>
@@ -190,7 +162,6 @@ __global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch la
   if (threadIdx.x == 0) {
     s.best_key = 0;
     s.best_count = 0;
-    s.improved = 0;
     s.num_local_refits = 0;
   }
   __syncthreads();
@@ -246,15 +217,25 @@ __global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch la
         }
       }
     }
-    const int winner = BlockArgMax(my_key, s);
-    if (winner >= 0 && threadIdx.x == winner && my_key > s.best_key) {
-      for (int k = 0; k < 9; ++k) s.best_model[k] = models[my_model][k];
-      s.best_key = my_key;
-      s.best_count = static_cast<int>(my_key >> 32);
-      s.improved = 1;
+    // Publish every trial's best model, then walk the round in trial order
+    // as the CPU loop would: each trial that beats the best so far becomes
+    // the best and is refined at once (refining only the round's winner
+    // would refine lucky wide-band models that a least-squares refit cannot
+    // improve, and lose inliers against the CPU).
+    s.keys[threadIdx.x] = my_key;
+    if (my_model >= 0) {
+      for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[my_model][k];
     }
     __syncthreads();
-    if (s.improved) {
+    unsigned long long best_key = s.best_key;
+    for (int t = 0; t < kRansacThreads; ++t) {
+      if (s.keys[t] <= best_key) continue;  // same decision in every thread
+      if (threadIdx.x == 0) {
+        for (int k = 0; k < 9; ++k) s.best_model[k] = s.models[t][k];
+        s.best_key = s.keys[t];
+        s.best_count = static_cast<int>(s.keys[t] >> 32);
+      }
+      __syncthreads();
       // Local optimisation, as the CPU path: refit while the inlier set grows.
       if (s.best_count > Model::kSampleSize && s.best_count >= Model::kMinLocalSize) {
         for (int it = 0; it < kMaxLocalIterations; ++it) {
@@ -281,8 +262,8 @@ __global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch la
       }
       dyn_max_trials = RequiredTrials(s.best_count, n, launch.confidence, launch.trials_multiplier,
                                       Model::kSampleSize);
-      __syncthreads();
-      if (threadIdx.x == 0) s.improved = 0;
+      best_key = s.best_key;
+      __syncthreads();  // everyone has read the best before thread 0 may change it
     }
     trials_done = min((round + 1) * kRansacThreads, launch.max_trials);
     __syncthreads();

@@ -100,19 +100,21 @@ TEST(GpuTwoViewRansac, SyntheticPairsAgreeWithCpu) {
   ransac.Estimate(pointers, seeds, &F, &H);
   ASSERT_EQ(F.size(), cases.size());
 
-  std::printf("%-28s %7s %7s %7s %7s %7s %9s %8s\n", "case", "matches", "F cpu", "F gpu", "H cpu", "H gpu",
-              "rms px", "trials");
+  std::printf("%-28s %7s %7s %7s %7s %7s %8s %8s %7s\n", "case", "matches", "F cpu", "F gpu", "H cpu", "H gpu",
+              "rms cpu", "rms gpu", "trials");
   for (size_t k = 0; k < cases.size(); ++k) {
     SCOPED_TRACE(cases[k].name);
     TwoViewGeometryOptions pair_options = options;
     pair_options.random_seed = seeds[k];
     const TwoViewModelEstimate cpu_F = EstimateFundamental(points[k], pair_options);
     const TwoViewModelEstimate cpu_H = EstimateHomography(points[k], pair_options);
-    // RMS Sampson distance over the true inliers: the noise is 0.3 px.
+    // RMS Sampson distance over the true inliers (the noise is 0.3 px).
     std::vector<char> truth(cases[k].scene.is_inlier.begin(), cases[k].scene.is_inlier.end());
     const double rms = F[k].success ? RmsSampsonPixels(F[k].model, points[k].pixels, truth) : -1;
-    std::printf("%-28s %7zu %7d %7d %7d %7d %9.3f %8d\n", cases[k].name.c_str(), points[k].pixels.size(),
-                cpu_F.num_inliers, F[k].num_inliers, cpu_H.num_inliers, H[k].num_inliers, rms, F[k].num_trials);
+    const double cpu_rms = cpu_F.success ? RmsSampsonPixels(cpu_F.model, points[k].pixels, truth) : -1;
+    std::printf("%-28s %7zu %7d %7d %7d %7d %8.3f %8.3f %7d\n", cases[k].name.c_str(), points[k].pixels.size(),
+                cpu_F.num_inliers, F[k].num_inliers, cpu_H.num_inliers, H[k].num_inliers, cpu_rms, rms,
+                F[k].num_trials);
     ASSERT_TRUE(F[k].success);
     ASSERT_EQ(F[k].inlier_mask.size(), points[k].pixels.size());
     int mask_count = 0;
@@ -123,8 +125,8 @@ TEST(GpuTwoViewRansac, SyntheticPairsAgreeWithCpu) {
       EXPECT_TRUE(Close(H[k].num_inliers, cpu_H.num_inliers)) << H[k].num_inliers << " vs " << cpu_H.num_inliers;
     } else {
       EXPECT_TRUE(Close(F[k].num_inliers, cpu_F.num_inliers)) << F[k].num_inliers << " vs " << cpu_F.num_inliers;
-      // The GPU's F explains the true inliers to about the noise (0.3 px).
-      EXPECT_LT(rms, 0.6);
+      // The GPU's F explains the true inliers about as well as the CPU's.
+      EXPECT_LE(rms, 1.25 * cpu_rms + 0.25);
       // And finds the true inliers.
       int true_kept = 0, true_total = 0;
       for (size_t i = 0; i < cases[k].scene.is_inlier.size(); ++i) {
