@@ -24,6 +24,7 @@
 #include "cashash_cuda/gpu_feature_matcher.h"
 #include "impl/cascade_hash_kernels.cuh"
 #include "impl/cascade_match_kernels.cuh"
+#include "impl/cascade_tile_kernels.cuh"
 #include "impl/device_image.cuh"
 #include "impl/device_memory.cuh"
 #include "utils/cuda_check.cuh"
@@ -34,8 +35,19 @@ namespace {
 
 // A batch holds at most this many query features (forward direction) ...
 constexpr size_t kMaxBatchQueries = size_t{1} << 22;
-// ... and at most this many pairs.
+// ... and at most this many pairs ...
 constexpr size_t kMaxBatchPairs = 8192;
+// ... and candidate lists of at most this many bytes (tiled kernels): with
+// 8 tables and 16 keys per list, 2 x 8192 features per pair take 8.5 MB, so
+// ~120 such pairs per batch, ~2.5 ms of work at 50k pairs/s.
+constexpr size_t kMaxBatchListBytes = size_t{1} << 30;
+
+// Which matching kernels run: the bucket-tile kernels (default) or the older
+// per-query kernel, kept to compare against (CASHASH_GPU_CASCADE_KERNEL=direct).
+bool UseTiledKernels() {
+  const char* value = std::getenv("CASHASH_GPU_CASCADE_KERNEL");
+  return value == nullptr || std::string(value) != "direct";
+}
 
 std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
   if (options.num_tables * options.bits_per_table > kMaxSignatureBits) {
@@ -61,10 +73,12 @@ struct BatchSlot {
   DeviceBuffer tasks;       // PairTask[]
   DeviceBuffer best;        // int32 per forward query
   DeviceBuffer cursor;      // one uint32
+  DeviceBuffer list_keys;   // tiled kernels: uint32 per (list row, table, slot)
+  DeviceBuffer list_counts; // tiled kernels: uint8 per (list row, table)
   PinnedBuffer host_tasks;  // staging of PairTask[]
   PinnedBuffer out;         // mapped: uint2 matches
   PinnedBuffer segments;    // mapped: MatchSegment per task
-  size_t task_capacity = 0, query_capacity = 0;
+  size_t task_capacity = 0, query_capacity = 0, row_capacity = 0;
   // What is in flight: the pair index of each task.
   std::vector<size_t> pair_of_task;
   bool busy = false;
@@ -74,7 +88,11 @@ class GpuCascadeMatcher : public FeatureMatcher {
  public:
   GpuCascadeMatcher(const SiftMatchingOptions& sift_options, const CasHashOptions& options,
                     const MeanDescriptor& mean, int gpu_index)
-      : sift_options_(sift_options), options_(options), device_(gpu_index) {
+      : sift_options_(sift_options),
+        options_(options),
+        device_(gpu_index),
+        tiled_(UseTiledKernels()),
+        list_capacity_(CandidateListCapacity(options.top_k)) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
     if (error.empty()) error = CheckGpuCascadeOptions(options);
@@ -269,10 +287,15 @@ class GpuCascadeMatcher : public FeatureMatcher {
     pending_.clear();
   }
 
-  // Device bytes of a batch slot sized for `tasks` pairs and `queries`
-  // forward queries.
-  static size_t SlotBytes(size_t tasks, size_t queries) {
-    return tasks * sizeof(PairTask) + queries * sizeof(int32_t) + 256;
+  // Bytes of the candidate lists of `rows` features (tiled kernels).
+  size_t ListBytes(size_t rows) const {
+    return tiled_ ? rows * options_.num_tables * (list_capacity_ * sizeof(uint32_t) + 1) : 0;
+  }
+
+  // Device bytes of a batch slot sized for `tasks` pairs, `queries` forward
+  // queries and `rows` list rows (features of both sides).
+  size_t SlotBytes(size_t tasks, size_t queries, size_t rows) const {
+    return tasks * sizeof(PairTask) + queries * sizeof(int32_t) + ListBytes(rows) + 512;
   }
 
   // End of the batch starting at `start`: bounded by kMaxBatch* and by the
@@ -281,61 +304,79 @@ class GpuCascadeMatcher : public FeatureMatcher {
     size_t free_for_slots = std::numeric_limits<size_t>::max();
     if (budget_ != std::numeric_limits<size_t>::max()) {
       size_t slots_now = 0;
-      for (const BatchSlot& s : slots_) slots_now += SlotBytes(s.task_capacity, s.query_capacity);
+      for (const BatchSlot& s : slots_) slots_now += SlotBytes(s.task_capacity, s.query_capacity, s.row_capacity);
       const size_t images = used_ - slots_now;
       free_for_slots = budget_ > images ? (budget_ - images) / 2 : 0;
     }
-    size_t end = start, queries = 0;
+    size_t end = start, queries = 0, rows = 0;
     while (end < tasks.size() && end - start < kMaxBatchPairs) {
       const size_t q = tasks[end].a.num_features;
-      if (end > start && (queries + q > kMaxBatchQueries || SlotBytes(end + 1 - start, queries + q) > free_for_slots)) {
+      const size_t r = q + tasks[end].b.num_features;
+      if (end > start && (queries + q > kMaxBatchQueries || ListBytes(rows + r) > kMaxBatchListBytes ||
+                          SlotBytes(end + 1 - start, queries + q, rows + r) > free_for_slots)) {
         break;
       }
-      if (end == start && SlotBytes(1, q) > free_for_slots) {
-        throw std::runtime_error("GPU memory budget too small to match a pair of " + std::to_string(q) +
-                                 " features: " + MiB(SlotBytes(1, q)) + " of scratch needed, " +
-                                 MiB(free_for_slots) + " left");
+      if (end == start && SlotBytes(1, q, r) > free_for_slots) {
+        throw std::runtime_error("GPU memory budget too small to match a pair of " + std::to_string(q) + " and " +
+                                 std::to_string(r - q) + " features: " + MiB(SlotBytes(1, q, r)) +
+                                 " of scratch needed, " + MiB(free_for_slots) + " left");
       }
       queries += q;
+      rows += r;
       ++end;
     }
     return end;
   }
 
-  // Grows the slot's buffers to hold `num_tasks` pairs and `queries` queries.
-  void EnsureCapacity(BatchSlot* slot, size_t num_tasks, size_t queries) {
-    if (num_tasks <= slot->task_capacity && queries <= slot->query_capacity) return;
+  // Grows the slot's buffers to hold `num_tasks` pairs, `queries` queries
+  // and `rows` list rows.
+  void EnsureCapacity(BatchSlot* slot, size_t num_tasks, size_t queries, size_t rows) {
+    if (num_tasks <= slot->task_capacity && queries <= slot->query_capacity && rows <= slot->row_capacity) return;
     const size_t new_tasks = std::max(num_tasks, slot->task_capacity);
     const size_t new_queries = std::max(queries, slot->query_capacity);
-    used_ -= SlotBytes(slot->task_capacity, slot->query_capacity);
+    const size_t new_rows = std::max(rows, slot->row_capacity);
+    used_ -= SlotBytes(slot->task_capacity, slot->query_capacity, slot->row_capacity);
     slot->tasks.Release();
     slot->best.Release();
-    slot->task_capacity = slot->query_capacity = 0;
-    Reserve(SlotBytes(new_tasks, new_queries), "matching scratch");
+    slot->list_keys.Release();
+    slot->list_counts.Release();
+    slot->task_capacity = slot->query_capacity = slot->row_capacity = 0;
+    Reserve(SlotBytes(new_tasks, new_queries, new_rows), "matching scratch");
     slot->tasks.Allocate(new_tasks * sizeof(PairTask), "pair tasks");
     slot->best.Allocate(new_queries * sizeof(int32_t), "match results");
+    if (tiled_ && new_rows > 0) {
+      slot->list_keys.Allocate(new_rows * options_.num_tables * list_capacity_ * sizeof(uint32_t),
+                               "candidate lists");
+      slot->list_counts.Allocate(new_rows * options_.num_tables, "candidate list counts");
+    }
     if (slot->cursor.bytes() == 0) slot->cursor.Allocate(256, "match cursor");
     slot->host_tasks.Allocate(new_tasks * sizeof(PairTask), false, "pair tasks");
     slot->segments.Allocate(new_tasks * sizeof(MatchSegment), true, "match segments");
     slot->out.Allocate(new_queries * sizeof(uint2), true, "matches");
     slot->task_capacity = new_tasks;
     slot->query_capacity = new_queries;
+    slot->row_capacity = new_rows;
   }
 
   void Launch(BatchSlot* slot, const std::vector<PairTask>& all_tasks, const std::vector<size_t>& pair_of_task,
               size_t start, size_t end) {
     const size_t num_tasks = end - start;
-    size_t queries = 0;
+    size_t queries = 0, rows = 0;
     uint32_t items = 0;
-    for (size_t k = start; k < end; ++k) queries += all_tasks[k].a.num_features;
-    EnsureCapacity(slot, num_tasks, queries);
+    for (size_t k = start; k < end; ++k) {
+      queries += all_tasks[k].a.num_features;
+      rows += all_tasks[k].a.num_features + all_tasks[k].b.num_features;
+    }
+    EnsureCapacity(slot, num_tasks, queries, rows);
     PairTask* staged = slot->host_tasks.host<PairTask>();
-    uint32_t offset = 0;
+    uint32_t offset = 0, row = 0;
     for (size_t k = 0; k < num_tasks; ++k) {
       staged[k] = all_tasks[start + k];
       staged[k].best_offset = offset;
       staged[k].item_begin = items;
+      staged[k].list_offset = row;
       offset += staged[k].a.num_features;
+      row += staged[k].a.num_features + staged[k].b.num_features;
       items += (staged[k].a.num_features + kQueriesPerItem - 1) / kQueriesPerItem;
     }
     slot->pair_of_task.assign(pair_of_task.begin() + start, pair_of_task.begin() + end);
@@ -355,8 +396,19 @@ class GpuCascadeMatcher : public FeatureMatcher {
       params.field_low_bits |= uint64_t{1} << low;
       params.field_high_bits |= uint64_t{1} << high;
     }
-    LaunchCascadeMatch(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params,
-                       sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+    if (tiled_) {
+      CandidateLists lists;
+      lists.keys = slot->list_keys.as<uint32_t>();
+      lists.counts = slot->list_counts.as<uint8_t>();
+      lists.capacity = list_capacity_;
+      CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * options_.num_tables, slot->stream));
+      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream);
+      LaunchCascadeSelect(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
+                          sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+    } else {
+      LaunchCascadeMatch(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params,
+                         sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+    }
     LaunchCompactMatches(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), slot->best.as<int32_t>(),
                          slot->out.device<uint2>(), slot->segments.device<MatchSegment>(),
                          slot->cursor.as<uint32_t>(), slot->stream);
@@ -380,6 +432,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
   const SiftMatchingOptions sift_options_;
   const CasHashOptions options_;
   const int device_;
+  const bool tiled_;
+  const int list_capacity_;
   size_t budget_ = 0;
   size_t used_ = 0;
   int rows_padded_ = 0;

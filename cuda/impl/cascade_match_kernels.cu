@@ -14,6 +14,7 @@
 // dots by (dot descending, index ascending).
 #include "impl/cascade_match_kernels.cuh"
 
+#include "impl/cascade_tile_kernels.cuh"
 #include "utils/cuda_check.cuh"
 #include "utils/warp_primitives.cuh"
 
@@ -174,6 +175,53 @@ __device__ __forceinline__ uint32_t EntryKey(uint4 c, uint4 s, bool valid, uint6
   return key;
 }
 
+// Exact dot products of the ranked candidates, then best / second best and
+// COLMAP's rule: the accepted match of feature q of `query`, or -1 (the same
+// value in every lane).
+__device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, uint32_t q,
+                                                const DeviceImageView& target, const WarpSortedList& ranked,
+                                                const MatchParams& params) {
+  const unsigned lane = LaneId();
+
+  // Exact dot products of the ranked candidates: 8 per pass, 4 lanes of 32
+  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum).
+  const int count = min(__popc(__ballot_sync(kFullWarpMask, ranked.key != WarpSortedList::kEmptyKey)), params.top_k);
+  if (count == 0) return -1;
+  const unsigned part = lane & 3, group = lane >> 2;
+  const uint4* mine = reinterpret_cast<const uint4*>(query.descriptors + size_t(q) * 128) + 2 * part;
+  const uint4 mine0 = mine[0], mine1 = mine[1];
+  int my_dot = 0;
+  for (int first = 0; first < count; first += 8) {
+    const int j = first + static_cast<int>(group);
+    const uint32_t key = ranked.At(min(j, 31));
+    uint4 other0 = make_uint4(0, 0, 0, 0), other1 = other0;
+    if (j < count) {
+      const uint4* other = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
+      other0 = other[0];
+      other1 = other[1];
+    }
+    const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other0) + Dot16(mine1, other1)));
+    // Lane L in [first, first + 8) takes the dot of candidate L.
+    const int rel = static_cast<int>(lane) - first;
+    const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
+    if (rel >= 0 && rel < 8) my_dot = got;
+  }
+  // Best by (dot descending, index ascending), second = largest dot of the
+  // others (0 when none): three single-instruction warp reductions. Dots of
+  // uint8 vectors are >= 0.
+  const bool valid = static_cast<int>(lane) < count;
+  const uint32_t dot = valid ? static_cast<uint32_t>(my_dot) : 0u;
+  const uint32_t index = ranked.key & kIndexMask;
+  const uint32_t best_dot = __reduce_max_sync(kFullWarpMask, dot);
+  if (best_dot == 0) return -1;
+  const uint32_t best_index = __reduce_min_sync(kFullWarpMask, valid && dot == best_dot ? index : 0xffffffffu);
+  const uint32_t second_dot = __reduce_max_sync(kFullWarpMask, valid && index != best_index ? dot : 0u);
+  if (!Accept(static_cast<int>(best_dot), static_cast<int>(second_dot), params.max_ratio, params.max_distance)) {
+    return -1;
+  }
+  return static_cast<int>(best_index);
+}
+
 // Accepted best match in `target` of feature q of `query`, or -1 (the same
 // value in every lane).
 //
@@ -240,55 +288,84 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
                 params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
-  const WarpSortedList& ranked = ranking.ranked;
-
-  // Exact dot products of the ranked candidates: 8 per pass, 4 lanes of 32
-  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum).
-  const int count = min(__popc(__ballot_sync(kFullWarpMask, ranked.key != WarpSortedList::kEmptyKey)), params.top_k);
-  if (count == 0) return -1;
-  const unsigned part = lane & 3, group = lane >> 2;
-  const uint4* mine = reinterpret_cast<const uint4*>(query.descriptors + size_t(q) * 128) + 2 * part;
-  const uint4 mine0 = mine[0], mine1 = mine[1];
-  int my_dot = 0;
-  for (int first = 0; first < count; first += 8) {
-    const int j = first + static_cast<int>(group);
-    const uint32_t key = ranked.At(min(j, 31));
-    uint4 other0 = make_uint4(0, 0, 0, 0), other1 = other0;
-    if (j < count) {
-      const uint4* other = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
-      other0 = other[0];
-      other1 = other[1];
-    }
-    const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other0) + Dot16(mine1, other1)));
-    // Lane L in [first, first + 8) takes the dot of candidate L.
-    const int rel = static_cast<int>(lane) - first;
-    const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
-    if (rel >= 0 && rel < 8) my_dot = got;
-  }
-  // Best by (dot descending, index ascending), second = largest dot of the
-  // others (0 when none): three single-instruction warp reductions. Dots of
-  // uint8 vectors are >= 0.
-  const bool valid = static_cast<int>(lane) < count;
-  const uint32_t dot = valid ? static_cast<uint32_t>(my_dot) : 0u;
-  const uint32_t index = ranked.key & kIndexMask;
-  const uint32_t best_dot = __reduce_max_sync(kFullWarpMask, dot);
-  if (best_dot == 0) return -1;
-  const uint32_t best_index = __reduce_min_sync(kFullWarpMask, valid && dot == best_dot ? index : 0xffffffffu);
-  const uint32_t second_dot = __reduce_max_sync(kFullWarpMask, valid && index != best_index ? dot : 0u);
-  if (!Accept(static_cast<int>(best_dot), static_cast<int>(second_dot), params.max_ratio, params.max_distance)) {
-    return -1;
-  }
-  return static_cast<int>(best_index);
+  return DecideFromRanked(query, q, target, ranking.ranked, params);
 }
+
+// The same answer from the query's candidate lists (list row `row`), which
+// hold every candidate within tau that can be among its top_k, per table,
+// de-duplicated already: the lists of all tables form one stream of keys,
+// ranked exactly as in MatchQuery.
+__device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row, const DeviceImageView& target,
+                           const CandidateLists& lists, const MatchParams& params, WarpScratch& scratch) {
+  const unsigned lane = LaneId();
+  const int num_tables = params.num_tables;
+  uint32_t size = 0, begin = 0;
+  if (static_cast<int>(lane) < num_tables) {
+    const size_t list = row * num_tables + lane;
+    size = lists.counts[list];
+    begin = static_cast<uint32_t>(list * lists.capacity);
+  }
+  uint32_t inclusive = size;
+  for (int d = 1; d < num_tables; d <<= 1) {
+    const uint32_t o = __shfl_up_sync(kFullWarpMask, inclusive, d);
+    if (lane >= static_cast<unsigned>(d)) inclusive += o;
+  }
+  const uint32_t total = __shfl_sync(kFullWarpMask, inclusive, num_tables - 1);
+  const unsigned nonempty = __ballot_sync(kFullWarpMask, size != 0);
+  __syncwarp();  // the previous query's reads of the scratch are done
+  if (size != 0) {
+    const uint32_t slot = __popc(nonempty & LaneMaskLt());
+    scratch.base[slot] = begin - (inclusive - size);
+    scratch.start[slot] = inclusive - size;
+  }
+  __syncwarp();
+  const bool has_slot = lane < static_cast<unsigned>(__popc(nonempty));
+  const uint32_t my_start = has_slot ? scratch.start[lane] : 0xffffffffu;
+  const uint32_t my_base = has_slot ? scratch.base[lane] : 0u;
+
+  QueryRanking ranking(static_cast<uint32_t>(params.tau));
+  uint32_t slot_before = ~0u;
+  for (uint32_t first = 0; first < total; first += 64) {
+    const uint32_t pos0 = first + lane, pos1 = pos0 + 32;
+    uint32_t key0 = __ldg(lists.keys + ChunkEntryIndex(my_start, my_base, first, total, slot_before));
+    uint32_t key1 = WarpSortedList::kEmptyKey;
+    if (first + 32 < total) {
+      key1 = __ldg(lists.keys + ChunkEntryIndex(my_start, my_base, first + 32, total, slot_before));
+      if (pos1 >= total || key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
+    }
+    if (pos0 >= total || key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
+    ranking.Add(key0, key1, scratch.pending, params.top_k);
+  }
+  if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
+  return DecideFromRanked(query, q, target, ranking.ranked, params);
+}
+
+// How the match kernel answers one query: straight from the bucket tables,
+// or from the candidate lists of the tile kernel.
+struct DirectQuery {
+  __device__ __forceinline__ int operator()(const PairTask* task, bool reverse, uint32_t q,
+                                            const MatchParams& params, WarpScratch& scratch) const {
+    return MatchQuery(reverse ? task->b : task->a, q, reverse ? task->a : task->b, params, scratch);
+  }
+};
+
+struct ListQuery {
+  CandidateLists lists;
+  __device__ __forceinline__ int operator()(const PairTask* task, bool reverse, uint32_t q,
+                                            const MatchParams& params, WarpScratch& scratch) const {
+    const size_t row = size_t(task->list_offset) + (reverse ? task->a.num_features : 0u) + q;
+    return SelectQuery(reverse ? task->b : task->a, q, row, reverse ? task->a : task->b, lists, params, scratch);
+  }
+};
 
 // best[i] = match of a's feature i in b. With kCrossCheck, a forward match j
 // is re-queried right away (j of b against a, same warp) and dropped unless
 // the answer is i: one launch, and the reverse work spreads over all warps
 // with the forward work instead of waiting in a second pass.
-template <bool kCrossCheck>
+template <bool kCrossCheck, class Query>
 __global__ void __launch_bounds__(kThreads, kMinBlocksPerSm) CascadeMatchKernel(const PairTask* tasks, int num_tasks,
                                                                               uint32_t total_items, MatchParams params,
-                                                                              int32_t* best) {
+                                                                              Query query, int32_t* best) {
   __shared__ WarpScratch warp_scratch[kThreads / 32];
   WarpScratch& scratch = warp_scratch[threadIdx.x >> 5];
   const unsigned lane = LaneId();
@@ -305,8 +382,7 @@ __global__ void __launch_bounds__(kThreads, kMinBlocksPerSm) CascadeMatchKernel(
     int forward = -1;
     bool reverse = false;
     while (i < last) {
-      const int answer = MatchQuery(reverse ? task->b : task->a, reverse ? static_cast<uint32_t>(forward) : i,
-                                    reverse ? task->a : task->b, params, scratch);
+      const int answer = query(task, reverse, reverse ? static_cast<uint32_t>(forward) : i, params, scratch);
       if (kCrossCheck && !reverse && answer >= 0) {
         forward = answer;
         reverse = true;
@@ -366,21 +442,38 @@ __global__ void __launch_bounds__(kCompactThreads) CompactKernel(const PairTask*
 int CascadeMatchGridSize(int device) {
   int sms = 0, per_sm = 0;
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, CascadeMatchKernel<true>, kThreads, 0));
+  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, CascadeMatchKernel<true, DirectQuery>,
+                                                           kThreads, 0));
   return sms * (per_sm > 0 ? per_sm : 1);
 }
 
-void LaunchCascadeMatch(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
-                        bool cross_check, int grid_size, int32_t* best, cudaStream_t stream) {
+namespace {
+
+template <class Query>
+void LaunchMatchKernel(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                       const Query& query, bool cross_check, int grid_size, int32_t* best, cudaStream_t stream) {
   if (num_tasks == 0 || total_items == 0) return;
   const uint32_t needed = (total_items + kThreads / 32 - 1) / (kThreads / 32);
   const int grid = static_cast<int>(needed < static_cast<uint32_t>(grid_size) ? needed : static_cast<uint32_t>(grid_size));
   if (cross_check) {
-    CascadeMatchKernel<true><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, best);
+    CascadeMatchKernel<true, Query><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, query, best);
   } else {
-    CascadeMatchKernel<false><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, best);
+    CascadeMatchKernel<false, Query><<<grid, kThreads, 0, stream>>>(tasks, num_tasks, total_items, params, query, best);
   }
   CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace
+
+void LaunchCascadeMatch(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                        bool cross_check, int grid_size, int32_t* best, cudaStream_t stream) {
+  LaunchMatchKernel(tasks, num_tasks, total_items, params, DirectQuery{}, cross_check, grid_size, best, stream);
+}
+
+void LaunchCascadeSelect(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                         const CandidateLists& lists, bool cross_check, int grid_size, int32_t* best,
+                         cudaStream_t stream) {
+  LaunchMatchKernel(tasks, num_tasks, total_items, params, ListQuery{lists}, cross_check, grid_size, best, stream);
 }
 
 void LaunchCompactMatches(const PairTask* tasks, int num_tasks, const int32_t* best, uint2* out,

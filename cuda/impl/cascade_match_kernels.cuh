@@ -28,6 +28,7 @@ struct PairTask {
   DeviceImageView b;
   uint32_t best_offset = 0;  // start of this pair's a.num_features results
   uint32_t item_begin = 0;   // first work item (ceil(a.n / kQueriesPerItem) items)
+  uint32_t list_offset = 0;  // first candidate-list row (tiled path, cascade_tile_kernels.cuh)
 };
 
 struct MatchParams {
@@ -57,6 +58,15 @@ int CascadeMatchGridSize(int device);
 // i back (one launch). Asynchronous on `stream`.
 void LaunchCascadeMatch(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
                         bool cross_check, int grid_size, int32_t* best, cudaStream_t stream);
+
+struct CandidateLists;
+
+// The same result from the candidate lists filled by LaunchCascadeTiles: per
+// query, the top_k of its lists' keys, then exact distances and the
+// decision, with the reverse query fused as above.
+void LaunchCascadeSelect(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                         const CandidateLists& lists, bool cross_check, int grid_size, int32_t* best,
+                         cudaStream_t stream);
 
 // Writes each task's surviving matches (point2D_idx1, point2D_idx2) in
 // ascending idx1 into out (device-visible, e.g. mapped host memory) and its

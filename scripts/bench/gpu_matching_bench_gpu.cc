@@ -2,13 +2,15 @@
 //
 //   gpu_matching_bench_gpu [--sample FILE] [--images N] [--sizes 2048,8192,16384]
 //                          [--repeats R] [--cpu_pairs P] [--bf_pairs P]
+//                          [--tables T] [--bits B] [--top_k K]
 //
 // Descriptors are sampled from FILE (raw N x 128 uint8 rows, e.g. SIFT rows
 // exported from a COLMAP database) or drawn synthetic; image i shares 30% of
 // its features, re-noised, with image i-1 so that pairs have true matches and
 // differ from each other. For each feature count it prints pairs/s of the GPU
 // cascade (all pairs, ratio test + cross-check, matching only: the images are
-// hashed before timing), of the GPU brute force and the CPU cascade on a
+// hashed before timing; the bucket-tile kernels and, for comparison, the
+// per-query kernel), of the GPU brute force and the CPU cascade on a
 // subset, the candidate statistics of the cascade, and the recall of the
 // cascade against the exact brute force on the same pairs.
 #include <algorithm>
@@ -41,6 +43,7 @@ struct Args {
   int repeats = 3;
   int cpu_pairs = 16;
   int bf_pairs = 128;
+  int tables = 0, bits = 0, top_k = 0;  // 0: the shipped defaults
 };
 
 Args Parse(int argc, char** argv) {
@@ -52,6 +55,9 @@ Args Parse(int argc, char** argv) {
     else if (key == "--repeats") a.repeats = std::stoi(value);
     else if (key == "--cpu_pairs") a.cpu_pairs = std::stoi(value);
     else if (key == "--bf_pairs") a.bf_pairs = std::stoi(value);
+    else if (key == "--tables") a.tables = std::stoi(value);
+    else if (key == "--bits") a.bits = std::stoi(value);
+    else if (key == "--top_k") a.top_k = std::stoi(value);
     else if (key == "--sizes") {
       a.sizes.clear();
       size_t at = 0;
@@ -149,6 +155,8 @@ struct Row {
   double gpu_cascade = 0, gpu_bf = 0, cpu_cascade = 0, hash_ms = 0;
   double entries_per_query = 0, within_tau_per_query = 0, matches_per_pair = 0;
   double recall = -1;
+  double gpu_cascade_direct = 0;
+  int direct_identical = -1;  // per-query kernel's matches == tiled kernels'
 };
 
 }  // namespace
@@ -183,6 +191,9 @@ int main(int argc, char** argv) {
     row.pairs = pairs.size();
     SiftMatchingOptions sift;
     CasHashOptions cas;
+    if (args.tables > 0) cas.num_tables = args.tables;
+    if (args.bits > 0) cas.bits_per_table = args.bits;
+    if (args.top_k > 0) cas.top_k = args.top_k;
 
     // Candidate statistics of the cascade on a few pairs (CPU, same definition).
     {
@@ -205,7 +216,7 @@ int main(int argc, char** argv) {
       row.cpu_cascade = cpu_subset.size() / Seconds(start);
     }
     if (gpu) {
-      std::vector<FeatureMatches> cascade_subset;
+      std::vector<FeatureMatches> cascade_subset, tiled_all;
       {
         auto matcher = cashash::cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
         for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(image_t(i), images[i]);
@@ -223,6 +234,18 @@ int main(int argc, char** argv) {
         row.gpu_cascade = rates[rates.size() / 2];
         row.matches_per_pair = double(CountMatches(all)) / pairs.size();
         cascade_subset = matcher->MatchPairs(bf_subset);
+        tiled_all = std::move(all);
+      }
+      {
+        setenv("CASHASH_GPU_CASCADE_KERNEL", "direct", 1);
+        auto matcher = cashash::cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+        unsetenv("CASHASH_GPU_CASCADE_KERNEL");
+        for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(image_t(i), images[i]);
+        matcher->MatchPairs({pairs.front()});
+        const auto start = Clock::now();
+        const auto direct = matcher->MatchPairs(pairs);
+        row.gpu_cascade_direct = pairs.size() / Seconds(start);
+        row.direct_identical = direct == tiled_all ? 1 : 0;
       }
       try {
         CasHashOptions bf_options = cas;
@@ -239,17 +262,19 @@ int main(int argc, char** argv) {
       }
     }
     std::printf("features %d: %zu pairs, gpu cascade %.0f pairs/s (hash of %d images %.1f ms), gpu bf %.0f pairs/s, "
-                "cpu cascade %.1f pairs/s, entries/query %.1f, within tau/query %.1f, matches/pair %.1f, recall %.4f\n",
+                "cpu cascade %.1f pairs/s, entries/query %.1f, within tau/query %.1f, matches/pair %.1f, recall %.4f, "
+                "per-query kernel %.0f pairs/s (identical matches: %d)\n",
                 features, row.pairs, row.gpu_cascade, args.images, row.hash_ms, row.gpu_bf, row.cpu_cascade,
-                row.entries_per_query, row.within_tau_per_query, row.matches_per_pair, row.recall);
+                row.entries_per_query, row.within_tau_per_query, row.matches_per_pair, row.recall,
+                row.gpu_cascade_direct, row.direct_identical);
     std::fflush(stdout);
     rows.push_back(row);
   }
-  std::printf("\n%8s %8s %14s %12s %12s %9s %11s %8s\n", "features", "pairs", "gpu_cas_pps", "gpu_bf_pps", "cpu_cas_pps",
-              "entries/q", "matches/pr", "recall");
+  std::printf("\n%8s %8s %14s %14s %12s %12s %9s %11s %8s\n", "features", "pairs", "gpu_cas_pps", "per_query_pps",
+              "gpu_bf_pps", "cpu_cas_pps", "entries/q", "matches/pr", "recall");
   for (const Row& r : rows) {
-    std::printf("%8d %8zu %14.0f %12.0f %12.1f %9.1f %11.1f %8.4f\n", r.features, r.pairs, r.gpu_cascade, r.gpu_bf,
-                r.cpu_cascade, r.entries_per_query, r.matches_per_pair, r.recall);
+    std::printf("%8d %8zu %14.0f %14.0f %12.0f %12.1f %9.1f %11.1f %8.4f\n", r.features, r.pairs, r.gpu_cascade,
+                r.gpu_cascade_direct, r.gpu_bf, r.cpu_cascade, r.entries_per_query, r.matches_per_pair, r.recall);
   }
   return 0;
 }

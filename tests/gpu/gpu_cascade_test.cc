@@ -250,9 +250,10 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
     unlimited = AddAndMatch(gpu.get(), images, pairs);
   }
   {
-    // ~1.05 MiB per image of 3000 features: 14 MiB leave well under 1 MiB of
-    // scratch per batch, so the 66 pairs run in several batches.
-    ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "14");
+    // ~1.05 MiB per image of 3000 features, ~2.7 MiB of candidate lists per
+    // pair: 24 MiB leave scratch for about two pairs per batch, so the 66
+    // pairs run in many batches.
+    ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "24");
     auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
     EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), unlimited);
   }
@@ -264,6 +265,49 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
       ADD_FAILURE() << "12 images of 3000 features cannot fit in 4 MiB";
     } catch (const std::runtime_error& e) {
       EXPECT_NE(std::string(e.what()).find("budget"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// The bucket-tile kernels (default) and the per-query kernel implement the
+// same definition: identical matches, pair for pair, on real descriptors,
+// with and without cross-check and with full candidate lists (skewed).
+TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
+  SKIP_WITHOUT_CUDA();
+  DescriptorSource source(8);
+  std::vector<FeatureDescriptors> images{source.Image(5000)};
+  for (int i = 1; i < 5; ++i) images.push_back(source.Related(images[i - 1], 4000 + 700 * i, 0.5));
+  std::vector<uint8_t> repeated(kDescriptorDim);
+  source.Row(repeated.data());
+  for (size_t i = 0; i < 400; ++i) {
+    std::copy(repeated.begin(), repeated.end(), images[3].data.begin() + 3 * i * kDescriptorDim);
+    std::copy(repeated.begin(), repeated.end(), images[4].data.begin() + 5 * i * kDescriptorDim);
+  }
+  std::vector<ImagePair> pairs = AllPairs(images.size());
+  pairs.emplace_back(4, 3);
+  const MeanDescriptor mean = MeanOf(images);
+  for (const bool cross_check : {true, false}) {
+    for (const int top_k : {10, 20}) {
+      SiftMatchingOptions sift;
+      sift.cross_check = cross_check;
+      CasHashOptions cas;
+      cas.top_k = top_k;
+      std::vector<FeatureMatches> direct, tiled;
+      {
+        ScopedEnv env("CASHASH_GPU_CASCADE_KERNEL", "direct");
+        auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+        direct = AddAndMatch(gpu.get(), images, pairs);
+      }
+      {
+        auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+        tiled = AddAndMatch(gpu.get(), images, pairs);
+      }
+      size_t total = 0;
+      for (const FeatureMatches& m : direct) total += m.size();
+      std::printf("[ kernels ] cross_check %d, top_k %d: %zu matches, identical %d\n", cross_check ? 1 : 0, top_k,
+                  total, direct == tiled ? 1 : 0);
+      EXPECT_GT(total, 1000u);
+      EXPECT_EQ(direct, tiled) << "cross_check " << cross_check << ", top_k " << top_k;
     }
   }
 }
