@@ -55,6 +55,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   }
   table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
   table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
+  table.Add({"write_empty_pairs"}, &o.write_empty_pairs,
+            "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
+            "them in table cashash_empty_pairs only, so that a rerun skips them)");
 
   table.Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o.sift.num_threads,
             "CPU threads, -1 for all cores");

@@ -33,6 +33,9 @@ struct MatcherCommandOptions {
   bool skip_geometric_verification = false;
   bool guided_matching = false;  // COLMAP's guided matching: not supported
   bool overwrite = false;        // re-match pairs already in the database
+  // COLMAP writes rows for every matched pair, rows = 0 included; 0 writes
+  // only pairs with matches and records the others compactly for resuming.
+  bool write_empty_pairs = true;
   uint64_t random_seed = 0;
   // matches_importer only.
   std::string match_list_path;

@@ -22,6 +22,7 @@
 
 #include "cashash/pair_id.h"
 #include "colmap_bridge/blob_codec.h"
+#include "colmap_bridge/pair_id_runs.h"
 #include "colmap_bridge/sqlite_statement.h"
 
 namespace cashash {
@@ -81,7 +82,17 @@ struct Database::Impl {
   // Prepared on first use, then reused.
   std::unique_ptr<SqliteStatement> image_name, keypoints, descriptors, num_keypoints,
       num_descriptors, matches, geometry, write_matches, write_geometry, write_camera,
-      write_image, write_keypoints, write_descriptors, keypoint_columns;
+      write_image, write_keypoints, write_descriptors, keypoint_columns, record_empty_pairs,
+      delete_matches, delete_geometry;
+  bool empty_pairs_table_ready = false;  // kEmptyPairsTable created by this connection
+
+  // Asks the file, not the list read when opening: another connection (or
+  // this one) may have created the table since.
+  bool HasTableNow(const std::string& name) {
+    SqliteStatement s(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?");
+    s.BindText(1, name);
+    return s.Step();
+  }
 
   ~Impl() {
     if (db == nullptr) return;
@@ -351,7 +362,44 @@ std::unordered_set<pair_t> Database::ReadCompletedPairIds() const {
                     "ON matches.pair_id = two_view_geometries.pair_id");
   std::unordered_set<pair_t> pair_ids;
   while (s.Step()) pair_ids.insert(static_cast<pair_t>(s.ColumnInt64(0)));
+  if (impl_->HasTableNow(kEmptyPairsTable)) {
+    SqliteStatement empty(impl_->db, std::string("SELECT rowid, data FROM ") + kEmptyPairsTable);
+    while (empty.Step()) {
+      DecodePairIdRuns(empty.ColumnBlob(1), empty.ColumnBytes(1),
+                       std::string(kEmptyPairsTable) + " row " + std::to_string(empty.ColumnInt64(0)),
+                       [&](pair_t first, pair_t last) {
+                         for (pair_t id = first; id <= last; ++id) pair_ids.insert(id);
+                       });
+    }
+  }
   return pair_ids;
+}
+
+void Database::RecordEmptyPairs(const std::vector<pair_t>& pair_ids) {
+  impl_->RequireWritable();
+  if (pair_ids.empty()) return;
+  if (!impl_->empty_pairs_table_ready) {
+    ExecuteSql(impl_->db, std::string("CREATE TABLE IF NOT EXISTS ") + kEmptyPairsTable +
+                              " (chunk_id INTEGER PRIMARY KEY NOT NULL, num_pairs INTEGER NOT NULL, data BLOB)");
+    impl_->empty_pairs_table_ready = true;
+  }
+  const std::vector<uint8_t> runs = EncodePairIdRuns(pair_ids);
+  StatementScope s(impl_->Prepared(impl_->record_empty_pairs, std::string("INSERT INTO ") + kEmptyPairsTable +
+                                                                 "(num_pairs, data) VALUES (?, ?)"));
+  s->BindInt64(1, static_cast<int64_t>(pair_ids.size()));
+  s->BindBlob(2, runs.data(), runs.size());
+  s->Execute();
+}
+
+void Database::DeleteMatchesAndGeometry(image_t image_id1, image_t image_id2) {
+  impl_->RequireWritable();
+  const int64_t pair_id = static_cast<int64_t>(ImagePairToPairId(image_id1, image_id2));
+  StatementScope m(impl_->Prepared(impl_->delete_matches, "DELETE FROM matches WHERE pair_id = ?"));
+  m->BindInt64(1, pair_id);
+  m->Execute();
+  StatementScope g(impl_->Prepared(impl_->delete_geometry, "DELETE FROM two_view_geometries WHERE pair_id = ?"));
+  g->BindInt64(1, pair_id);
+  g->Execute();
 }
 
 FeatureMatches Database::ReadMatches(image_t image_id1, image_t image_id2) const {
@@ -438,6 +486,7 @@ void Database::ClearMatchesAndGeometries() {
   try {
     ExecuteSql(impl_->db, "DELETE FROM matches");
     ExecuteSql(impl_->db, "DELETE FROM two_view_geometries");
+    if (impl_->HasTableNow(kEmptyPairsTable)) ExecuteSql(impl_->db, std::string("DELETE FROM ") + kEmptyPairsTable);
   } catch (...) {
     if (own_transaction) Rollback();
     throw;

@@ -22,6 +22,9 @@ class DatabaseError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// cashash's own table of pairs decided empty (see RecordEmptyPairs).
+constexpr const char* kEmptyPairsTable = "cashash_empty_pairs";
+
 struct SchemaInfo {
   int user_version = 0;            // PRAGMA user_version
   bool descriptors_have_type = false;    // COLMAP >= 4.0
@@ -55,9 +58,18 @@ class Database {
   size_t NumKeypoints(image_t image_id) const;
   size_t NumDescriptors(image_t image_id) const;
 
-  // Pairs that already have both a matches and a two_view_geometries row
-  // (these are skipped on resume).
+  // Pairs that already have both a matches and a two_view_geometries row,
+  // and pairs recorded by RecordEmptyPairs (these are skipped on resume).
   std::unordered_set<pair_t> ReadCompletedPairIds() const;
+
+  // Records pairs that were matched and found no match, for runs that write
+  // no rows for them (--write_empty_pairs 0): one row of the table
+  // kEmptyPairsTable (created on first use; COLMAP ignores it) holding their
+  // ids as runs (pair_id_runs.h). Lets a rerun skip them.
+  void RecordEmptyPairs(const std::vector<pair_t>& pair_ids);
+  // Removes a pair's rows from matches and two_view_geometries (a pair
+  // matched again, now without matches, under --write_empty_pairs 0).
+  void DeleteMatchesAndGeometry(image_t image_id1, image_t image_id2);
 
   FeatureMatches ReadMatches(image_t image_id1, image_t image_id2) const;
   TwoViewGeometry ReadTwoViewGeometry(image_t image_id1, image_t image_id2) const;

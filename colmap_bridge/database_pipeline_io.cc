@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "cashash/camera_models.h"
+#include "cashash/pair_id.h"
 
 namespace cashash {
 namespace colmap {
@@ -113,22 +114,38 @@ const Camera& DatabaseFeatureSource::CameraOfImage(image_t image_id) const {
 }
 
 DatabaseResultSink::DatabaseResultSink(const std::string& database_path, bool write_two_view_geometries)
-    : lock_(database_path), database_(database_path, /*read_only=*/false), write_two_view_geometries_(write_two_view_geometries) {}
+    : DatabaseResultSink(database_path, Options{write_two_view_geometries, true, false}) {}
+
+DatabaseResultSink::DatabaseResultSink(const std::string& database_path, const Options& options)
+    : lock_(database_path), database_(database_path, /*read_only=*/false), options_(options) {}
 
 void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
+  std::vector<pair_t> empty_pairs;
+  size_t rows = 0;
   database_.BeginTransaction();
   try {
     for (const PairResult& result : results) {
+      if (!options_.write_empty_pairs && result.matches.empty()) {
+        empty_pairs.push_back(ImagePairToPairId(result.pair.first, result.pair.second));
+        if (options_.replace_existing) database_.DeleteMatchesAndGeometry(result.pair.first, result.pair.second);
+        continue;
+      }
       database_.WriteMatches(result.pair.first, result.pair.second, result.matches);
-      if (write_two_view_geometries_) {
+      ++rows;
+      if (options_.write_two_view_geometries) {
         database_.WriteTwoViewGeometry(result.pair.first, result.pair.second, result.geometry);
+        ++rows;
       }
     }
+    // In the chunk's transaction: recorded exactly when the chunk is.
+    database_.RecordEmptyPairs(empty_pairs);
     database_.Commit();
   } catch (...) {
     database_.Rollback();
     throw;
   }
+  rows_written_ += rows;
+  empty_pairs_recorded_ += empty_pairs.size();
 }
 
 }  // namespace colmap

@@ -55,15 +55,39 @@ class DatabaseFeatureSource : public FeatureSource {
 
 class DatabaseResultSink : public ResultSink {
  public:
+  // What a chunk writes besides the pairs with matches.
+  struct Options {
+    bool write_two_view_geometries = true;
+    // COLMAP writes a matches and a two_view_geometries row for every pair it
+    // matched, also with no match (rows = 0). Off, pairs without a match get
+    // no rows; their ids are recorded compactly (Database::RecordEmptyPairs)
+    // so that a rerun skips them. COLMAP's own matchers do not read that
+    // record and would match those pairs again.
+    bool write_empty_pairs = true;
+    // The pairs may have rows from an earlier run (--overwrite): a pair now
+    // without a match has its old rows deleted when no rows are written for it.
+    bool replace_existing = false;
+  };
+
   // Throws DatabaseError when another cashash process writes to the same
   // database (see DatabaseWriterLock).
   DatabaseResultSink(const std::string& database_path, bool write_two_view_geometries);
+  DatabaseResultSink(const std::string& database_path, const Options& options);
+  // One transaction per chunk, through prepared statements, from the one
+  // writer thread of the pipeline.
   void WriteChunk(const std::vector<PairResult>& results) override;
+
+  // Rows written to matches and two_view_geometries so far.
+  size_t rows_written() const { return rows_written_; }
+  // Pairs recorded as empty instead of written (write_empty_pairs off).
+  size_t empty_pairs_recorded() const { return empty_pairs_recorded_; }
 
  private:
   DatabaseWriterLock lock_;  // taken before opening, released after closing
   Database database_;
-  bool write_two_view_geometries_;
+  Options options_;
+  size_t rows_written_ = 0;
+  size_t empty_pairs_recorded_ = 0;
 };
 
 }  // namespace colmap

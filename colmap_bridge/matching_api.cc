@@ -192,7 +192,9 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   std::unique_ptr<MpiResultSender> sender;
   ResultSink* sink = nullptr;
   if (rank == 0) {
-    database_sink = std::make_unique<DatabaseResultSink>(options.database_path, !options.skip_geometric_verification);
+    database_sink = std::make_unique<DatabaseResultSink>(
+        options.database_path, DatabaseResultSink::Options{!options.skip_geometric_verification,
+                                                           options.write_empty_pairs, options.overwrite});
     locked_sink = std::make_unique<LockedSink>(database_sink.get());
     sink = locked_sink.get();
   } else {
