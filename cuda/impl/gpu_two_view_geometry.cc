@@ -3,6 +3,7 @@
 // the estimates the CPU path's decision reads.
 #include "cashash_cuda/gpu_two_view_geometry.h"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -77,28 +78,36 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     return;
   }
 
-  // Inputs: F's pairs first, then H's, over one shared point array.
+  // Inputs: F's pairs first, then H's, over one shared point array, largest
+  // pairs first (blocks start roughly in order; big ones last would leave a
+  // long tail). Slot j holds pair order[j].
+  std::vector<size_t> order(num_pairs);
+  for (size_t k = 0; k < num_pairs; ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return pairs[a]->normalized.size() > pairs[b]->normalized.size();
+  });
   std::vector<RansacPairInput> inputs(2 * num_pairs);
   size_t total = 0;
   int max_count = 0;
-  for (size_t k = 0; k < num_pairs; ++k) {
+  for (size_t j = 0; j < num_pairs; ++j) {
+    const size_t k = order[j];
     const size_t n = pairs[k]->normalized.size();
     if (total + n > static_cast<size_t>(INT32_MAX)) throw std::runtime_error("GPU verification batch too large");
-    RansacPairInput& f = inputs[k];
+    RansacPairInput& f = inputs[j];
     f.offset = static_cast<int>(total);
     f.count = static_cast<int>(n);
     f.squared_threshold = static_cast<float>(NormalizedSquaredThreshold(*pairs[k], d.options));
     f.seed = DeriveSeed(seeds[k], kSeedF);
-    RansacPairInput& h = inputs[num_pairs + k];
+    RansacPairInput& h = inputs[num_pairs + j];
     h = f;
     h.seed = DeriveSeed(seeds[k], kSeedH);
     total += n;
     max_count = std::max(max_count, f.count);
   }
   std::vector<float4> host_points(total);
-  for (size_t k = 0; k < num_pairs; ++k) {
-    const PointPairs& p = pairs[k]->normalized;
-    float4* out = host_points.data() + inputs[k].offset;
+  for (size_t j = 0; j < num_pairs; ++j) {
+    const PointPairs& p = pairs[order[j]]->normalized;
+    float4* out = host_points.data() + inputs[j].offset;
     for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
   }
 
@@ -117,25 +126,23 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   ransac.min_num_trials = d.options.min_num_trials;
   ransac.max_num_trials = d.options.max_num_trials;
   ransac.min_inlier_ratio = d.options.min_inlier_ratio;
-  RansacLaunch launch;
-  launch.points = d.points.as<float4>();
-  launch.num_pairs = static_cast<int>(num_pairs);
-  launch.min_trials = d.options.min_num_trials;
-  launch.confidence = d.options.confidence;
-  launch.trials_multiplier = ransac.num_trials_multiplier;
-  launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
-
-  launch.pairs = d.inputs.as<RansacPairInput>();
-  launch.outputs = d.outputs.as<RansacPairOutput>();
-  launch.masks = d.masks.as<uint8_t>();
-  launch.max_trials = RansacMaxTrials(ransac, 7);
-  LaunchFundamentalRansac(launch, d.stream);
-
-  launch.pairs = d.inputs.as<RansacPairInput>() + num_pairs;
-  launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
-  launch.masks = d.masks.as<uint8_t>() + total;
-  launch.max_trials = RansacMaxTrials(ransac, 4);
-  LaunchHomographyRansac(launch, d.stream);
+  RansacLaunch F_launch;
+  F_launch.points = d.points.as<float4>();
+  F_launch.num_pairs = static_cast<int>(num_pairs);
+  F_launch.min_trials = d.options.min_num_trials;
+  F_launch.confidence = d.options.confidence;
+  F_launch.trials_multiplier = ransac.num_trials_multiplier;
+  F_launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
+  RansacLaunch H_launch = F_launch;
+  F_launch.pairs = d.inputs.as<RansacPairInput>();
+  F_launch.outputs = d.outputs.as<RansacPairOutput>();
+  F_launch.masks = d.masks.as<uint8_t>();
+  F_launch.max_trials = RansacMaxTrials(ransac, 7);
+  H_launch.pairs = d.inputs.as<RansacPairInput>() + num_pairs;
+  H_launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
+  H_launch.masks = d.masks.as<uint8_t>() + total;
+  H_launch.max_trials = RansacMaxTrials(ransac, 4);
+  LaunchTwoViewRansac(F_launch, H_launch, d.stream);
 
   std::vector<RansacPairOutput> outputs(inputs.size());
   std::vector<uint8_t> masks(2 * total);
@@ -149,9 +156,10 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   float gpu_ms = 0;
   CUDA_CHECK(cudaEventElapsedTime(&gpu_ms, d.start, d.stop));
 
-  for (size_t k = 0; k < num_pairs; ++k) {
+  for (size_t j = 0; j < num_pairs; ++j) {
+    const size_t k = order[j];
     for (int model = 0; model < 2; ++model) {
-      const RansacPairOutput& out = outputs[model * num_pairs + k];
+      const RansacPairOutput& out = outputs[model * num_pairs + j];
       TwoViewModelEstimate& e = model == 0 ? (*F)[k] : (*H)[k];
       e.success = out.success != 0;
       e.num_inliers = e.success ? out.num_inliers : 0;
@@ -159,8 +167,8 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
       if (e.success) {
         const Eigen::Matrix3d m = FromRowMajor(out.model);
         e.model = model == 0 ? FundamentalToPixels(m, pairs[k]->norm) : HomographyToPixels(m, pairs[k]->norm);
-        const uint8_t* mask = masks.data() + model * total + inputs[k].offset;
-        e.inlier_mask.assign(mask, mask + inputs[k].count);
+        const uint8_t* mask = masks.data() + model * total + inputs[j].offset;
+        e.inlier_mask.assign(mask, mask + inputs[j].count);
       }
       (model == 0 ? d.stats.trials_F : d.stats.trials_H) += out.num_trials;
       (model == 0 ? d.stats.local_refits_F : d.stats.local_refits_H) += out.num_local_refits;

@@ -10,6 +10,7 @@
 // the trial order only, never on timing, so a seed gives one result.
 #include "impl/ransac_kernels.cuh"
 
+#include <algorithm>
 #include <cfloat>
 
 #include "impl/ransac_solvers.cuh"
@@ -148,10 +149,8 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
 }
 
 template <typename Model>
-__global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch launch) {
-  extern __shared__ float4 cached_points[];
-  __shared__ BlockScratch s;
-  const RansacPairInput input = launch.pairs[blockIdx.x];
+__device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cached_points, BlockScratch& s) {
+  const RansacPairInput input = launch.pairs[pair];
   const int n = input.count;
   const float threshold = input.squared_threshold;
   const float4* points = launch.points + input.offset;
@@ -165,7 +164,7 @@ __global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch la
     s.num_local_refits = 0;
   }
   __syncthreads();
-  RansacPairOutput* output = launch.outputs + blockIdx.x;
+  RansacPairOutput* output = launch.outputs + pair;
   if (n < Model::kSampleSize) {
     if (threadIdx.x == 0) {
       output->success = 0;
@@ -288,27 +287,32 @@ __global__ void __launch_bounds__(kRansacThreads) LoRansacKernel(RansacLaunch la
   }
 }
 
-template <typename Model>
-void Launch(const RansacLaunch& launch, cudaStream_t stream) {
-  if (launch.num_pairs == 0) return;
-  const size_t shared_bytes = static_cast<size_t>(launch.shared_points) * sizeof(float4);
-  // The point cache plus the static scratch may pass the default 48 KiB.
-  static const cudaError_t opt_in = cudaFuncSetAttribute(
-      LoRansacKernel<Model>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-      static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
-  CUDA_CHECK(opt_in);
-  LoRansacKernel<Model><<<launch.num_pairs, kRansacThreads, shared_bytes, stream>>>(launch);
-  CUDA_CHECK_LAUNCH();
+// F blocks first, then H blocks, in one grid: no tail between two launches.
+__global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaunch F, RansacLaunch H) {
+  extern __shared__ float4 cached_points[];
+  __shared__ BlockScratch s;
+  const int block = static_cast<int>(blockIdx.x);
+  if (block < F.num_pairs) {
+    LoRansacBlock<FundamentalModel>(F, block, cached_points, s);
+  } else {
+    LoRansacBlock<HomographyModel>(H, block - F.num_pairs, cached_points, s);
+  }
 }
 
 }  // namespace
 
-void LaunchFundamentalRansac(const RansacLaunch& launch, cudaStream_t stream) {
-  Launch<FundamentalModel>(launch, stream);
-}
-
-void LaunchHomographyRansac(const RansacLaunch& launch, cudaStream_t stream) {
-  Launch<HomographyModel>(launch, stream);
+void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream) {
+  const int blocks = F.num_pairs + H.num_pairs;
+  if (blocks == 0) return;
+  const int shared_points = std::max(F.shared_points, H.shared_points);
+  const size_t shared_bytes = static_cast<size_t>(shared_points) * sizeof(float4);
+  // The point cache plus the static scratch may pass the default 48 KiB.
+  static const cudaError_t opt_in =
+      cudaFuncSetAttribute(TwoViewRansacKernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
+  CUDA_CHECK(opt_in);
+  TwoViewRansacKernel<<<blocks, kRansacThreads, shared_bytes, stream>>>(F, H);
+  CUDA_CHECK_LAUNCH();
 }
 
 }  // namespace cuda

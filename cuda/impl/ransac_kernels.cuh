@@ -46,8 +46,9 @@ constexpr int kRansacThreads = 128;
 // Largest shared-memory point cache a launch may ask for (48 KiB of float4).
 constexpr int kRansacMaxSharedPoints = 3072;
 
-void LaunchFundamentalRansac(const RansacLaunch& launch, cudaStream_t stream);
-void LaunchHomographyRansac(const RansacLaunch& launch, cudaStream_t stream);
+// F of F.num_pairs pairs and H of H.num_pairs pairs in one grid (F blocks
+// first; callers put the largest pairs first so the tail is short).
+void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream);
 
 }  // namespace cuda
 }  // namespace cashash

