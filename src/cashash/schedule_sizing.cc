@@ -84,12 +84,16 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   const size_t gpu_for_images = static_cast<size_t>(limits.gpu_image_share * limits.max_gpu_bytes);
   const size_t n = std::max<size_t>(2, features_per_image.size());
 
+  // Nothing holds more images than the run has.
+  const size_t num_images = features_per_image.size();
+  auto images = [num_images](size_t count) { return std::min(count, num_images); };
   // Host bytes besides the cache for blocks of bs images.
   auto fixed_host = [&](size_t bs) {
-    return kPipelineBlocks * bs * sizes.host_bytes_per_image +
-           (gpu ? 0 : kMatcherBlocks * bs * sizes.matcher_bytes_per_image);
+    return images(kPipelineBlocks * bs) * sizes.host_bytes_per_image +
+           (gpu ? 0 : images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image);
   };
-  auto group_bytes = [&](size_t bs) { return kCacheGroups * bs * sizes.host_bytes_per_image; };
+  // The cache with groups of one block.
+  auto group_bytes = [&](size_t bs) { return images(kCacheGroups * bs) * sizes.host_bytes_per_image; };
 
   size_t bs = 0;
   if (limits.block_size > 0) {
@@ -117,13 +121,19 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
                                 std::to_string(largest) + " features need at least " +
                                 FormatMemorySize(fixed_host(bs) + group_bytes(bs)));
   }
-  const size_t num_blocks = (features_per_image.size() + bs - 1) / bs;
-  const size_t per_group = (limits.max_host_bytes - fixed_host(bs)) / group_bytes(bs);
+  const size_t num_blocks = std::max<size_t>(1, (num_images + bs - 1) / bs);
+  const size_t cache_bytes = limits.max_host_bytes - fixed_host(bs);
+  size_t per_group = 1;
+  if (images(num_blocks * bs) * sizes.host_bytes_per_image <= cache_bytes) {
+    per_group = num_blocks;  // every image fits: one group, each image read once
+  } else {
+    per_group = std::max<size_t>(1, cache_bytes / (kCacheGroups * bs * sizes.host_bytes_per_image));
+  }
   sizes.block_size = static_cast<int>(bs);
-  sizes.blocks_per_group = static_cast<int>(std::max<size_t>(1, std::min(per_group, std::max<size_t>(1, num_blocks))));
-  const size_t cached_images = std::min<size_t>(kCacheGroups * sizes.blocks_per_group * bs, features_per_image.size());
-  sizes.predicted_host_bytes = fixed_host(bs) + cached_images * sizes.host_bytes_per_image;
-  sizes.predicted_gpu_bytes = gpu ? kMatcherBlocks * bs * sizes.matcher_bytes_per_image : 0;
+  sizes.blocks_per_group = static_cast<int>(std::min(per_group, num_blocks));
+  sizes.predicted_host_bytes =
+      fixed_host(bs) + images(kCacheGroups * sizes.blocks_per_group * bs) * sizes.host_bytes_per_image;
+  sizes.predicted_gpu_bytes = gpu ? images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image : 0;
   return sizes;
 }
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # `mpirun -np 3 cashash exhaustive_matcher` on one machine must write exactly
 # the rows of one process: with blocks given, with blocks and groups derived
-# from a small --max_host_memory, on a rollback-journal database, when
+# from a small --max_host_memory (several groups), on a rollback-journal database, when
 # resuming a partly matched database; and a database another process is
 # matching must be refused by the whole job. Synthetic features (60 images,
 # 1770 pairs), CPU matching.
@@ -59,12 +59,12 @@ expect_mpi_run "$WORK/mpi.log"
 grep "^Summary" "$WORK/mpi.log"
 python3 "$TOOL" compare "$WORK/mpi.db" "$WORK/reference.db"
 
-echo "== 3 ranks, blocks and groups from --max_host_memory 40M"
+echo "== 3 ranks, blocks and groups from --max_host_memory 20M"
 cp "$WORK/base.db" "$WORK/groups.db"
-ranks3 "$WORK/groups.db" --max_host_memory 40M >"$WORK/groups.log" 2>&1 || { cat "$WORK/groups.log"; exit 1; }
+ranks3 "$WORK/groups.db" --max_host_memory 20M >"$WORK/groups.log" 2>&1 || { cat "$WORK/groups.log"; exit 1; }
 expect_mpi_run "$WORK/groups.log"
 grep "^Schedule" "$WORK/groups.log"
-grep -q "groups of 1 blocks (3 blocks, 3 groups)" "$WORK/groups.log" || { echo "FAIL: expected 3 groups"; exit 1; }
+grep -qE "blocks, [2-9][0-9]* groups\)" "$WORK/groups.log" || { echo "FAIL: expected several groups"; exit 1; }
 python3 "$TOOL" compare "$WORK/groups.db" "$WORK/reference.db"
 
 echo "== 3 ranks on a rollback-journal database (readers and the writer lock each other out briefly)"
