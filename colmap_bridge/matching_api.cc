@@ -235,10 +235,19 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   }
   summary.matcher_name = matcher->Name();
   Info(callbacks, "Matcher: " + summary.matcher_name);
+  // How well the group level worked: database reads against images.
+  auto report_cache = [&]() {
+    if (!cache) return;
+    const FeatureCacheStats stats = cache->stats();
+    Info(callbacks, "Features: " + std::to_string(stats.source_loads) + " image reads for " +
+                        std::to_string(image_ids.size()) + " images in " + std::to_string(stats.steps) +
+                        " group steps, at most " + FormatMemorySize(stats.peak_bytes) + " cached");
+  };
   if (num_ranks == 1) {
     summary.pipeline = pipeline.Run(my_chunks);
     // The GPU matcher may have handed over to the CPU on running out of memory.
     summary.matcher_name = matcher->Name();
+    report_cache();
     return summary;
   }
 
@@ -261,6 +270,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   }
   for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
   summary.matcher_name = matcher->Name();
+  report_cache();  // rank 0's share
   Info(callbacks, "Matched by " + std::to_string(num_ranks) + " MPI processes");
   return summary;
 }
