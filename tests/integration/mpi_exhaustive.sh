@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# `mpirun -np 3 cashash exhaustive_matcher` on one machine must write exactly
-# the rows of one process: with blocks given, with blocks and groups derived
-# from a small --max_host_memory (several groups), on a rollback-journal database, when
-# resuming a partly matched database; and a database another process is
+# `mpirun -np 3 cashash ...` on one machine must write exactly the rows of
+# one process: exhaustive_matcher with blocks given, with blocks and groups
+# derived from a small --max_host_memory (several groups), on a
+# rollback-journal database, resuming a partly matched database;
+# matches_importer on a pair list; and a database another process is
 # matching must be refused by the whole job. Synthetic features (60 images,
 # 1770 pairs), CPU matching.
 # Usage: mpi_exhaustive.sh CASHASH_BINARY [SHARED_DATA_DIR]   (exit 77: skipped)
@@ -93,6 +94,22 @@ expect_mpi_run "$WORK/resume.log"
 grep -E "^Skipping $kept of $PAIRS pairs already in the database" "$WORK/resume.log"
 grep -qE "^Summary: $((PAIRS - kept)) pairs" "$WORK/resume.log" || { echo "FAIL: resumed pair count"; cat "$WORK/resume.log"; exit 1; }
 python3 "$TOOL" compare "$WORK/resume.db" "$WORK/reference.db"
+
+echo "== matches_importer: 3 ranks match a pair list as one process does"
+python3 -c "
+for i in range(1, 41):
+    for j in range(i + 1, 41, 3):
+        print(f'image_{i:03d}.png image_{j:03d}.png')" >"$WORK/pairs.txt"
+for n in 1 3; do
+  cp "$WORK/base.db" "$WORK/list$n.db"
+  launch=()
+  [[ $n == 3 ]] && launch=(mpirun -np 3 --oversubscribe --bind-to none)
+  "${launch[@]}" "$CASHASH" matches_importer --database_path "$WORK/list$n.db" --match_list_path "$WORK/pairs.txt" \
+    --SiftMatching.use_gpu 0 --FeatureMatching.num_threads 1 --ExhaustiveMatching.block_size 5 \
+    >"$WORK/list$n.log" 2>&1 || { cat "$WORK/list$n.log"; exit 1; }
+done
+expect_mpi_run "$WORK/list3.log"
+python3 "$TOOL" compare "$WORK/list3.db" "$WORK/list1.db"
 
 echo "== a database another process is matching: the whole job is refused, nothing written"
 cp "$WORK/base.db" "$WORK/locked.db"
