@@ -225,7 +225,8 @@ void BindOptions(py::module_& m) {
       .def_readwrite("use_gpu", &MatcherCommandOptions::use_gpu)
       .def_readwrite("gpu_index", &MatcherCommandOptions::gpu_index)
       .def_readwrite("skip_geometric_verification", &MatcherCommandOptions::skip_geometric_verification)
-      .def_readwrite("overwrite", &MatcherCommandOptions::overwrite);
+      .def_readwrite("overwrite", &MatcherCommandOptions::overwrite)
+      .def_readwrite("write_empty_pairs", &MatcherCommandOptions::write_empty_pairs);
 }
 
 }  // namespace
