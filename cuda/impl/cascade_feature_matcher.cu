@@ -38,8 +38,8 @@ constexpr size_t kMaxBatchQueries = size_t{1} << 22;
 // ... and at most this many pairs ...
 constexpr size_t kMaxBatchPairs = 8192;
 // ... and candidate lists of at most this many bytes (tiled kernels): with
-// 8 tables and 16 keys per list, 2 x 8192 features per pair take 8.5 MB, so
-// ~120 such pairs per batch, ~2.5 ms of work at 50k pairs/s.
+// 128 keys per list, 2 x 8192 features per pair take 8.5 MB, so ~120 such
+// pairs per batch, ~2.5 ms of work at 50k pairs/s.
 constexpr size_t kMaxBatchListBytes = size_t{1} << 30;
 
 // Which matching kernels run: the bucket-tile kernels (default) or the older
@@ -73,8 +73,8 @@ struct BatchSlot {
   DeviceBuffer tasks;       // PairTask[]
   DeviceBuffer best;        // int32 per forward query
   DeviceBuffer cursor;      // one uint32
-  DeviceBuffer list_keys;   // tiled kernels: uint32 per (list row, table, slot)
-  DeviceBuffer list_counts; // tiled kernels: uint8 per (list row, table)
+  DeviceBuffer list_keys;   // tiled kernels: kCandidateListCapacity uint32 per list row
+  DeviceBuffer list_counts; // tiled kernels: uint32 per list row
   PinnedBuffer host_tasks;  // staging of PairTask[]
   PinnedBuffer out;         // mapped: uint2 matches
   PinnedBuffer segments;    // mapped: MatchSegment per task
@@ -92,7 +92,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
         options_(options),
         device_(gpu_index),
         tiled_(UseTiledKernels()),
-        list_capacity_(CandidateListCapacity(options.top_k)) {
+        list_capacity_(kCandidateListCapacity) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
     if (error.empty()) error = CheckGpuCascadeOptions(options);
@@ -289,7 +289,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
 
   // Bytes of the candidate lists of `rows` features (tiled kernels).
   size_t ListBytes(size_t rows) const {
-    return tiled_ ? rows * options_.num_tables * (list_capacity_ * sizeof(uint32_t) + 1) : 0;
+    return tiled_ ? rows * (list_capacity_ + 1) * sizeof(uint32_t) : 0;
   }
 
   // Device bytes of a batch slot sized for `tasks` pairs, `queries` forward
@@ -345,9 +345,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
     slot->tasks.Allocate(new_tasks * sizeof(PairTask), "pair tasks");
     slot->best.Allocate(new_queries * sizeof(int32_t), "match results");
     if (tiled_ && new_rows > 0) {
-      slot->list_keys.Allocate(new_rows * options_.num_tables * list_capacity_ * sizeof(uint32_t),
-                               "candidate lists");
-      slot->list_counts.Allocate(new_rows * options_.num_tables, "candidate list counts");
+      slot->list_keys.Allocate(new_rows * list_capacity_ * sizeof(uint32_t), "candidate lists");
+      slot->list_counts.Allocate(new_rows * sizeof(uint32_t), "candidate list counts");
     }
     if (slot->cursor.bytes() == 0) slot->cursor.Allocate(256, "match cursor");
     slot->host_tasks.Allocate(new_tasks * sizeof(PairTask), false, "pair tasks");
@@ -399,9 +398,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
     if (tiled_) {
       CandidateLists lists;
       lists.keys = slot->list_keys.as<uint32_t>();
-      lists.counts = slot->list_counts.as<uint8_t>();
+      lists.counts = slot->list_counts.as<uint32_t>();
       lists.capacity = list_capacity_;
-      CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * options_.num_tables, slot->stream));
+      CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * sizeof(uint32_t), slot->stream));
       LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream);
       LaunchCascadeSelect(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
                           sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);

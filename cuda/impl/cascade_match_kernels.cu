@@ -291,49 +291,24 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
   return DecideFromRanked(query, q, target, ranking.ranked, params);
 }
 
-// The same answer from the query's candidate lists (list row `row`), which
-// hold every candidate within tau that can be among its top_k, per table,
-// de-duplicated already: the lists of all tables form one stream of keys,
-// ranked exactly as in MatchQuery.
+// The same answer from the query's candidate list (list row `row`): every
+// candidate within tau, de-duplicated already, in no particular order. The
+// keys are ranked exactly as in MatchQuery; a list that overflowed (more
+// candidates than it holds) is answered by MatchQuery itself.
 __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row, const DeviceImageView& target,
                            const CandidateLists& lists, const MatchParams& params, WarpScratch& scratch) {
   const unsigned lane = LaneId();
-  const int num_tables = params.num_tables;
-  uint32_t size = 0, begin = 0;
-  if (static_cast<int>(lane) < num_tables) {
-    const size_t list = row * num_tables + lane;
-    size = lists.counts[list];
-    begin = static_cast<uint32_t>(list * lists.capacity);
-  }
-  uint32_t inclusive = size;
-  for (int d = 1; d < num_tables; d <<= 1) {
-    const uint32_t o = __shfl_up_sync(kFullWarpMask, inclusive, d);
-    if (lane >= static_cast<unsigned>(d)) inclusive += o;
-  }
-  const uint32_t total = __shfl_sync(kFullWarpMask, inclusive, num_tables - 1);
-  const unsigned nonempty = __ballot_sync(kFullWarpMask, size != 0);
-  __syncwarp();  // the previous query's reads of the scratch are done
-  if (size != 0) {
-    const uint32_t slot = __popc(nonempty & LaneMaskLt());
-    scratch.base[slot] = begin - (inclusive - size);
-    scratch.start[slot] = inclusive - size;
-  }
-  __syncwarp();
-  const bool has_slot = lane < static_cast<unsigned>(__popc(nonempty));
-  const uint32_t my_start = has_slot ? scratch.start[lane] : 0xffffffffu;
-  const uint32_t my_base = has_slot ? scratch.base[lane] : 0u;
-
+  const uint32_t total = lists.counts[row];
+  if (total > static_cast<uint32_t>(lists.capacity)) return MatchQuery(query, q, target, params, scratch);
+  const uint32_t* keys = lists.keys + row * lists.capacity;
   QueryRanking ranking(static_cast<uint32_t>(params.tau));
-  uint32_t slot_before = ~0u;
+  __syncwarp();  // the previous query's reads of the scratch are done
   for (uint32_t first = 0; first < total; first += 64) {
     const uint32_t pos0 = first + lane, pos1 = pos0 + 32;
-    uint32_t key0 = __ldg(lists.keys + ChunkEntryIndex(my_start, my_base, first, total, slot_before));
-    uint32_t key1 = WarpSortedList::kEmptyKey;
-    if (first + 32 < total) {
-      key1 = __ldg(lists.keys + ChunkEntryIndex(my_start, my_base, first + 32, total, slot_before));
-      if (pos1 >= total || key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
-    }
-    if (pos0 >= total || key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
+    uint32_t key0 = pos0 < total ? __ldg(keys + pos0) : WarpSortedList::kEmptyKey;
+    uint32_t key1 = pos1 < total ? __ldg(keys + pos1) : WarpSortedList::kEmptyKey;
+    if (key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
+    if (key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
     ranking.Add(key0, key1, scratch.pending, params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);

@@ -1,13 +1,15 @@
 // Kernels of cascade_tile_kernels.cuh.
 //
-// Cost model (8192 features per image, 8 tables x 7 bits): a query meets
-// ~1,100 bucket entries over the tables, so a pair has ~9M (a, b, table)
-// candidate pairs. Here each costs one broadcast shared load per 32 of them
-// and ~13 lane instructions (4 XOR, 4 POPC, adds, the tau test and a
-// predicated append), i.e. ~0.45 warp instructions per candidate pair, both
-// directions at once; the per-query kernel spent ~4 per entry and direction.
-// Candidates within tau (a few percent) are appended to a per-lane stripe in
-// shared memory and written out after each staged chunk, all lanes at once.
+// Cost model (8192 features per image, 8 tables x 7 bits, real SIFT): a
+// query meets ~730 bucket entries over the tables, so a pair has ~6M
+// (a, b, table) candidate pairs, of which ~6 % are within tau. Each costs one
+// broadcast shared load per 32 and ~16 lane instructions (4 XOR, 4 POPC,
+// adds, the tau test and a branch-free append), both directions at once:
+// ~3M warp instructions per pair. A survivor costs a duplicate test, a
+// shared atomic and two stores. History (H100, same benchmark): per-table
+// lists of 16 or 32 keys kept in order by replacing the largest key spent
+// more than half of the kernel's 14-16M warp instructions per pair on list
+// upkeep; append-only lists removed it.
 #include "impl/cascade_tile_kernels.cuh"
 
 #include "utils/cuda_check.cuh"
@@ -22,110 +24,24 @@ namespace {
 // one-warp blocks keep the SMs full where 8-warp blocks left them at 16 %
 // occupancy (measured).
 constexpr int kTileThreads = 32;
-constexpr uint32_t kNoLimit = 0xffffffffu;
 
-// Shared memory of the warp: the staged chunk of B's bucket and the current
-// 32 rows of A with their lists for this table, the per-lane stripes of
-// survivors (entry = chunk position | distance << 8, stored [n][lane] so that
-// the lanes' appends hit distinct banks). The lists themselves (32 x capacity keys per side)
-// follow in dynamic shared memory: replacing the largest key of a full list
-// then costs a few shared loads, where global lists made big buckets wait on
-// one L2 round trip per survivor (measured: one tile of a skewed bucket took
-// 1.9 ms).
+// Shared memory of the warp: the staged chunk of B's bucket, per staged
+// entry the number of keys it receives in this step and the first list slot
+// reserved for them, and the per-lane stripes of survivors (entry = chunk
+// position | distance << 5 | rank among the staged entry's keys << 13,
+// stored [n][lane] so that the lanes' appends hit distinct banks).
 struct TileScratch {
   uint4 code[32];
   uint64_t signature[32];
   uint32_t index[32];
-  uint32_t count[32];    // keys seen by the staged B features in this table
-  uint32_t limit_b[32];  // a key must be below it to enter the B list
-  uint64_t signature_a[32];
-  uint32_t index_a[32];
-  uint32_t seen_a[32];   // keys seen by the current A rows in this table
-  uint32_t limit_a[32];
-  uint16_t stripe[33][32];  // one spare row: the branch-free append
+  uint32_t received[32];
+  uint32_t base[32];
+  uint32_t stripe[33][32];  // one spare row: the branch-free append
 };
-
-// Lists in shared memory are stored slot-major ([slot][32 rows]), so that
-// one lane per list reads or writes it without bank conflicts.
-//
-// Largest key of a full list (in-lane).
-__device__ __forceinline__ uint32_t ListMax(const uint32_t* lists, int row, int capacity) {
-  uint32_t largest = 0;
-  for (int s = 0; s < capacity; ++s) largest = max(largest, lists[s * 32 + row]);
-  return largest;
-}
-
-// In-lane: puts `key` into the full list in place of its largest key when
-// smaller, and returns the list's new largest key (keys of a list are unique).
-__device__ __forceinline__ uint32_t ReplaceLargest(uint32_t* lists, int row, int capacity, uint32_t key) {
-  uint32_t largest = 0, second = 0;
-  int at = 0;
-  for (int s = 0; s < capacity; ++s) {
-    const uint32_t v = lists[s * 32 + row];
-    if (v > largest) {
-      second = largest;
-      largest = v;
-      at = s;
-    } else if (v > second) {
-      second = v;
-    }
-  }
-  if (key >= largest) return largest;
-  lists[at * 32 + row] = key;
-  return max(second, key);
-}
-
-// Copies one list between shared memory (slot-major, this lane's `row`) and
-// its global row (`global`, 16-byte aligned), the first `count` keys rounded
-// up to whole 16-byte vectors.
-template <bool kToGlobal>
-__device__ __forceinline__ void CopyList(uint32_t* lists, int row, uint32_t count, uint32_t* global) {
-  for (uint32_t s = 0; s < count; s += 4) {
-    uint4* g = reinterpret_cast<uint4*>(global + s);
-    uint32_t* l = lists + s * 32 + row;
-    if (kToGlobal) {
-      *g = make_uint4(l[0], l[32], l[64], l[96]);
-    } else {
-      const uint4 v = *g;
-      l[0] = v.x;
-      l[32] = v.y;
-      l[64] = v.z;
-      l[96] = v.w;
-    }
-  }
-}
-
-// Keys that found their list full wait here for the conflict-free pass.
-struct FullListKey {
-  uint32_t key = 0;
-  int row = -1;  // none
-};
-
-// One lane per list at a time (lanes holding keys for the same list take
-// turns), each replacing in-lane.
-__device__ __forceinline__ void ReplaceInFullLists(FullListKey pending, uint32_t* lists, uint32_t* limits,
-                                                   int capacity) {
-  const unsigned lane = LaneId();
-  unsigned active = __ballot_sync(kFullWarpMask, pending.row >= 0);
-  while (active != 0) {
-    if (pending.row >= 0) {
-      const unsigned peers = __match_any_sync(active, pending.row);
-      if (static_cast<int>(lane) == __ffs(peers) - 1) {
-        if (pending.key < limits[pending.row]) {
-          limits[pending.row] = ReplaceLargest(lists, pending.row, capacity, pending.key);
-        }
-        pending.row = -1;
-      }
-    }
-    __syncwarp();
-    active = __ballot_sync(kFullWarpMask, pending.row >= 0);
-  }
-}
 
 __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
                                                                   MatchParams params, CandidateLists lists) {
   __shared__ TileScratch scratch;
-  extern __shared__ uint32_t dynamic_lists[];
   const unsigned lane = LaneId();
   const uint32_t item = blockIdx.x;
   if (item >= total_items) return;
@@ -149,15 +65,7 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
   const BucketEntry* entries_b = task.b.entries + size_t(t) * task.b.num_features;
   const size_t rows_a = task.list_offset;
   const size_t rows_b = size_t(task.list_offset) + task.a.num_features;
-  const int capacity = lists.capacity;  // 16 or 32
-  uint32_t* lists_a = dynamic_lists;                  // [slot][32 A rows]
-  uint32_t* lists_b = dynamic_lists + 32 * capacity;  // [slot][32 staged B entries]
-  auto global_list = [&](size_t first_row, uint32_t index) {
-    return lists.keys + ((first_row + index) * num_tables + t) * capacity;
-  };
-  auto global_count = [&](size_t first_row, uint32_t index) {
-    return lists.counts + (first_row + index) * num_tables + t;
-  };
+  const uint32_t capacity = static_cast<uint32_t>(lists.capacity);
   const uint32_t tau = static_cast<uint32_t>(min(params.tau, 128));
   // Duplicate test (see EntryKey in cascade_match_kernels.cu): fields of the
   // tables before t must all differ.
@@ -165,17 +73,14 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
   const uint64_t high_from_t = params.field_high_bits & ~below;
 
   for (uint32_t a0 = a_begin; a0 < a_end; a0 += 32) {
-    const int rows = static_cast<int>(min(32u, a_end - a0));
-    const bool a_valid = static_cast<int>(lane) < rows;
+    const bool a_valid = a0 + lane < a_end;
     const int row_tau = a_valid ? static_cast<int>(tau) : -1;  // lanes past the rows find nothing
     const uint4* entry_a = reinterpret_cast<const uint4*>(entries_a + min(a0 + lane, a_end - 1));
     const uint4 code_a = __ldg(entry_a);
     const uint4 meta_a = __ldg(entry_a + 1);
-    __syncwarp();
-    scratch.signature_a[lane] = uint64_t(meta_a.y) << 32 | meta_a.x;
-    scratch.index_a[lane] = meta_a.z;
-    scratch.seen_a[lane] = 0;
-    scratch.limit_a[lane] = kNoLimit;
+    const uint64_t signature_a = uint64_t(meta_a.y) << 32 | meta_a.x;
+    const uint32_t index_a = meta_a.z;
+    const size_t row_a = rows_a + index_a;
 
     for (uint32_t b0 = b_begin; b0 < b_end; b0 += 32) {
       const int chunk = static_cast<int>(min(32u, b_end - b0));
@@ -186,18 +91,8 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
         scratch.code[lane] = __ldg(entry_b);
         scratch.signature[lane] = uint64_t(meta_b.y) << 32 | meta_b.x;
         scratch.index[lane] = meta_b.z;
-        uint32_t count = 0;
-        uint32_t limit = kNoLimit;
-        // The first rows of A start every B list of this table empty; later
-        // rows continue the lists where the previous rows left them.
-        if (a0 != a_begin) {
-          count = *global_count(rows_b, meta_b.z);
-          CopyList<false>(lists_b, static_cast<int>(lane), count, global_list(rows_b, meta_b.z));
-          if (static_cast<int>(count) == capacity) limit = ListMax(lists_b, static_cast<int>(lane), capacity);
-        }
-        scratch.count[lane] = count;
-        scratch.limit_b[lane] = limit;
       }
+      scratch.received[lane] = 0;
       __syncwarp();
 
       // Hot loop: one broadcast load and ~16 instructions per candidate,
@@ -209,85 +104,37 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
         const uint4 c = scratch.code[j];
         const int distance = __popc(code_a.x ^ c.x) + __popc(code_a.y ^ c.y) + __popc(code_a.z ^ c.z) +
                              __popc(code_a.w ^ c.w);
-        scratch.stripe[found][lane] = static_cast<uint16_t>(j | distance << 8);
+        scratch.stripe[found][lane] = static_cast<uint32_t>(j | distance << 5);
         found += distance <= row_tau ? 1 : 0;
       }
 
-      // Survivors are numbered across the lanes (exclusive scan of `found`);
-      // lane L of a round takes number q0 + L from the stripe of the last
-      // lane whose first number is not above it (a 5-step binary search).
-      uint32_t before = static_cast<uint32_t>(found);
-#pragma unroll
-      for (int d = 1; d < 32; d <<= 1) {
-        const uint32_t o = __shfl_up_sync(kFullWarpMask, before, d);
-        if (static_cast<int>(lane) >= d) before += o;
-      }
-      const uint32_t total = __shfl_sync(kFullWarpMask, before, 31);
-      before -= static_cast<uint32_t>(found);
-
-      // Append the survivors to both sides' lists, 32 at a time. A key not
-      // below its list's limit cannot enter it (limits only decrease).
-      for (uint32_t q0 = 0; q0 < total; q0 += 32) {
-        FullListKey full_a, full_b;
-        int filled_a = -1, filled_b = -1;  // lists this lane just filled
-        const uint32_t number = q0 + lane;
-        uint32_t row = 0;
-#pragma unroll
-        for (uint32_t step = 16; step > 0; step >>= 1) {
-          if (__shfl_sync(kFullWarpMask, before, row + step) <= number) row += step;
+      // Drop duplicates (compacting the stripe in place) and rank each
+      // survivor among the keys of its B entry.
+      int kept = 0;
+      for (int i = 0; i < found; ++i) {
+        const uint32_t e = scratch.stripe[i][lane];
+        const uint32_t j = e & 31u;
+        const uint64_t v = ((signature_a ^ scratch.signature[j]) & below) | high_from_t;
+        if (((v - params.field_low_bits) & ~v & params.field_high_bits) == 0) {
+          const uint32_t rank = atomicAdd(&scratch.received[j], 1u);
+          scratch.stripe[kept++][lane] = e | rank << 13;
         }
-        const uint32_t slot = number - __shfl_sync(kFullWarpMask, before, row);
-        if (number < total) {
-          const uint32_t e = scratch.stripe[slot][row];
-          const uint32_t j = e & 31u, distance = e >> 8;
-          const uint64_t v = ((scratch.signature_a[row] ^ scratch.signature[j]) & below) | high_from_t;
-          const bool duplicate = ((v - params.field_low_bits) & ~v & params.field_high_bits) != 0;
-          if (!duplicate) {
-            const uint32_t key_a = distance << 24 | scratch.index[j];
-            if (key_a < scratch.limit_a[row]) {
-              const int pos = static_cast<int>(atomicAdd(&scratch.seen_a[row], 1u));
-              if (pos < capacity) {
-                lists_a[pos * 32 + row] = key_a;
-                if (pos == capacity - 1) filled_a = static_cast<int>(row);
-              } else {
-                full_a.key = key_a;
-                full_a.row = static_cast<int>(row);
-              }
-            }
-            const uint32_t key_b = distance << 24 | scratch.index_a[row];
-            if (key_b < scratch.limit_b[j]) {
-              const int pos = static_cast<int>(atomicAdd(&scratch.count[j], 1u));
-              if (pos < capacity) {
-                lists_b[pos * 32 + j] = key_b;
-                if (pos == capacity - 1) filled_b = static_cast<int>(j);
-              } else {
-                full_b.key = key_b;
-                full_b.row = static_cast<int>(j);
-              }
-            }
-          }
-        }
-        __syncwarp();
-        // A list filled in this round gets its limit from the lane that
-        // filled it (one per list), before any key is tested against it.
-        if (filled_a >= 0) scratch.limit_a[filled_a] = ListMax(lists_a, filled_a, capacity);
-        if (filled_b >= 0) scratch.limit_b[filled_b] = ListMax(lists_b, filled_b, capacity);
-        __syncwarp();
-        ReplaceInFullLists(full_a, lists_a, scratch.limit_a, capacity);
-        ReplaceInFullLists(full_b, lists_b, scratch.limit_b, capacity);
       }
       __syncwarp();
-      if (static_cast<int>(lane) < chunk) {
-        const uint32_t count = min(scratch.count[lane], static_cast<uint32_t>(capacity));
-        CopyList<true>(lists_b, static_cast<int>(lane), count, global_list(rows_b, scratch.index[lane]));
-        *global_count(rows_b, scratch.index[lane]) = static_cast<uint8_t>(count);
+      // Reserve list slots: one atomic per A row and per staged B entry.
+      const uint32_t base_a = kept > 0 ? atomicAdd(lists.counts + row_a, static_cast<uint32_t>(kept)) : 0u;
+      if (static_cast<int>(lane) < chunk && scratch.received[lane] > 0) {
+        scratch.base[lane] = atomicAdd(lists.counts + rows_b + scratch.index[lane], scratch.received[lane]);
       }
-    }
-    __syncwarp();
-    if (a_valid) {
-      const uint32_t count = min(scratch.seen_a[lane], static_cast<uint32_t>(capacity));
-      CopyList<true>(lists_a, static_cast<int>(lane), count, global_list(rows_a, scratch.index_a[lane]));
-      *global_count(rows_a, scratch.index_a[lane]) = static_cast<uint8_t>(count);
+      __syncwarp();
+      for (int i = 0; i < kept; ++i) {
+        const uint32_t e = scratch.stripe[i][lane];
+        const uint32_t j = e & 31u, distance = (e >> 5) & 0xffu, rank = e >> 13;
+        const uint32_t index_b = scratch.index[j];
+        if (base_a + i < capacity) lists.keys[row_a * capacity + base_a + i] = distance << 24 | index_b;
+        const uint32_t slot_b = scratch.base[j] + rank;
+        if (slot_b < capacity) lists.keys[(rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
+      }
     }
   }
 }
@@ -298,8 +145,7 @@ void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams&
                         cudaStream_t stream) {
   if (num_tasks == 0) return;
   const uint64_t items = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
-  const size_t list_bytes = 2 * 32 * size_t(lists.capacity) * sizeof(uint32_t);
-  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, list_bytes, stream>>>(
+  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, 0, stream>>>(
       tasks, static_cast<uint32_t>(items), params, lists);
   CUDA_CHECK_LAUNCH();
 }

@@ -250,7 +250,7 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
     unlimited = AddAndMatch(gpu.get(), images, pairs);
   }
   {
-    // ~1.05 MiB per image of 3000 features, ~2.7 MiB of candidate lists per
+    // ~1.05 MiB per image of 3000 features, ~3.1 MiB of candidate lists per
     // pair: 24 MiB leave scratch for about two pairs per batch, so the 66
     // pairs run in many batches.
     ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "24");
