@@ -13,6 +13,7 @@
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_generator.h"
 #include "colmap_bridge/database_pipeline_io.h"
+#include "colmap_bridge/generate_database_command.h"
 #include "colmap_bridge/matching_api.h"
 #include "colmap_bridge/synthetic_street_scene.h"
 #include "generated_database_support.h"
@@ -187,6 +188,37 @@ TEST_F(DatabaseGeneratorTest, ErrorsNameTheOption) {
   o = Options("exists.db", 3, 100);
   colmap::GenerateDatabase(o);
   EXPECT_NE(error_of(o).find("exists already"), std::string::npos);
+}
+
+TEST_F(DatabaseGeneratorTest, CommandLineWritesTheDatabaseAndNamesBadOptions) {
+  const std::string out = scratch_.File("cli.db");
+  auto run = [](std::vector<std::string> args, std::string* err) {
+    std::vector<const char*> argv = {"generate_database"};
+    for (const std::string& a : args) argv.push_back(a.c_str());
+    ::testing::internal::CaptureStdout();
+    ::testing::internal::CaptureStderr();
+    const int code = colmap::RunGenerateDatabase(static_cast<int>(argv.size()), argv.data());
+    ::testing::internal::GetCapturedStdout();
+    *err = ::testing::internal::GetCapturedStderr();
+    return code;
+  };
+  std::string err;
+  EXPECT_EQ(run({"--database_path", out, "--source_database_path", source_, "--num_images", "3", "--num_features",
+                 "200"},
+                &err),
+            0)
+      << err;
+  {
+    Database db(out, true);
+    EXPECT_EQ(db.ReadAllImages().size(), 3u);
+    EXPECT_EQ(db.NumDescriptors(3), 200u);
+  }
+  EXPECT_EQ(run({"--database_path", scratch_.File("cli2.db"), "--num_images", "3"}, &err), 1);
+  EXPECT_NE(err.find("--source_database_path is required"), std::string::npos) << err;
+  EXPECT_EQ(run({"--database_path", scratch_.File("cli2.db"), "--num_imagez", "3"}, &err), 1);
+  EXPECT_NE(err.find("num_imagez"), std::string::npos) << err;
+  EXPECT_EQ(run({"--database_path", out, "--source_database_path", source_, "--num_images", "3"}, &err), 1);
+  EXPECT_NE(err.find("--database_path"), std::string::npos) << err;
 }
 
 }  // namespace
