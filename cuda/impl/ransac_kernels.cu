@@ -139,9 +139,13 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   }
   __syncthreads();
   if (threadIdx.x == 0) {
-    double full[81];
-    ExpandNormalMatrix(s.upper, full);
-    SmallestEigenvector<9>(full, s.local_model);
+    // Inverse iteration from the model being refined; the full Jacobi
+    // decomposition only where the factorisation breaks down.
+    if (!SmallestEigenvectorNear(s.upper, s.best_model, s.local_model)) {
+      double full[81];
+      ExpandNormalMatrix(s.upper, full);
+      SmallestEigenvector<9>(full, s.local_model);
+    }
     s.local_ok = Model::FinishLocal(s.local_model) ? 1 : 0;
     ++s.num_local_refits;
   }
