@@ -47,13 +47,20 @@ struct CasHashOptions {
   // 128 bits (two 64-bit words) in every backend.
   static constexpr int kRemapBits = 128;
   // Candidates whose remap Hamming distance exceeds tau are dropped before
-  // ranking (the paper's threshold). 40 loses no recall against 48 or 128
-  // on real SIFT and leaves a third of the candidates of 48 to rank.
-  int tau = 40;
-  // Number of nearest candidates by Hamming distance whose exact descriptor
-  // distance is computed. Recall hardly depends on it (5: -0.5 %, 15:
-  // +0.1 %): a true match that shares a bucket at all ranks near the top.
-  int top_k = 10;
+  // ranking (the paper's threshold), and top_k is the number of nearest
+  // candidates by Hamming distance whose exact descriptor distance is
+  // computed. Recall hardly depends on either (fountain-P11: 0.967 at
+  // 40 / 10, 0.969 at 43 / 16), but precision does: the ratio test can only
+  // reject an ambiguous match if the close second best was ranked. At
+  // 40 / 10 the cascade's precision at 6 px on graf was 2.6 points below
+  // exact matching (target: 2); top_k alone does not fix it (16: -2.3, 32:
+  // -2.3 on hpatches v_graffiti), because the missed second bests lie just
+  // beyond tau 40. 43 / 16 gives -1.8 / -1.9 points (seeds 0 to 2: at most
+  // -1.9) at about 10 % more CPU matching time than 40 / 10 (within-tau
+  // candidates grow about 2x per +4 of tau: 48 / 16 costs +60 %).
+  // docs/cascade_parameters.md and docs/ACCURACY.md have the tables.
+  int tau = 43;
+  int top_k = 16;
   // Seed of the random projections; the same seed gives the same matches.
   uint64_t random_seed = 0;
 
