@@ -6,11 +6,15 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iomanip>
 #include <map>
 #include <memory>
 #include <numeric>
 #include <stdexcept>
 #include <vector>
+
+#include <Eigen/Geometry>
 
 #include "cashash/feature_matcher.h"
 #include "cashash/random_sampler.h"
@@ -64,7 +68,16 @@ std::vector<std::vector<bool>> RepeatedViews(const std::vector<FeatureDescriptor
   for (const FeatureDescriptors& d : images) pointers.push_back(&d);
   SiftMatchingOptions sift;
   sift.num_threads = -1;
-  std::unique_ptr<FeatureMatcher> matcher = CreateCpuFeatureMatcher(sift, CasHashOptions(), ComputeMeanDescriptor(pointers));
+  // Pinned rather than the library defaults, so that a change of defaults
+  // does not change what a seed generates (the matcher's code still may).
+  CasHashOptions cashash;
+  cashash.matcher = MatcherType::kCascade;
+  cashash.num_tables = 8;
+  cashash.bits_per_table = 7;
+  cashash.tau = 40;
+  cashash.top_k = 10;
+  cashash.random_seed = 0;
+  std::unique_ptr<FeatureMatcher> matcher = CreateCpuFeatureMatcher(sift, cashash, ComputeMeanDescriptor(pointers));
   std::vector<ImagePair> pairs;
   for (size_t i = 0; i < images.size(); ++i) {
     matcher->AddImage(static_cast<image_t>(i), images[i]);
@@ -305,6 +318,41 @@ class ImageGenerator {
   size_t planned_points_;
 };
 
+const char* ModelName(int model_id) {
+  switch (model_id) {
+    case kPinholeModel: return "PINHOLE";
+    case kSimpleRadialModel: return "SIMPLE_RADIAL";
+    default: return "SIMPLE_PINHOLE";
+  }
+}
+
+// The true cameras in COLMAP's text model format (world-to-camera poses).
+void WriteGroundTruth(const DatabaseGeneratorOptions& options, const SyntheticStreetScene& scene,
+                      const Camera& camera) {
+  std::error_code error;
+  std::filesystem::create_directories(options.ground_truth_path, error);
+  const std::filesystem::path dir(options.ground_truth_path);
+  std::ofstream cameras(dir / "cameras.txt"), images(dir / "images.txt"), points(dir / "points3D.txt");
+  if (!cameras || !images || !points) {
+    throw std::runtime_error("--ground_truth_path: cannot write files in " + options.ground_truth_path);
+  }
+  cameras << "# CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]\n" << std::setprecision(17);
+  images << "# IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME (world-to-camera), then an empty line\n"
+         << std::setprecision(17);
+  points << "# no points: the ground truth holds cameras only\n";
+  for (int k = 0; k < options.num_images; ++k) {
+    // Ids as the database assigns them: image k + 1 with its own camera k + 1.
+    cameras << k + 1 << " " << ModelName(camera.model_id) << " " << camera.width << " " << camera.height;
+    for (double p : camera.params) cameras << " " << p;
+    cameras << "\n";
+    const Eigen::Matrix3d R = scene.Rotation(k);
+    const Eigen::Quaterniond q(R);
+    const Eigen::Vector3d t = -R * scene.Centre(k);
+    images << k + 1 << " " << q.w() << " " << q.x() << " " << q.y() << " " << q.z() << " " << t.x() << " " << t.y()
+           << " " << t.z() << " " << k + 1 << " " << ImageName(k, options.num_images) << "\n\n";
+  }
+}
+
 void RemoveDatabaseFiles(const std::string& path) {
   std::error_code ignored;
   for (const char* suffix : {"", "-journal", "-wal", "-shm"}) std::filesystem::remove(path + suffix, ignored);
@@ -419,6 +467,7 @@ GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
     throw;
   }
   SetWalJournal(options.database_path);
+  if (!options.ground_truth_path.empty()) WriteGroundTruth(options, scene, camera);
   summary.file_bytes = std::filesystem::file_size(options.database_path, error);
   summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return summary;

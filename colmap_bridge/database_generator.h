@@ -39,6 +39,10 @@ struct DatabaseGeneratorOptions {
   // Views of one point in several of them are kept once; finding those costs
   // a matching of every pair of them.
   int source_max_images = 24;
+  // When set: a folder that receives the true cameras as a COLMAP text model
+  // (cameras.txt, images.txt, an empty points3D.txt), for comparing a
+  // reconstruction (scripts/summarize_model.py --gt).
+  std::string ground_truth_path;
 
   // "" or a message naming the option at fault (--name as on the command line).
   std::string Check() const;

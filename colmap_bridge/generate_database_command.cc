@@ -41,7 +41,9 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
       "images_per_transaction", po::value(&o.images_per_transaction)->default_value(o.images_per_transaction),
       "Images written per database transaction")(
       "source_max_images", po::value(&o.source_max_images)->default_value(o.source_max_images),
-      "Source images whose descriptors are used (their repeated views of a point are kept once)");
+      "Source images whose descriptors are used (their repeated views of a point are kept once)")(
+      "ground_truth_path", po::value(&o.ground_truth_path),
+      "Folder for the true cameras as a COLMAP text model (optional)");
   po::variables_map vm;
   try {
     po::store(po::command_line_parser(argc, argv).options(description).run(), vm);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <set>
 #include <stdexcept>
 
@@ -204,10 +205,26 @@ TEST_F(DatabaseGeneratorTest, CommandLineWritesTheDatabaseAndNamesBadOptions) {
   };
   std::string err;
   EXPECT_EQ(run({"--database_path", out, "--source_database_path", source_, "--num_images", "3", "--num_features",
-                 "200"},
+                 "200", "--ground_truth_path", scratch_.File("gt")},
                 &err),
             0)
       << err;
+  // The true cameras as a COLMAP text model: one pose line and one empty
+  // line per image, one camera per image.
+  std::ifstream images(scratch_.File("gt") + "/images.txt"), cameras(scratch_.File("gt") + "/cameras.txt");
+  std::string line;
+  std::vector<std::string> image_lines, camera_lines;
+  while (std::getline(images, line)) {
+    if (!line.empty() && line[0] != '#') image_lines.push_back(line);
+  }
+  while (std::getline(cameras, line)) {
+    if (!line.empty() && line[0] != '#') camera_lines.push_back(line);
+  }
+  ASSERT_EQ(image_lines.size(), 3u);
+  EXPECT_NE(image_lines[2].find(" 3 synthetic_000003.jpg"), std::string::npos) << image_lines[2];
+  ASSERT_EQ(camera_lines.size(), 3u);
+  EXPECT_EQ(camera_lines[0].rfind("1 SIMPLE_RADIAL 1600 1200 1920 800 600 0", 0), 0u) << camera_lines[0];
+  EXPECT_TRUE(std::filesystem::exists(scratch_.File("gt") + "/points3D.txt"));
   {
     Database db(out, true);
     EXPECT_EQ(db.ReadAllImages().size(), 3u);
