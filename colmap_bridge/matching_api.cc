@@ -14,6 +14,7 @@
 #include "cashash/feature_cache.h"
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
+#include "cashash/retaining_feature_matcher.h"
 #include "cashash/schedule_sizing.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -136,9 +137,13 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
 // Under MPI every rank computes the same chunk list (the database is read
 // by all, read-only, before rank 0 opens it for writing) and matches its
 // share (ChunksOfRank); rank 0 writes everything (mpi_distributed.h).
+//
+// With matcher_keep_bytes > 0 the matcher keeps released images up to that
+// many bytes (RetainingFeatureMatcher), so that most images are hashed once.
 MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
                             const std::vector<image_t>& image_ids, std::vector<PairChunk> chunks,
-                            size_t num_pairs_requested, bool cache_groups, const MatchingCallbacks& callbacks) {
+                            size_t num_pairs_requested, bool cache_groups, size_t matcher_keep_bytes,
+                            const MatchingCallbacks& callbacks) {
   const int rank = MpiRank(), num_ranks = MpiSize();
   MatchingSummary summary;
   summary.pairs_requested = num_pairs_requested;
@@ -183,6 +188,17 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
   std::unique_ptr<FeatureMatcher> matcher =
       CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); });
+  RetainingFeatureMatcher* retaining = nullptr;
+  if (matcher_keep_bytes > 0) {
+    const size_t max_rows = static_cast<size_t>(std::max(1, options.sift.max_num_matches));
+    auto keeping = std::make_unique<RetainingFeatureMatcher>(
+        std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables](
+                                                    const FeatureDescriptors& d) {
+          return MatcherBytesPerImage(std::min(d.rows(), max_rows), tables);
+        });
+    retaining = keeping.get();
+    matcher = std::move(keeping);
+  }
   const std::vector<PairChunk> my_chunks = num_ranks > 1 ? ChunksOfRank(chunks, rank, num_ranks) : chunks;
 
   // Rank 0 alone opens the database for writing (and takes the writer
@@ -237,6 +253,13 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   Info(callbacks, "Matcher: " + summary.matcher_name);
   // How well the group level worked: database reads against images.
   auto report_cache = [&]() {
+    if (retaining != nullptr) {
+      const RetainingStats& kept = retaining->stats();
+      Info(callbacks, "Hashing: " + std::to_string(kept.images_added) + " images hashed, " +
+                          std::to_string(kept.images_reused) + " times reused, " +
+                          std::to_string(kept.images_dropped) + " dropped to stay within " +
+                          FormatMemorySize(matcher_keep_bytes));
+    }
     if (!cache) return;
     const FeatureCacheStats stats = cache->stats();
     Info(callbacks, "Features: " + std::to_string(stats.source_loads) + " image reads for " +
@@ -366,7 +389,7 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
   const size_t block = static_cast<size_t>(options.block_size);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
   return MatchChunks(options, source, ImagesOfPairs(pairs), std::move(chunks), pairs.size(), /*cache_groups=*/false,
-                     callbacks);
+                     /*matcher_keep_bytes=*/0, callbacks);
 }
 
 }  // namespace
@@ -440,7 +463,7 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
     const size_t n = image_ids.size();
     return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
-                       callbacks);
+                       sizes.matcher_keep_bytes, callbacks);
   });
 }
 

@@ -134,6 +134,13 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   sizes.predicted_host_bytes =
       fixed_host(bs) + images(kCacheGroups * sizes.blocks_per_group * bs) * sizes.host_bytes_per_image;
   sizes.predicted_gpu_bytes = gpu ? images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image : 0;
+  // Kept images cost matcher memory (device or host) and, on the GPU, a host
+  // copy of their descriptors (for the CPU fallback), less than the former.
+  const size_t in_use = images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image;
+  const size_t host_left = limits.max_host_bytes - std::min(limits.max_host_bytes, sizes.predicted_host_bytes);
+  size_t left = host_left;
+  if (gpu) left = std::min(left, gpu_for_images - std::min(gpu_for_images, in_use));
+  sizes.matcher_keep_bytes = in_use + static_cast<size_t>(0.8 * left);
   return sizes;
 }
 

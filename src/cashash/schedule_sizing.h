@@ -56,6 +56,10 @@ struct ScheduleSizes {
   size_t matcher_bytes_per_image = 0;  // what the matcher keeps of it
   size_t predicted_host_bytes = 0;     // cache + pipeline (+ matcher on CPU)
   size_t predicted_gpu_bytes = 0;      // images held by the GPU matcher
+  // What the matcher may keep of images the pipeline has let go, so that
+  // they are not hashed again (RetainingFeatureMatcher): the images in use
+  // plus 80 % of what both caps leave over.
+  size_t matcher_keep_bytes = 0;
   std::string warning;                 // set when a user block size exceeds the GPU cap
 };
 
