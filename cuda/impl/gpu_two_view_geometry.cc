@@ -19,10 +19,15 @@ namespace cashash {
 namespace cuda {
 namespace {
 
-// Grows a device buffer geometrically so that chunk after chunk reuses it.
+// Grow buffers geometrically so that chunk after chunk reuses them.
 void Reserve(DeviceBuffer* buffer, size_t bytes, const char* what) {
   if (buffer->bytes() >= bytes) return;
   buffer->Allocate(bytes + bytes / 2, what);
+}
+
+void Reserve(PinnedBuffer* buffer, size_t bytes) {
+  if (buffer->bytes() >= bytes) return;
+  buffer->Allocate(bytes + bytes / 2, /*mapped=*/false, "RANSAC host staging");
 }
 
 Eigen::Matrix3d FromRowMajor(const double* v) {
@@ -39,6 +44,7 @@ struct GpuTwoViewRansac::Impl {
   cudaStream_t stream = nullptr;
   cudaEvent_t start = nullptr, stop = nullptr;
   DeviceBuffer points, inputs, outputs, masks;
+  PinnedBuffer host_points, host_outputs, host_masks;
   GpuRansacStats stats;
 };
 
@@ -104,12 +110,15 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     total += n;
     max_count = std::max(max_count, f.count);
   }
-  std::vector<float4> host_points(total);
-  for (size_t j = 0; j < num_pairs; ++j) {
+  // Packing and unpacking run on all cores: at tens of thousands of pairs
+  // per second they would otherwise cost as much as the kernels.
+  Reserve(&d.host_points, total * sizeof(float4));
+  float4* host_points = d.host_points.host<float4>();
+  ParallelFor(num_pairs, -1, [&](size_t j) {
     const PointPairs& p = pairs[order[j]]->normalized;
-    float4* out = host_points.data() + inputs[j].offset;
+    float4* out = host_points + inputs[j].offset;
     for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
-  }
+  });
 
   Reserve(&d.points, total * sizeof(float4), "RANSAC points");
   Reserve(&d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
@@ -117,7 +126,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   Reserve(&d.masks, 2 * total, "RANSAC inlier masks");
 
   CUDA_CHECK(cudaEventRecord(d.start, d.stream));
-  CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points.data(), total * sizeof(float4),
+  CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points, total * sizeof(float4),
                              cudaMemcpyHostToDevice, d.stream));
   CUDA_CHECK(cudaMemcpyAsync(d.inputs.as<RansacPairInput>(), inputs.data(), inputs.size() * sizeof(RansacPairInput),
                              cudaMemcpyHostToDevice, d.stream));
@@ -144,19 +153,22 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   H_launch.max_trials = RansacMaxTrials(ransac, 4);
   LaunchTwoViewRansac(F_launch, H_launch, d.stream);
 
-  std::vector<RansacPairOutput> outputs(inputs.size());
-  std::vector<uint8_t> masks(2 * total);
-  CUDA_CHECK(cudaMemcpyAsync(outputs.data(), d.outputs.as<RansacPairOutput>(),
-                             outputs.size() * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
-  CUDA_CHECK(cudaMemcpyAsync(masks.data(), d.masks.as<uint8_t>(), masks.size(), cudaMemcpyDeviceToHost, d.stream));
+  Reserve(&d.host_outputs, inputs.size() * sizeof(RansacPairOutput));
+  Reserve(&d.host_masks, 2 * total);
+  const RansacPairOutput* outputs = d.host_outputs.host<RansacPairOutput>();
+  const uint8_t* masks = d.host_masks.host<uint8_t>();
+  CUDA_CHECK(cudaMemcpyAsync(d.host_outputs.host<RansacPairOutput>(), d.outputs.as<RansacPairOutput>(),
+                             inputs.size() * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.host_masks.host<uint8_t>(), d.masks.as<uint8_t>(), 2 * total, cudaMemcpyDeviceToHost,
+                             d.stream));
   CUDA_CHECK(cudaEventRecord(d.stop, d.stream));
-  // Pageable copies return once queued data is staged; the kernels run on.
+  // Pinned copies are asynchronous: the host works while the kernels run.
   if (while_running) while_running();
   CUDA_CHECK(cudaStreamSynchronize(d.stream));
   float gpu_ms = 0;
   CUDA_CHECK(cudaEventElapsedTime(&gpu_ms, d.start, d.stop));
 
-  for (size_t j = 0; j < num_pairs; ++j) {
+  ParallelFor(num_pairs, -1, [&](size_t j) {
     const size_t k = order[j];
     for (int model = 0; model < 2; ++model) {
       const RansacPairOutput& out = outputs[model * num_pairs + j];
@@ -167,12 +179,14 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
       if (e.success) {
         const Eigen::Matrix3d m = FromRowMajor(out.model);
         e.model = model == 0 ? FundamentalToPixels(m, pairs[k]->norm) : HomographyToPixels(m, pairs[k]->norm);
-        const uint8_t* mask = masks.data() + model * total + inputs[j].offset;
+        const uint8_t* mask = masks + model * total + inputs[j].offset;
         e.inlier_mask.assign(mask, mask + inputs[j].count);
       }
-      (model == 0 ? d.stats.trials_F : d.stats.trials_H) += out.num_trials;
-      (model == 0 ? d.stats.local_refits_F : d.stats.local_refits_H) += out.num_local_refits;
     }
+  });
+  for (size_t j = 0; j < 2 * num_pairs; ++j) {
+    (j < num_pairs ? d.stats.trials_F : d.stats.trials_H) += outputs[j].num_trials;
+    (j < num_pairs ? d.stats.local_refits_F : d.stats.local_refits_H) += outputs[j].num_local_refits;
   }
   d.stats.pairs += num_pairs;
   d.stats.points += total;
