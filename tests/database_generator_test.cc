@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "cashash/pair_id.h"
+#include "colmap_bridge/blob_codec.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_generator.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -110,6 +111,35 @@ TEST_F(DatabaseGeneratorTest, SameSeedSameDatabaseOtherSeedOtherFeatures) {
     }
     EXPECT_NE(da.ReadDescriptors(id).data, dc.ReadDescriptors(id).data);
   }
+}
+
+TEST(EncodeKeypointsTest, TwoFourAndSixColumnsRoundTripThroughTheDecoder) {
+  Keypoint kp;
+  kp.x = 10.5f;
+  kp.y = 20.25f;
+  const float scale = 3.f, angle = 0.7f;
+  kp.a11 = scale * std::cos(angle);
+  kp.a12 = -scale * std::sin(angle);
+  kp.a21 = scale * std::sin(angle);
+  kp.a22 = scale * std::cos(angle);
+  for (int cols : {2, 4, 6}) {
+    const std::vector<float> values = colmap::EncodeKeypoints({kp, kp}, cols);
+    ASSERT_EQ(values.size(), 2u * cols);
+    colmap::MatrixBlob blob;
+    blob.rows = 2;
+    blob.cols = cols;
+    blob.data = values.data();
+    blob.num_bytes = values.size() * sizeof(float);
+    const Keypoint back = colmap::DecodeKeypoints(blob, "test")[1];
+    EXPECT_EQ(back.x, kp.x);
+    EXPECT_EQ(back.y, kp.y);
+    if (cols == 2) continue;  // no shape stored
+    EXPECT_NEAR(back.a11, kp.a11, 1e-5);
+    EXPECT_NEAR(back.a12, kp.a12, 1e-5);
+    EXPECT_NEAR(back.a21, kp.a21, 1e-5);
+    EXPECT_NEAR(back.a22, kp.a22, 1e-5);
+  }
+  EXPECT_THROW(colmap::EncodeKeypoints({kp}, 3), colmap::DatabaseError);
 }
 
 TEST(SyntheticStreetSceneTest, ObservationsAreProjectionsOfTheScenePoints) {
