@@ -211,7 +211,7 @@ def run_sweeps(args, binary, bench, dbs):
     choice_path = os.path.join(work, "settings.json")
     if not (args.reuse and os.path.exists(choice_path)):
         save_json(choice_path, sweeps.setting_sweep(binary, scene_db, dbs, os.path.join(work, "settings"), 6, log,
-                                                    SETTING_CHOICES))
+                                                    SETTING_CHOICES, repeats=5))
     print("sweeps done", flush=True)
     return {"tau": {int(k): v for k, v in load_json(tau_path).items()}, "topk_bits": load_json(bench_path),
             "settings": load_json(choice_path)}

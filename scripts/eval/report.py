@@ -286,7 +286,7 @@ def settings_lines(rows, results, setting):
     base = next((r for r in rows if r["setting"] == [8, 7, 40, 10, 0]), None)
     lines = ["| tables x bits | tau | top_k | seed | " + " | ".join("%s: precision - brute force, correct / brute "
                                                                     "force" % n for n in names)
-             + " | target met | matching s, 1 thread (least of 3) | vs 8 x 7 / 40 / 10 |",
+             + " | target met | matching s, 1 thread (least of 5) | vs 8 x 7 / 40 / 10 |",
              "|---|---|---|---|" + "---|" * len(names) + "---|---|---|"]
     for r in rows:
         tables, bits, tau, top_k, seed = r["setting"]
@@ -321,12 +321,13 @@ def sweep_section(sweeps, plots, scene, setting, results):
                   "cascade at one setting on every homography sequence (precision at 6 px minus brute force's, "
                   "correct matches as a share of brute force's) and its matching time on the 55 pairs of %s "
                   "(the `matching` seconds cashash prints: hashing and matching, one thread, no verification; "
-                  "the least of three runs on a shared 2-core machine, still +-10 %%). Seeds 1 and 2 draw other "
-                  "random projections." % scene, ""]
+                  "the least of five rounds over all settings on a shared 2-core machine, so still +-15 %%; "
+                  "docs/cascade_parameters.md has the same comparison on an idle machine, +7 to +9 %% for "
+                  "43 / 16). Seeds 1 and 2 draw other random projections." % scene, ""]
         lines += settings_lines(sweeps["settings"], results, setting) + [""]
     lines += ["### tau", "",
               "Raw matches and matching time (one thread, no verification; the `matching` seconds cashash prints, "
-              "wall time on a shared 2-core machine, so +-20 %%) over the 55 pairs of %s, and precision at 6 px "
+              "the least of three rounds over all taus on a shared 2-core machine, so +-15 %%) over the 55 pairs of %s, and precision at 6 px "
               "over pairs 1-2 ... 1-6 of each homography sequence (%d tables x %d bits, top_k %d); the last row "
               "is brute force." % (scene, tables, bits, top_k), "",
               "| tau | raw matches (%s) | matching s | process CPU s | " % scene
