@@ -5,6 +5,7 @@ import platform
 import subprocess
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -110,8 +111,11 @@ def plot_topk_bits(bench, out_dir, setting):
         ax.tick_params(labelsize=7)
         twin.tick_params(labelsize=7)
     axes[0].set_xscale("log")
-    axes[0].set_xticks([r["top_k"] for r in series[0][1]])
-    axes[0].set_xticklabels([str(r["top_k"]) for r in series[0][1]])
+    # Neighbouring values (10, 12) would print on top of each other on the log axis.
+    ticks = [k for k in (1, 2, 3, 5, 10, 16, 32) if any(r["top_k"] == k for r in series[0][1])]
+    axes[0].set_xticks(ticks)
+    axes[0].set_xticklabels([str(k) for k in ticks])
+    axes[0].xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     return _save(fig, out_dir, "topk_bits_sweep.png")
 
 
