@@ -231,6 +231,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     }
     __syncthreads();
     unsigned long long best_key = s.best_key;
+    __syncthreads();  // everyone has read the best before thread 0 may change it
     for (int t = 0; t < kRansacThreads; ++t) {
       if (s.keys[t] <= best_key) continue;  // same decision in every thread
       if (threadIdx.x == 0) {
@@ -252,11 +253,14 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
             int count;
             float sum;
             BlockScore<Model>(lf, points, n, threshold, s, &count, &sum);
-            const unsigned long long key = SupportKey(count, sum);
-            if (threadIdx.x == 0 && key > s.best_key) {
-              for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_model[k];
-              s.best_key = key;
-              s.best_count = count;
+            // Only thread 0 reads the best here (others would race with its write).
+            if (threadIdx.x == 0) {
+              const unsigned long long key = SupportKey(count, sum);
+              if (key > s.best_key) {
+                for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_model[k];
+                s.best_key = key;
+                s.best_count = count;
+              }
             }
           }
           __syncthreads();
