@@ -38,8 +38,8 @@ constexpr size_t kMaxBatchQueries = size_t{1} << 22;
 // ... and at most this many pairs ...
 constexpr size_t kMaxBatchPairs = 8192;
 // ... and candidate lists of at most this many bytes (tiled kernels): with
-// 128 keys per list, 2 x 8192 features per pair take 8.5 MB, so ~120 such
-// pairs per batch, ~2.5 ms of work at 50k pairs/s.
+// 256 keys per list, 2 x 8192 features per pair take 17 MB, so ~60 such
+// pairs per batch, ~1.2 ms of work at 50k pairs/s.
 constexpr size_t kMaxBatchListBytes = size_t{1} << 30;
 
 // Which matching kernels run: the bucket-tile kernels (default) or the older

@@ -41,9 +41,9 @@ struct CandidateLists {
 };
 
 // Keys per list. Real SIFT at 8192 features per image has ~44 candidates
-// within tau per query on average (8 x 7 tables); 128 leaves the per-query
-// fallback to the few features in very dense buckets.
-constexpr int kCandidateListCapacity = 128;
+// within tau per query on average (8 x 7 tables) with a long tail; 256
+// leaves the per-query fallback to the few features in very dense buckets.
+constexpr int kCandidateListCapacity = 256;
 
 // Fills `lists` for every task (one warp per (task, table, bucket)).
 // Asynchronous on `stream`.

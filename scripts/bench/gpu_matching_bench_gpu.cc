@@ -2,7 +2,7 @@
 //
 //   gpu_matching_bench_gpu [--sample FILE] [--images N] [--sizes 2048,8192,16384]
 //                          [--repeats R] [--cpu_pairs P] [--bf_pairs P]
-//                          [--tables T] [--bits B] [--top_k K]
+//                          [--tables T] [--bits B] [--top_k K] [--tau D]
 //
 // Descriptors are sampled from FILE (raw N x 128 uint8 rows, e.g. SIFT rows
 // exported from a COLMAP database) or drawn synthetic; image i shares 30% of
@@ -43,7 +43,7 @@ struct Args {
   int repeats = 3;
   int cpu_pairs = 16;
   int bf_pairs = 128;
-  int tables = 0, bits = 0, top_k = 0;  // 0: the shipped defaults
+  int tables = 0, bits = 0, top_k = 0, tau = -1;  // 0 / -1: the shipped defaults
 };
 
 Args Parse(int argc, char** argv) {
@@ -58,6 +58,7 @@ Args Parse(int argc, char** argv) {
     else if (key == "--tables") a.tables = std::stoi(value);
     else if (key == "--bits") a.bits = std::stoi(value);
     else if (key == "--top_k") a.top_k = std::stoi(value);
+    else if (key == "--tau") a.tau = std::stoi(value);
     else if (key == "--sizes") {
       a.sizes.clear();
       size_t at = 0;
@@ -194,6 +195,7 @@ int main(int argc, char** argv) {
     if (args.tables > 0) cas.num_tables = args.tables;
     if (args.bits > 0) cas.bits_per_table = args.bits;
     if (args.top_k > 0) cas.top_k = args.top_k;
+    if (args.tau >= 0) cas.tau = args.tau;
 
     // Candidate statistics of the cascade on a few pairs (CPU, same definition).
     {
