@@ -4,14 +4,17 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <mutex>
+#include <sstream>
 #include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
 
 #include "cashash/fallback_feature_matcher.h"
 #include "cashash/feature_cache.h"
+#include "cashash/guided_matching.h"
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
 #include "cashash/retaining_feature_matcher.h"
@@ -188,13 +191,32 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
   std::unique_ptr<FeatureMatcher> matcher =
       CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); });
+  // Guided matching (Ga-CasHash, cashash/guided_matching.h): a second
+  // matcher for the top-scale subsets, the stage-1 F estimator, and the
+  // pipeline's features read through a source that keeps the keypoints.
+  std::unique_ptr<KeypointRecordingSource> keypoint_source;
+  GuidedFeatureMatcher* guided = nullptr;
+  if (options.guided.enabled) {
+    keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
+    auto guided_matcher = std::make_unique<GuidedFeatureMatcher>(
+        std::move(matcher), CreateMatcherForOptions(run_options, mean, nullptr),
+        CreateFundamentalEstimatorForOptions(run_options), keypoint_source.get(), options.guided,
+        options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
+    guided = guided_matcher.get();
+    matcher = std::move(guided_matcher);
+  }
   RetainingFeatureMatcher* retaining = nullptr;
   if (matcher_keep_bytes > 0) {
     const size_t max_rows = static_cast<size_t>(std::max(1, options.sift.max_num_matches));
+    // A guided matcher also holds the top-scale subset and the positions.
+    const double share = options.guided.enabled ? 1.0 + options.guided.top_scale_fraction : 1.0;
+    const size_t position_bytes = options.guided.enabled ? 24 : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
-        std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables](
-                                                    const FeatureDescriptors& d) {
-          return MatcherBytesPerImage(std::min(d.rows(), max_rows), tables);
+        std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables, share,
+                                                 position_bytes](const FeatureDescriptors& d) {
+          const size_t rows = std::min(d.rows(), max_rows);
+          return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
+                 rows * position_bytes;
         });
     retaining = keeping.get();
     matcher = std::move(keeping);
@@ -226,6 +248,10 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   std::unique_ptr<GroupFeatureCache> cache;
   if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, my_chunks);
   FeatureSource* features = cache ? static_cast<FeatureSource*>(cache.get()) : &source;
+  if (keypoint_source) {
+    keypoint_source->SetInner(features);
+    features = keypoint_source.get();
+  }
   MatchingPipeline pipeline(pipeline_options, features, matcher.get(), sink);
 
   // Progress counts the pairs of every rank written so far.
@@ -259,6 +285,16 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
                           std::to_string(kept.images_reused) + " times reused, " +
                           std::to_string(kept.images_dropped) + " dropped to stay within " +
                           FormatMemorySize(matcher_keep_bytes));
+    }
+    if (guided != nullptr) {
+      const GuidedMatchingStats& g = guided->stats();
+      std::ostringstream text;
+      text << std::fixed << std::setprecision(3) << "Guided matching: " << g.pairs << " pairs, "
+           << g.pairs_enough_matches << " with >= " << options.guided.min_num_matches << " top-scale matches ("
+           << g.stage1_matches << " in all), " << g.pairs_guided << " matched within the epipolar band ("
+           << g.stage2_matches << " matches); stage 1 " << g.seconds_stage1 << " s, F " << g.seconds_fundamental
+           << " s, stage 2 " << g.seconds_stage2 << " s";
+      Info(callbacks, text.str());
     }
     if (!cache) return;
     const FeatureCacheStats stats = cache->stats();

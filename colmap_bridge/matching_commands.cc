@@ -127,6 +127,15 @@ int RunExhaustiveMatcher(int argc, const char* const* argv) {
   });
 }
 
+int RunGuidedMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("guided_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded([&]() {
+    return MatchExhaustive(options.database_path, options, ConsoleCallbacks("Guided feature matching (Ga-CasHash)"));
+  });
+}
+
 int RunMatchesImporter(int argc, const char* const* argv) {
   MatcherCommandOptions options;
   const int early = PrepareOptions("matches_importer", argc, argv, &options);
