@@ -19,6 +19,7 @@
 #include "cashash/pair_id.h"
 #include "cashash/retaining_feature_matcher.h"
 #include "cashash/schedule_sizing.h"
+#include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/gpu_memory_query.h"
@@ -151,11 +152,11 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   MatchingSummary summary;
   summary.pairs_requested = num_pairs_requested;
   if (!options.overwrite) {
-    const std::unordered_set<pair_t> done = source.database().ReadCompletedPairIds();
-    if (!done.empty()) {
-      chunks = RemovePairs(std::move(chunks), [&](const ImagePair& pair) {
-        return done.count(ImagePairToPairId(pair.first, pair.second)) > 0;
-      });
+    // One bit per pair of the run, whatever the database holds.
+    const CompletedPairs done = ReadCompletedPairs(source.database(), image_ids, chunks);
+    if (done.num_completed() > 0) {
+      chunks = RemovePairs(std::move(chunks),
+                           [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
     }
   }
   if (num_ranks > 1) {
