@@ -127,11 +127,50 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
   stats->inlier_matches += other.inlier_matches;
   stats->seconds_total = std::max(stats->seconds_total, other.seconds_total);
   stats->seconds_loading = std::max(stats->seconds_loading, other.seconds_loading);
+  stats->seconds_hashing = std::max(stats->seconds_hashing, other.seconds_hashing);
   stats->seconds_matching = std::max(stats->seconds_matching, other.seconds_matching);
   stats->seconds_verification = std::max(stats->seconds_verification, other.seconds_verification);
   stats->seconds_writing = std::max(stats->seconds_writing, other.seconds_writing);
   stats->stopped = stats->stopped || other.stopped;
 }
+
+// Device memory in use on the run's GPU: before the matcher exists, then
+// after every committed block (the writer thread, and the MPI receiver's).
+class GpuMemorySampler {
+ public:
+  explicit GpuMemorySampler(int gpu_index) : gpu_index_(gpu_index) {
+    size_t free_bytes = 0;
+    if (gpu_index_ < 0 || !GpuMemoryInfo(gpu_index_, &free_bytes, &total_bytes_)) {
+      gpu_index_ = -1;
+      return;
+    }
+    before_bytes_ = total_bytes_ - free_bytes;
+    peak_bytes_ = before_bytes_;
+  }
+
+  void Sample() {
+    if (gpu_index_ < 0) return;
+    size_t free_bytes = 0, total_bytes = 0;
+    if (!GpuMemoryInfo(gpu_index_, &free_bytes, &total_bytes)) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    peak_bytes_ = std::max(peak_bytes_, total_bytes - free_bytes);
+  }
+
+  void Fill(MatchingSummary* summary) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    summary->gpu_index = gpu_index_;
+    summary->gpu_total_bytes = total_bytes_;
+    summary->gpu_used_before_bytes = before_bytes_;
+    summary->gpu_peak_used_bytes = peak_bytes_;
+  }
+
+ private:
+  int gpu_index_;
+  size_t total_bytes_ = 0, before_bytes_ = 0, peak_bytes_ = 0;
+  std::mutex mutex_;
+};
+
+int GpuIndexForRun(const MatcherCommandOptions& options);
 
 // Runs the pipeline over `chunks`, leaving out pairs already in the database
 // unless options.overwrite is set. With `cache_groups` (chunks of
@@ -189,6 +228,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     if (devices > 1) run_options.gpu_index = std::to_string(MpiLocalRank() % devices);
   }
 #endif
+  GpuMemorySampler gpu_memory(GpuIndexForRun(run_options));
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
   std::unique_ptr<FeatureMatcher> matcher =
       CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); });
@@ -259,6 +299,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   std::mutex progress_mutex;
   const auto run_start = std::chrono::steady_clock::now();
   auto report_progress = [&](PipelineProgress progress) {
+    gpu_memory.Sample();
     if (!callbacks.progress || locked_sink == nullptr) return;
     std::lock_guard<std::mutex> lock(progress_mutex);
     progress.pairs_done = locked_sink->pairs_written();
@@ -267,7 +308,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
         std::chrono::duration<double>(std::chrono::steady_clock::now() - run_start).count();
     callbacks.progress(progress);
   };
-  if (callbacks.progress) pipeline.SetProgressCallback(report_progress);
+  pipeline.SetProgressCallback(report_progress);
   if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
   // Verification on the GPU too when use_gpu is set (the matcher has
   // already warned when no GPU can be used).
@@ -307,6 +348,8 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     summary.pipeline = pipeline.Run(my_chunks);
     // The GPU matcher may have handed over to the CPU on running out of memory.
     summary.matcher_name = matcher->Name();
+    gpu_memory.Sample();
+    gpu_memory.Fill(&summary);
     report_cache();
     return summary;
   }
@@ -330,6 +373,8 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   }
   for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
   summary.matcher_name = matcher->Name();
+  gpu_memory.Sample();
+  gpu_memory.Fill(&summary);  // rank 0's device
   report_cache();  // rank 0's share
   Info(callbacks, "Matched by " + std::to_string(num_ranks) + " MPI processes");
   return summary;
