@@ -1,6 +1,7 @@
 #include "colmap_bridge/verifier_selection.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <stdexcept>
 
 #ifdef CASHASH_WITH_CUDA
@@ -14,6 +15,12 @@ namespace colmap {
 
 std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
                                                              const std::function<void(const std::string&)>& warning) {
+  // CASHASH_VERIFIER=cpu verifies on the CPU while matching on the GPU (to
+  // compare the two verifiers within one run configuration).
+  const char* forced = std::getenv("CASHASH_VERIFIER");
+  if (forced != nullptr && std::string(forced) == "cpu") {
+    return CreateCpuBatchVerifier(options.two_view, options.sift.num_threads);
+  }
   if (options.use_gpu) {
 #ifdef CASHASH_WITH_CUDA
     int gpu_index = 0;
