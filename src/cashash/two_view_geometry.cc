@@ -187,24 +187,34 @@ bool TwoViewIsCalibrated(const Camera& camera1, const Camera& camera2) {
          CameraModelIsSupported(camera1.model_id) && CameraModelIsSupported(camera2.model_id);
 }
 
-TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+EssentialPoints PrepareEssentialPoints(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
                                        const TwoViewGeometryOptions& options) {
+  EssentialPoints points;
   const size_t n = pixels.size();
-  PointPairs world;
-  world.resize(n);
+  points.world.resize(n);
   for (size_t i = 0; i < n; ++i) {
     double u1, v1, u2, v2;
     CameraImageToWorld(camera1, pixels.x1[i], pixels.y1[i], &u1, &v1);
     CameraImageToWorld(camera2, pixels.x2[i], pixels.y2[i], &u2, &v2);
-    world.Set(i, u1, v1, u2, v2);
+    points.world.Set(i, u1, v1, u2, v2);
   }
-  RansacOptions e_options = MakeRansacOptions(options, kSeedE);
   // The pixel threshold mapped through each camera's focal length, averaged.
-  e_options.max_error = 0.5 * (options.max_error / CameraMeanFocalLength(camera1) +
-                               options.max_error / CameraMeanFocalLength(camera2));
-  TwoViewModelEstimate E = ToEstimate(LoRansac(EssentialEstimator(world), e_options));
+  points.max_error = 0.5 * (options.max_error / CameraMeanFocalLength(camera1) +
+                            options.max_error / CameraMeanFocalLength(camera2));
+  return points;
+}
+
+TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options) {
+  RansacOptions e_options = MakeRansacOptions(options, kSeedE);
+  e_options.max_error = points.max_error;
+  TwoViewModelEstimate E = ToEstimate(LoRansac(EssentialEstimator(points.world), e_options));
   if (!E.success) E.model = Eigen::Matrix3d::Zero();
   return E;
+}
+
+TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                                       const TwoViewGeometryOptions& options) {
+  return EstimateEssential(PrepareEssentialPoints(camera1, camera2, pixels, options), options);
 }
 
 TwoViewGeometry DecideTwoViewGeometry(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,

@@ -135,6 +135,19 @@ bool TwoViewIsCalibrated(const Camera& camera1, const Camera& camera2);
 TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
                                        const TwoViewGeometryOptions& options);
 
+// What EstimateEssential runs its RANSAC on: the matched pixels undistorted
+// to normalised camera coordinates, and the threshold there (the pixel
+// threshold through each camera's mean focal length, averaged). Other
+// verifiers (the GPU one) estimate E from the same points and threshold.
+struct EssentialPoints {
+  PointPairs world;
+  double max_error = 0;  // normalised camera units; residuals compare against its square
+};
+EssentialPoints PrepareEssentialPoints(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
+                                       const TwoViewGeometryOptions& options);
+// EstimateEssential on prepared points.
+TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options);
+
 // COLMAP's configuration decision from the three estimates (E unused unless
 // `calibrated`), then the inlier matches and the watermark test. F, H and E
 // of the result are those of the estimates that succeeded.
