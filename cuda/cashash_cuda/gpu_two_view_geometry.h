@@ -1,8 +1,9 @@
-// Geometric verification on the GPU: F (7-point LO-RANSAC, Sampson error)
-// and H (4-point LO-RANSAC, transfer error) of many pairs in one launch,
-// one thread block per pair and model. E (calibrated pairs), the
-// configuration decision and the watermark test stay on the CPU and are the
-// CPU path's own code (DecideTwoViewGeometry), so both paths decide alike.
+// Geometric verification on the GPU: F (7-point LO-RANSAC, Sampson error),
+// H (4-point LO-RANSAC, transfer error) and, for calibrated pairs, E
+// (5-point LO-RANSAC on normalised camera coordinates) of many pairs at
+// once, one thread block per pair and model. The configuration decision and
+// the watermark test stay on the CPU and are the CPU path's own code
+// (DecideTwoViewGeometry), so both paths decide alike.
 #pragma once
 
 #include <cstdint>
@@ -24,6 +25,8 @@ struct GpuRansacStats {
   double seconds_gpu = 0;    // upload, kernels and download (CUDA events)
   long long trials_F = 0, trials_H = 0;
   long long local_refits_F = 0, local_refits_H = 0;
+  size_t pairs_E = 0;  // pairs whose E was estimated on the device
+  long long trials_E = 0, local_refits_E = 0;
 };
 
 // F and H estimation for batches of pairs on one device. Not thread-safe:
@@ -47,6 +50,17 @@ class GpuTwoViewRansac {
                 std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,
                 const std::function<void()>& while_running = {});
 
+  // The same, and E of every pair k with essential[k] != nullptr (its points
+  // and threshold from PrepareEssentialPoints), in the form EstimateEssential
+  // gives it (model in normalised camera coordinates, unit norm, seeded by
+  // DeriveSeed(seeds[k], kSeedE)); (*E)[k] stays unset (no success) for the
+  // other pairs. `essential` is empty or has one entry per pair. E runs in a
+  // kernel of its own, concurrently with F and H.
+  void Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
+                const std::vector<const EssentialPoints*>& essential, std::vector<TwoViewModelEstimate>* F,
+                std::vector<TwoViewModelEstimate>* H, std::vector<TwoViewModelEstimate>* E,
+                const std::function<void()>& while_running = {});
+
   const GpuRansacStats& stats() const;
 
  private:
@@ -54,10 +68,16 @@ class GpuTwoViewRansac {
   std::unique_ptr<Impl> impl_;
 };
 
-// The BatchVerifier that estimates F and H of a whole chunk on the GPU and
-// prepares points, estimates E and decides on num_threads CPU threads.
+// The BatchVerifier that estimates F, H and E of a whole chunk on the GPU
+// and prepares points and decides on num_threads CPU threads. With
+// CASHASH_GPU_ESSENTIAL=cpu in the environment, E stays on the CPU (run
+// while the kernels estimate F and H), to compare the two.
 std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
                                                       int num_threads);
+
+// Where the GPU verifier estimates E: on the device unless the environment
+// variable CASHASH_GPU_ESSENTIAL is "cpu".
+bool GpuEssentialFromEnvironment();
 
 }  // namespace cuda
 }  // namespace cashash

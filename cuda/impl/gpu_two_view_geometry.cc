@@ -1,11 +1,14 @@
 // Host side of the GPU verification: packs a batch of pairs' normalised
-// correspondences, runs the F and H kernels, and turns their outputs into
-// the estimates the CPU path's decision reads.
+// correspondences (and calibrated pairs' normalised camera coordinates),
+// runs the F/H and E kernels, and turns their outputs into the estimates the
+// CPU path's decision reads.
 #include "cashash_cuda/gpu_two_view_geometry.h"
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <stdexcept>
+#include <string>
 
 #include "cashash/random_sampler.h"
 #include "cashash/ransac.h"
@@ -41,8 +44,8 @@ Eigen::Matrix3d FromRowMajor(const double* v) {
 struct GpuTwoViewRansac::Impl {
   TwoViewGeometryOptions options;
   int device = 0;
-  cudaStream_t stream = nullptr;
-  cudaEvent_t start = nullptr, stop = nullptr;
+  cudaStream_t stream = nullptr, stream_E = nullptr;
+  cudaEvent_t start = nullptr, stop = nullptr, uploaded = nullptr, done_E = nullptr;
   DeviceBuffer points, inputs, outputs, masks;
   PinnedBuffer host_points, host_outputs, host_masks;
   GpuRansacStats stats;
@@ -56,14 +59,19 @@ GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gp
   impl_->device = gpu_index;
   CUDA_CHECK(cudaSetDevice(gpu_index));
   CUDA_CHECK(cudaStreamCreateWithFlags(&impl_->stream, cudaStreamNonBlocking));
+  CUDA_CHECK(cudaStreamCreateWithFlags(&impl_->stream_E, cudaStreamNonBlocking));
   CUDA_CHECK(cudaEventCreate(&impl_->start));
   CUDA_CHECK(cudaEventCreate(&impl_->stop));
+  CUDA_CHECK(cudaEventCreateWithFlags(&impl_->uploaded, cudaEventDisableTiming));
+  CUDA_CHECK(cudaEventCreateWithFlags(&impl_->done_E, cudaEventDisableTiming));
 }
 
 GpuTwoViewRansac::~GpuTwoViewRansac() {
   cudaSetDevice(impl_->device);
-  if (impl_->start != nullptr) cudaEventDestroy(impl_->start);
-  if (impl_->stop != nullptr) cudaEventDestroy(impl_->stop);
+  for (cudaEvent_t event : {impl_->start, impl_->stop, impl_->uploaded, impl_->done_E}) {
+    if (event != nullptr) cudaEventDestroy(event);
+  }
+  if (impl_->stream_E != nullptr) cudaStreamDestroy(impl_->stream_E);
   if (impl_->stream != nullptr) cudaStreamDestroy(impl_->stream);
 }
 
@@ -72,13 +80,24 @@ const GpuRansacStats& GpuTwoViewRansac::stats() const { return impl_->stats; }
 void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
                                 std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,
                                 const std::function<void()>& while_running) {
+  Estimate(pairs, seeds, {}, F, H, nullptr, while_running);
+}
+
+void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
+                                const std::vector<const EssentialPoints*>& essential,
+                                std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,
+                                std::vector<TwoViewModelEstimate>* E, const std::function<void()>& while_running) {
   if (seeds.size() != pairs.size()) throw std::invalid_argument("GpuTwoViewRansac::Estimate: one seed per pair");
+  if (!essential.empty() && (essential.size() != pairs.size() || E == nullptr)) {
+    throw std::invalid_argument("GpuTwoViewRansac::Estimate: E needs one entry per pair and an output");
+  }
   const auto t0 = std::chrono::steady_clock::now();
   Impl& d = *impl_;
   CUDA_CHECK(cudaSetDevice(d.device));
   const size_t num_pairs = pairs.size();
   F->assign(num_pairs, TwoViewModelEstimate());
   H->assign(num_pairs, TwoViewModelEstimate());
+  if (E != nullptr) E->assign(num_pairs, TwoViewModelEstimate());
   if (num_pairs == 0) {
     if (while_running) while_running();
     return;
@@ -86,13 +105,20 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
 
   // Inputs: F's pairs first, then H's, over one shared point array, largest
   // pairs first (blocks start roughly in order; big ones last would leave a
-  // long tail). Slot j holds pair order[j].
+  // long tail). Slot j holds pair order[j]. E's pairs (their own points, in
+  // normalised camera coordinates) follow, again largest first: slot
+  // 2 num_pairs + j holds pair order_E[j].
   std::vector<size_t> order(num_pairs);
   for (size_t k = 0; k < num_pairs; ++k) order[k] = k;
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     return pairs[a]->normalized.size() > pairs[b]->normalized.size();
   });
-  std::vector<RansacPairInput> inputs(2 * num_pairs);
+  std::vector<size_t> order_E;
+  for (size_t j = 0; j < essential.size(); ++j) {
+    if (essential[order[j]] != nullptr) order_E.push_back(order[j]);
+  }
+  const size_t num_E = order_E.size();
+  std::vector<RansacPairInput> inputs(2 * num_pairs + num_E);
   size_t total = 0;
   int max_count = 0;
   for (size_t j = 0; j < num_pairs; ++j) {
@@ -110,23 +136,43 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     total += n;
     max_count = std::max(max_count, f.count);
   }
+  // E's points follow F/H's in the point array (offsets from the array's
+  // start); its masks follow F's and H's.
+  size_t total_E = 0;
+  int max_count_E = 0;
+  for (size_t j = 0; j < num_E; ++j) {
+    const EssentialPoints& e = *essential[order_E[j]];
+    const size_t n = e.world.size();
+    if (total + total_E + n > static_cast<size_t>(INT32_MAX)) {
+      throw std::runtime_error("GPU verification batch too large");
+    }
+    RansacPairInput& in = inputs[2 * num_pairs + j];
+    in.offset = static_cast<int>(total + total_E);
+    in.count = static_cast<int>(n);
+    // As LoRansac compares: float residuals against float(max_error^2).
+    in.squared_threshold = static_cast<float>(e.max_error * e.max_error);
+    in.seed = DeriveSeed(seeds[order_E[j]], kSeedE);
+    total_E += n;
+    max_count_E = std::max(max_count_E, in.count);
+  }
+  const size_t all_points = total + total_E;
   // Packing and unpacking run on all cores: at tens of thousands of pairs
   // per second they would otherwise cost as much as the kernels.
-  Reserve(&d.host_points, total * sizeof(float4));
+  Reserve(&d.host_points, all_points * sizeof(float4));
   float4* host_points = d.host_points.host<float4>();
-  ParallelFor(num_pairs, -1, [&](size_t j) {
-    const PointPairs& p = pairs[order[j]]->normalized;
-    float4* out = host_points + inputs[j].offset;
+  ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
+    const PointPairs& p = j < num_pairs ? pairs[order[j]]->normalized : essential[order_E[j - num_pairs]]->world;
+    float4* out = host_points + inputs[j < num_pairs ? j : num_pairs + j].offset;
     for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
   });
 
-  Reserve(&d.points, total * sizeof(float4), "RANSAC points");
+  Reserve(&d.points, all_points * sizeof(float4), "RANSAC points");
   Reserve(&d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
   Reserve(&d.outputs, inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
-  Reserve(&d.masks, 2 * total, "RANSAC inlier masks");
+  Reserve(&d.masks, 2 * total + total_E, "RANSAC inlier masks");
 
   CUDA_CHECK(cudaEventRecord(d.start, d.stream));
-  CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points, total * sizeof(float4),
+  CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points, all_points * sizeof(float4),
                              cudaMemcpyHostToDevice, d.stream));
   CUDA_CHECK(cudaMemcpyAsync(d.inputs.as<RansacPairInput>(), inputs.data(), inputs.size() * sizeof(RansacPairInput),
                              cudaMemcpyHostToDevice, d.stream));
@@ -143,6 +189,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   F_launch.trials_multiplier = ransac.num_trials_multiplier;
   F_launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
   RansacLaunch H_launch = F_launch;
+  RansacLaunch E_launch = F_launch;
   F_launch.pairs = d.inputs.as<RansacPairInput>();
   F_launch.outputs = d.outputs.as<RansacPairOutput>();
   F_launch.masks = d.masks.as<uint8_t>();
@@ -151,16 +198,33 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   H_launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
   H_launch.masks = d.masks.as<uint8_t>() + total;
   H_launch.max_trials = RansacMaxTrials(ransac, 4);
+  // E's masks sit at 2 total + (offset - total): the kernel indexes masks by
+  // the pair's point offset, so its base is shifted back by `total`.
+  E_launch.num_pairs = static_cast<int>(num_E);
+  E_launch.pairs = d.inputs.as<RansacPairInput>() + 2 * num_pairs;
+  E_launch.outputs = d.outputs.as<RansacPairOutput>() + 2 * num_pairs;
+  E_launch.masks = d.masks.as<uint8_t>() + total;
+  E_launch.max_trials = RansacMaxTrials(ransac, 5);
+  E_launch.shared_points = std::min(max_count_E, kRansacMaxSharedPoints);
+  if (num_E > 0) {
+    // E (the longest) starts first on its own stream; F and H run beside it.
+    CUDA_CHECK(cudaEventRecord(d.uploaded, d.stream));
+    CUDA_CHECK(cudaStreamWaitEvent(d.stream_E, d.uploaded, 0));
+    LaunchEssentialRansac(E_launch, d.stream_E);
+    CUDA_CHECK(cudaEventRecord(d.done_E, d.stream_E));
+  }
   LaunchTwoViewRansac(F_launch, H_launch, d.stream);
+  if (num_E > 0) CUDA_CHECK(cudaStreamWaitEvent(d.stream, d.done_E, 0));
 
-  Reserve(&d.host_outputs, inputs.size() * sizeof(RansacPairOutput));
-  Reserve(&d.host_masks, 2 * total);
+  const size_t num_outputs = inputs.size();
+  Reserve(&d.host_outputs, num_outputs * sizeof(RansacPairOutput));
+  Reserve(&d.host_masks, 2 * total + total_E);
   const RansacPairOutput* outputs = d.host_outputs.host<RansacPairOutput>();
   const uint8_t* masks = d.host_masks.host<uint8_t>();
   CUDA_CHECK(cudaMemcpyAsync(d.host_outputs.host<RansacPairOutput>(), d.outputs.as<RansacPairOutput>(),
-                             inputs.size() * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
-  CUDA_CHECK(cudaMemcpyAsync(d.host_masks.host<uint8_t>(), d.masks.as<uint8_t>(), 2 * total, cudaMemcpyDeviceToHost,
-                             d.stream));
+                             num_outputs * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.host_masks.host<uint8_t>(), d.masks.as<uint8_t>(), 2 * total + total_E,
+                             cudaMemcpyDeviceToHost, d.stream));
   CUDA_CHECK(cudaEventRecord(d.stop, d.stream));
   // Pinned copies are asynchronous: the host works while the kernels run.
   if (while_running) while_running();
@@ -168,7 +232,21 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   float gpu_ms = 0;
   CUDA_CHECK(cudaEventElapsedTime(&gpu_ms, d.start, d.stop));
 
-  ParallelFor(num_pairs, -1, [&](size_t j) {
+  ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
+    if (j >= num_pairs) {
+      const size_t slot = 2 * num_pairs + (j - num_pairs);
+      const RansacPairOutput& out = outputs[slot];
+      TwoViewModelEstimate& e = (*E)[order_E[j - num_pairs]];
+      e.success = out.success != 0;
+      e.num_inliers = e.success ? out.num_inliers : 0;
+      e.num_trials = out.num_trials;
+      if (e.success) {
+        e.model = FromRowMajor(out.model);  // normalised camera coordinates, as the CPU's
+        const uint8_t* mask = masks + total + inputs[slot].offset;
+        e.inlier_mask.assign(mask, mask + inputs[slot].count);
+      }
+      return;
+    }
     const size_t k = order[j];
     for (int model = 0; model < 2; ++model) {
       const RansacPairOutput& out = outputs[model * num_pairs + j];
@@ -188,10 +266,20 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     (j < num_pairs ? d.stats.trials_F : d.stats.trials_H) += outputs[j].num_trials;
     (j < num_pairs ? d.stats.local_refits_F : d.stats.local_refits_H) += outputs[j].num_local_refits;
   }
+  for (size_t j = 0; j < num_E; ++j) {
+    d.stats.trials_E += outputs[2 * num_pairs + j].num_trials;
+    d.stats.local_refits_E += outputs[2 * num_pairs + j].num_local_refits;
+  }
   d.stats.pairs += num_pairs;
+  d.stats.pairs_E += num_E;
   d.stats.points += total;
   d.stats.seconds_gpu += gpu_ms / 1000.0;
   d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+bool GpuEssentialFromEnvironment() {
+  const char* where = std::getenv("CASHASH_GPU_ESSENTIAL");
+  return where == nullptr || std::string(where) != "cpu";
 }
 
 namespace {
@@ -199,7 +287,10 @@ namespace {
 class GpuBatchVerifier : public BatchVerifier {
  public:
   GpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index, int num_threads)
-      : options_(options), num_threads_(num_threads), ransac_(options, gpu_index) {}
+      : options_(options),
+        num_threads_(num_threads),
+        essential_on_gpu_(GpuEssentialFromEnvironment()),
+        ransac_(options, gpu_index) {}
 
   std::string Name() const override { return "gpu"; }
 
@@ -207,6 +298,7 @@ class GpuBatchVerifier : public BatchVerifier {
     const size_t n = pairs.size();
     std::vector<TwoViewGeometry> geometries(n);
     std::vector<TwoViewPoints> points(n);
+    std::vector<EssentialPoints> essential_points(essential_on_gpu_ ? n : 0);
     std::vector<char> estimated(n, 0), calibrated(n, 0);
     ParallelFor(n, num_threads_, [&](size_t k) {
       const VerificationPair& pair = pairs[k];
@@ -214,9 +306,13 @@ class GpuBatchVerifier : public BatchVerifier {
       points[k] = PrepareTwoViewPoints(*pair.points1, *pair.points2, *pair.matches);
       estimated[k] = 1;
       calibrated[k] = TwoViewIsCalibrated(*pair.camera1, *pair.camera2);
+      if (calibrated[k] && essential_on_gpu_) {
+        essential_points[k] = PrepareEssentialPoints(*pair.camera1, *pair.camera2, points[k].pixels, options_);
+      }
     });
     std::vector<size_t> batch;
     std::vector<const TwoViewPoints*> batch_points;
+    std::vector<const EssentialPoints*> batch_essential;
     std::vector<uint64_t> batch_seeds;
     std::vector<size_t> calibrated_pairs;
     for (size_t k = 0; k < n; ++k) {
@@ -224,16 +320,22 @@ class GpuBatchVerifier : public BatchVerifier {
       batch.push_back(k);
       batch_points.push_back(&points[k]);
       batch_seeds.push_back(pairs[k].random_seed);
+      if (essential_on_gpu_) batch_essential.push_back(calibrated[k] ? &essential_points[k] : nullptr);
       if (calibrated[k]) calibrated_pairs.push_back(k);
     }
-    std::vector<TwoViewModelEstimate> F, H, E(n);
-    // E (calibrated pairs) on the CPU while the GPU estimates F and H.
-    ransac_.Estimate(batch_points, batch_seeds, &F, &H, [&]() {
-      ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
-        const size_t k = calibrated_pairs[i];
-        E[k] = EstimateEssential(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, PairOptions(pairs[k]));
+    std::vector<TwoViewModelEstimate> F, H, E_batch, E(n);
+    if (essential_on_gpu_) {
+      ransac_.Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
+      for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
+    } else {
+      // E (calibrated pairs) on the CPU while the GPU estimates F and H.
+      ransac_.Estimate(batch_points, batch_seeds, &F, &H, [&]() {
+        ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
+          const size_t k = calibrated_pairs[i];
+          E[k] = EstimateEssential(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, PairOptions(pairs[k]));
+        });
       });
-    });
+    }
     ParallelFor(batch.size(), num_threads_, [&](size_t i) {
       const size_t k = batch[i];
       geometries[k] = DecideTwoViewGeometry(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels,
@@ -255,6 +357,7 @@ class GpuBatchVerifier : public BatchVerifier {
 
   TwoViewGeometryOptions options_;
   int num_threads_;
+  bool essential_on_gpu_;
   GpuTwoViewRansac ransac_;
 };
 

@@ -1,11 +1,12 @@
-// Batched LO-RANSAC for F and H. Per pair (one block), per round: every
+// Batched LO-RANSAC for F, H and E. Per pair (one block), per round: every
 // thread draws its own sample from a stream keyed by (pair seed, trial
 // index), solves it and scores its models over all correspondences (the
 // hypotheses in parallel); then the block walks the round's trials in trial
 // order exactly as the CPU loop walks its trials: a trial that beats the
 // best so far (more inliers, then a smaller residual sum) becomes the best
 // and the block refits it on its inliers (8-point or DLT, the CPU path's
-// local optimisation) while the inlier set grows. COLMAP's adaptive
+// local optimisation; 5-point least-squares refits for E, which may give
+// several models, each scored) while the inlier set grows. COLMAP's adaptive
 // stopping rule is evaluated after each round. Every decision depends on
 // the trial order only, never on timing, so a seed gives one result.
 #include "impl/ransac_kernels.cuh"
@@ -13,6 +14,7 @@
 #include <algorithm>
 #include <cfloat>
 
+#include "cashash/five_point_solver.h"
 #include "impl/ransac_solvers.cuh"
 #include "utils/cuda_check.cuh"
 
@@ -24,6 +26,7 @@ using namespace ransac;  // NOLINT: the solvers of this kernel
 
 constexpr int kWarps = kRansacThreads / 32;
 constexpr int kMaxLocalIterations = 10;
+constexpr int kMaxLocalModels = five_point::kMaxSolutions;  // models of one local refit
 
 struct FundamentalModel {
   static constexpr int kSampleSize = 7;
@@ -38,7 +41,17 @@ struct FundamentalModel {
     EpipolarRow(p, row);
     AddOuter(row, upper);
   }
-  __device__ static bool FinishLocal(double* m) { return ProjectRankTwo(m); }
+  // Smallest eigenvector of the normal matrix by inverse iteration from the
+  // model being refined (a full Jacobi decomposition where the factorisation
+  // breaks down), projected to rank 2.
+  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+    if (!SmallestEigenvectorNear(upper, start, models[0])) {
+      double full[81];
+      ExpandNormalMatrix(upper, full);
+      SmallestEigenvector<9>(full, models[0]);
+    }
+    return ProjectRankTwo(models[0]) ? 1 : 0;
+  }
 };
 
 struct HomographyModel {
@@ -55,7 +68,44 @@ struct HomographyModel {
     AddOuter(r1, upper);
     AddOuter(r2, upper);
   }
-  __device__ static bool FinishLocal(double* m) { return NormalizeModel(m); }
+  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+    if (!SmallestEigenvectorNear(upper, start, models[0])) {
+      double full[81];
+      ExpandNormalMatrix(upper, full);
+      SmallestEigenvector<9>(full, models[0]);
+    }
+    return NormalizeModel(models[0]) ? 1 : 0;
+  }
+};
+
+// E on normalised camera coordinates (x2^T E x1 = 0): 5-point hypotheses,
+// Sampson residuals as F, and the CPU path's local refit, the 5-point solver
+// on the least-squares null space of all inliers (up to 10 models).
+struct EssentialModel {
+  static constexpr int kSampleSize = 5;
+  static constexpr int kMaxModels = five_point::kMaxSolutions;
+  static constexpr int kMinLocalSize = 5;
+  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
+    double pairs[20];
+    for (int k = 0; k < 5; ++k) {
+      pairs[4 * k] = sample[k].x;
+      pairs[4 * k + 1] = sample[k].y;
+      pairs[4 * k + 2] = sample[k].z;
+      pairs[4 * k + 3] = sample[k].w;
+    }
+    return five_point::EssentialFromFivePoints(pairs, models);
+  }
+  __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
+  __device__ static void AddRows(float4 p, double* upper) {
+    double row[9];
+    EpipolarRow(p, row);
+    AddOuter(row, upper);
+  }
+  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+    double basis[4][9];
+    if (!five_point::LeastSquaresNullSpace(upper, basis)) return 0;
+    return five_point::SolveFromBasis(basis, models);
+  }
 };
 
 // Orders supports: more inliers first, then the smaller residual sum
@@ -73,10 +123,10 @@ struct BlockScratch {
   double warp_upper[kWarps][45];
   double upper[45];
   double best_model[9];
-  double local_model[9];
+  double local_models[kMaxLocalModels][9];
   unsigned long long best_key;
   int best_count;
-  int local_ok;
+  int num_local;
   int num_local_refits;
 };
 
@@ -116,7 +166,7 @@ __device__ void BlockScore(const float* m, const float4* points, int n, float th
 }
 
 // Least-squares refit of the best model on its inliers: the block sums the
-// normal matrix, thread 0 takes its smallest eigenvector.
+// normal matrix, thread 0 solves it (s.num_local models in s.local_models).
 template <typename Model>
 __device__ void BlockLocalSolve(const float* best, const float4* points, int n, float threshold, BlockScratch& s) {
   double upper[45];
@@ -139,14 +189,7 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   }
   __syncthreads();
   if (threadIdx.x == 0) {
-    // Inverse iteration from the model being refined; the full Jacobi
-    // decomposition only where the factorisation breaks down.
-    if (!SmallestEigenvectorNear(s.upper, s.best_model, s.local_model)) {
-      double full[81];
-      ExpandNormalMatrix(s.upper, full);
-      SmallestEigenvector<9>(full, s.local_model);
-    }
-    s.local_ok = Model::FinishLocal(s.local_model) ? 1 : 0;
+    s.num_local = Model::LocalSolve(s.upper, s.best_model, s.local_models);
     ++s.num_local_refits;
   }
   __syncthreads();
@@ -247,9 +290,10 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
           float f[9];
           for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
           BlockLocalSolve<Model>(f, points, n, threshold, s);
-          if (s.local_ok == 1) {
+          // Each model of the refit in turn, as the CPU loop compares them.
+          for (int l = 0; l < s.num_local; ++l) {
             float lf[9];
-            for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_model[k]);
+            for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_models[l][k]);
             int count;
             float sum;
             BlockScore<Model>(lf, points, n, threshold, s, &count, &sum);
@@ -257,7 +301,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
             if (threadIdx.x == 0) {
               const unsigned long long key = SupportKey(count, sum);
               if (key > s.best_key) {
-                for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_model[k];
+                for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_models[l][k];
                 s.best_key = key;
                 s.best_count = count;
               }
@@ -307,7 +351,57 @@ __global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaun
   }
 }
 
+// E blocks: a kernel of their own, so the 5-point solver's registers and
+// stack do not weigh on the F/H kernel's occupancy.
+__global__ void __launch_bounds__(kRansacThreads) EssentialRansacKernel(RansacLaunch E) {
+  extern __shared__ float4 cached_points[];
+  __shared__ BlockScratch s;
+  LoRansacBlock<EssentialModel>(E, static_cast<int>(blockIdx.x), cached_points, s);
+}
+
+// One thread per 5-point sample (tests).
+__global__ void EssentialFivePointKernel(const float4* samples, int num_samples, double* models, int* counts) {
+  const int i = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (i >= num_samples) return;
+  double out[five_point::kMaxSolutions][9];
+  const int n = EssentialModel::Minimal(samples + 5 * i, out);
+  counts[i] = n;
+  for (int m = 0; m < n; ++m)
+    for (int k = 0; k < 9; ++k) models[(i * five_point::kMaxSolutions + m) * 9 + k] = out[m][k];
+}
+
 }  // namespace
+
+void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
+  if (E.num_pairs == 0) return;
+  const size_t shared_bytes = static_cast<size_t>(E.shared_points) * sizeof(float4);
+  static const cudaError_t opt_in =
+      cudaFuncSetAttribute(EssentialRansacKernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
+  CUDA_CHECK(opt_in);
+  EssentialRansacKernel<<<E.num_pairs, kRansacThreads, shared_bytes, stream>>>(E);
+  CUDA_CHECK_LAUNCH();
+}
+
+void EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {
+  if (num_samples <= 0) return;
+  float4* d_samples = nullptr;
+  double* d_models = nullptr;
+  int* d_counts = nullptr;
+  const size_t model_doubles = static_cast<size_t>(num_samples) * five_point::kMaxSolutions * 9;
+  CUDA_CHECK(cudaMalloc(&d_samples, sizeof(float4) * 5 * num_samples));
+  CUDA_CHECK(cudaMalloc(&d_models, sizeof(double) * model_doubles));
+  CUDA_CHECK(cudaMalloc(&d_counts, sizeof(int) * num_samples));
+  CUDA_CHECK(cudaMemcpy(d_samples, samples, sizeof(float4) * 5 * num_samples, cudaMemcpyHostToDevice));
+  CUDA_CHECK(cudaMemset(d_models, 0, sizeof(double) * model_doubles));
+  EssentialFivePointKernel<<<(num_samples + 127) / 128, 128>>>(d_samples, num_samples, d_models, d_counts);
+  CUDA_CHECK_LAUNCH();
+  CUDA_CHECK(cudaMemcpy(models, d_models, sizeof(double) * model_doubles, cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(counts, d_counts, sizeof(int) * num_samples, cudaMemcpyDeviceToHost));
+  cudaFree(d_samples);
+  cudaFree(d_models);
+  cudaFree(d_counts);
+}
 
 void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream) {
   const int blocks = F.num_pairs + H.num_pairs;

@@ -50,5 +50,15 @@ constexpr int kRansacMaxSharedPoints = 3072;
 // first; callers put the largest pairs first so the tail is short).
 void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream);
 
+// E (5-point LO-RANSAC on normalised camera coordinates) of E.num_pairs
+// pairs, in a kernel of its own (the 5-point solver needs far more registers
+// and stack than F and H).
+void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream);
+
+// Tests: the device 5-point solver on num_samples samples of 5 correspondences
+// (x1, y1, x2, y2 floats, 20 per sample); up to 10 row-major models (90
+// doubles) and their count per sample. Synchronous.
+void EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts);
+
 }  // namespace cuda
 }  // namespace cashash

@@ -1,6 +1,7 @@
 // Geometric verification of the same matches by the CPU batch verifier (all
-// cores) and the GPU one (F and H on the device, E and the decision on the
-// CPU), printed as a table. Pairs come from a verification pairs file
+// cores) and the GPU one (F, H and E on the device, the decision on the CPU;
+// also timed with E on the CPU, as CASHASH_GPU_ESSENTIAL=cpu runs it),
+// printed as a table. Pairs come from a verification pairs file
 // (scripts/bench/dump_verification_pairs) or, without one, from synthetic
 // scenes; --replicate K verifies every pair K times under different seeds, to
 // give the GPU a full chunk's worth of pairs.
@@ -117,20 +118,33 @@ int main(int argc, char** argv) {
     }
   }
   const int num_threads = cashash::ResolveNumThreads(threads);
-  std::printf("%zu pairs (%zu stored x %d), %zu matches, %zu calibrated pairs (E on the CPU), %d CPU threads\n",
+  std::printf("%zu pairs (%zu stored x %d), %zu matches, %zu calibrated pairs (E estimated), %d CPU threads\n",
               pairs.size(), stored.size(), replicate, matches, calibrated, num_threads);
 
   const cashash::TwoViewGeometryOptions options;
   auto cpu = cashash::CreateCpuBatchVerifier(options, threads);
+  if (!cashash::cuda::GpuEssentialFromEnvironment()) {
+    std::printf("CASHASH_GPU_ESSENTIAL=cpu is set: both GPU rows below run E on the CPU\n");
+  }
   auto gpu = cashash::cuda::CreateGpuBatchVerifier(options, 0, threads);
+  // The former split (E on the CPU while the GPU runs F and H), for comparison.
+  const char* previous = std::getenv("CASHASH_GPU_ESSENTIAL");
+  const std::string previous_value = previous != nullptr ? previous : "";
+  setenv("CASHASH_GPU_ESSENTIAL", "cpu", 1);
+  auto gpu_cpu_e = cashash::cuda::CreateGpuBatchVerifier(options, 0, threads);
+  if (previous != nullptr) {
+    setenv("CASHASH_GPU_ESSENTIAL", previous_value.c_str(), 1);
+  } else {
+    unsetenv("CASHASH_GPU_ESSENTIAL");
+  }
   // The CPU may verify a subset only (it is slow); its time is scaled up.
   std::vector<cashash::VerificationPair> cpu_pairs = pairs;
   if (cpu_max_pairs > 0 && cpu_pairs.size() > cpu_max_pairs) cpu_pairs.resize(cpu_max_pairs);
   const double cpu_scale = static_cast<double>(pairs.size()) / static_cast<double>(cpu_pairs.size());
 
   gpu->Verify(std::vector<cashash::VerificationPair>(pairs.begin(), pairs.begin() + std::min<size_t>(pairs.size(), 8)));
-  std::vector<cashash::TwoViewGeometry> cpu_result, gpu_result;
-  double cpu_best = 1e30, gpu_best = 1e30;
+  std::vector<cashash::TwoViewGeometry> cpu_result, gpu_result, gpu_cpu_e_result;
+  double cpu_best = 1e30, gpu_best = 1e30, gpu_cpu_e_best = 1e30;
   for (int r = 0; r < repeats; ++r) {
     auto t0 = Clock::now();
     cpu_result = cpu->Verify(cpu_pairs);
@@ -138,6 +152,11 @@ int main(int argc, char** argv) {
     t0 = Clock::now();
     gpu_result = gpu->Verify(pairs);
     gpu_best = std::min(gpu_best, Seconds(t0));
+    if (calibrated > 0 && r == 0) {  // once: E on the CPU is slow
+      t0 = Clock::now();
+      gpu_cpu_e_result = gpu_cpu_e->Verify(pairs);
+      gpu_cpu_e_best = std::min(gpu_cpu_e_best, Seconds(t0));
+    }
   }
   // The GPU's F and H alone (no E, no decision), and E alone on the CPU.
   std::vector<cashash::TwoViewPoints> points(pairs.size());
@@ -158,6 +177,19 @@ int main(int argc, char** argv) {
   auto t0 = Clock::now();
   ransac.Estimate(pointers, seeds, &F, &H);
   const double gpu_fh = Seconds(t0);
+  const cashash::cuda::GpuRansacStats fh_stats = ransac.stats();
+  // F, H and E of the calibrated pairs (E's points prepared beforehand).
+  std::vector<cashash::EssentialPoints> essential(pairs.size());
+  std::vector<const cashash::EssentialPoints*> essential_pointers(pairs.size(), nullptr);
+  cashash::ParallelFor(pairs.size(), threads, [&](size_t k) {
+    if (!cashash::TwoViewIsCalibrated(*pairs[k].camera1, *pairs[k].camera2)) return;
+    essential[k] = cashash::PrepareEssentialPoints(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, options);
+    essential_pointers[k] = &essential[k];
+  });
+  std::vector<cashash::TwoViewModelEstimate> E;
+  t0 = Clock::now();
+  ransac.Estimate(pointers, seeds, essential_pointers, &F, &H, &E);
+  const double gpu_fhe = Seconds(t0);
   t0 = Clock::now();
   cashash::ParallelFor(cpu_pairs.size(), threads, [&](size_t k) {
     cashash::TwoViewGeometryOptions o = options;
@@ -181,7 +213,8 @@ int main(int argc, char** argv) {
                                    false, F[k], H[k], cashash::TwoViewModelEstimate(), options);
   });
   const double decide_seconds = Seconds(t0);
-  const cashash::cuda::GpuRansacStats& st = ransac.stats();
+  const cashash::cuda::GpuRansacStats& st = fh_stats;
+  const cashash::cuda::GpuRansacStats& all = ransac.stats();
 
   std::vector<cashash::TwoViewGeometry> gpu_subset(gpu_result.begin(), gpu_result.begin() + cpu_result.size());
   const Agreement a = Compare(cpu_result, gpu_subset);
@@ -190,13 +223,31 @@ int main(int argc, char** argv) {
               cpu_best / gpu_best, pairs.size() / gpu_best);
   std::printf("| F and H only | %.3f | %.3f | %.1fx | %.0f |\n", cpu_fh, gpu_fh, cpu_fh / gpu_fh,
               pairs.size() / gpu_fh);
-  std::printf("| E only (calibrated pairs, CPU in both) | %.3f | - | - | - |\n", cpu_e);
+  if (calibrated > 0) {
+    std::printf("| whole verification, E on the CPU beside the GPU's F and H | %.3f | %.3f | %.1fx | %.0f |\n",
+                cpu_best, gpu_cpu_e_best, cpu_best / gpu_cpu_e_best, pairs.size() / gpu_cpu_e_best);
+    std::printf("| F, H and E (E of the %zu calibrated pairs) | %.3f | %.3f | %.1fx | %.0f |\n", calibrated,
+                cpu_fh + cpu_e, gpu_fhe, (cpu_fh + cpu_e) / gpu_fhe, pairs.size() / gpu_fhe);
+  }
+  std::printf("| E only (calibrated pairs; GPU: F, H and E less F and H) | %.3f | %.3f | - | - |\n", cpu_e,
+              gpu_fhe - gpu_fh);
   std::printf("| preparing points (CPU in both) | - | %.3f | - | - |\n", prepare_seconds);
   std::printf("| decision and watermark test (CPU in both) | - | %.3f | - | - |\n", decide_seconds);
   std::printf("\nGPU F/H (two calls): %.3f s on the device (upload + kernels + download), mean trials F %.0f H %.0f, "
               "local refits per pair F %.1f H %.1f\n",
               st.seconds_gpu, static_cast<double>(st.trials_F) / st.pairs, static_cast<double>(st.trials_H) / st.pairs,
               static_cast<double>(st.local_refits_F) / st.pairs, static_cast<double>(st.local_refits_H) / st.pairs);
+  if (all.pairs_E > 0) {
+    std::printf("GPU E: mean trials %.0f, local refits per pair %.1f (%zu pairs)\n",
+                static_cast<double>(all.trials_E) / all.pairs_E, static_cast<double>(all.local_refits_E) / all.pairs_E,
+                all.pairs_E);
+  }
+  if (!gpu_cpu_e_result.empty()) {
+    const Agreement b = Compare(cpu_result, std::vector<cashash::TwoViewGeometry>(
+                                                gpu_cpu_e_result.begin(), gpu_cpu_e_result.begin() + cpu_result.size()));
+    std::printf("agreement with E on the CPU: same config %d, verified with inlier counts within 5%%: %d/%d\n",
+                b.same_config, b.close_inliers, b.verified);
+  }
   std::printf("agreement on %zu pairs: same config %d, verified with inlier counts within 5%%: %d/%d%s\n",
               cpu_result.size(), a.same_config, a.close_inliers, a.verified,
               cpu_scale > 1 ? " (CPU ran a subset; its times are scaled up)" : "");

@@ -1,4 +1,4 @@
-// GPU RANSAC (F and H on the device, E and the decision on the CPU) against
+// GPU RANSAC (F, H and E on the device, the decision on the CPU) against
 // the CPU path on the same matches: synthetic pairs with known geometry and
 // outlier ratios, and, when CASHASH_VERIFY_PAIRS_FILE names a verification
 // pairs file (scripts/bench/dump_verification_pairs), real pairs. Inlier
@@ -201,7 +201,7 @@ TEST(GpuTwoViewRansac, DegenerateInputsFailCleanly) {
   EXPECT_LT(H[2].num_inliers, 30);
 }
 
-// The whole verifier (GPU F/H, CPU E and decision) against the CPU one.
+// The whole verifier (GPU F/H/E, CPU decision) against the CPU one.
 TEST(GpuBatchVerifier, SameConfigurationsAsCpuOnSyntheticPairs) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const std::vector<Case> cases = SyntheticCases();
