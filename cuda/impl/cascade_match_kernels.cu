@@ -65,6 +65,9 @@ struct WarpScratch {
   uint32_t pending[64 + 1];       // survivors not yet merged into the ranked list; [64]: discard slot
 };
 
+// Lists of this many tables are loaded together by SelectQuery (even).
+constexpr int kListTablesPerStep = 4;
+
 // Capacity of WarpScratch::pending: two chunks' survivors always fit.
 constexpr int kPendingCapacity = 64;
 
@@ -184,27 +187,36 @@ __device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, ui
   const unsigned lane = LaneId();
 
   // Exact dot products of the ranked candidates: 8 per pass, 4 lanes of 32
-  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum).
+  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum). Passes go
+  // two at a time with all four loads issued first: the descriptors are a
+  // round trip to L2, and top_k 16 needs exactly two passes.
   const int count = min(__popc(__ballot_sync(kFullWarpMask, ranked.key != WarpSortedList::kEmptyKey)), params.top_k);
   if (count == 0) return -1;
   const unsigned part = lane & 3, group = lane >> 2;
   const uint4* mine = reinterpret_cast<const uint4*>(query.descriptors + size_t(q) * 128) + 2 * part;
   const uint4 mine0 = mine[0], mine1 = mine[1];
   int my_dot = 0;
-  for (int first = 0; first < count; first += 8) {
-    const int j = first + static_cast<int>(group);
-    const uint32_t key = ranked.At(min(j, 31));
-    uint4 other0 = make_uint4(0, 0, 0, 0), other1 = other0;
-    if (j < count) {
-      const uint4* other = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
-      other0 = other[0];
-      other1 = other[1];
+  for (int first = 0; first < count; first += 16) {
+    uint4 other[2][2];
+#pragma unroll
+    for (int h = 0; h < 2; ++h) {
+      const int j = first + 8 * h + static_cast<int>(group);
+      const uint32_t key = ranked.At(min(j, 31));
+      other[h][0] = other[h][1] = make_uint4(0, 0, 0, 0);
+      if (j < count) {
+        const uint4* row = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
+        other[h][0] = row[0];
+        other[h][1] = row[1];
+      }
     }
-    const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other0) + Dot16(mine1, other1)));
-    // Lane L in [first, first + 8) takes the dot of candidate L.
-    const int rel = static_cast<int>(lane) - first;
-    const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
-    if (rel >= 0 && rel < 8) my_dot = got;
+#pragma unroll
+    for (int h = 0; h < 2; ++h) {
+      const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other[h][0]) + Dot16(mine1, other[h][1])));
+      // Lane L in [first + 8h, first + 8h + 8) takes the dot of candidate L.
+      const int rel = static_cast<int>(lane) - first - 8 * h;
+      const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
+      if (rel >= 0 && rel < 8) my_dot = got;
+    }
   }
   // Best by (dot descending, index ascending), second = largest dot of the
   // others (0 when none): three single-instruction warp reductions. Dots of
@@ -291,25 +303,46 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
   return DecideFromRanked(query, q, target, ranking.ranked, params);
 }
 
-// The same answer from the query's candidate list (list row `row`): every
-// candidate within tau, de-duplicated already, in no particular order. The
-// keys are ranked exactly as in MatchQuery; a list that overflowed (more
-// candidates than it holds) is answered by MatchQuery itself.
+// The same answer from the query's candidate lists (list row `row`, one
+// list per table): every candidate within tau, de-duplicated already, in no
+// particular order. The keys are ranked exactly as in MatchQuery; a query
+// with an overflowing list (more candidates than it holds) is answered by
+// MatchQuery itself. Counts and keys go out together (the keys of a list
+// past its count are ignored), so a query costs one round trip, not two.
 __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row, const DeviceImageView& target,
                            const CandidateLists& lists, const MatchParams& params, WarpScratch& scratch) {
   const unsigned lane = LaneId();
-  const uint32_t total = lists.counts[row];
-  if (total > static_cast<uint32_t>(lists.capacity)) return MatchQuery(query, q, target, params, scratch);
-  const uint32_t* keys = lists.keys + row * lists.capacity;
+  const int num_tables = lists.num_tables;
+  const uint32_t* keys = lists.keys + row * num_tables * kTableListCapacity;
+  const uint32_t count = static_cast<int>(lane) < num_tables ? lists.counts[row * num_tables + lane] : 0u;
+  uint32_t key[kListTablesPerStep];
+#pragma unroll
+  for (int i = 0; i < kListTablesPerStep; ++i) {
+    key[i] = i < num_tables ? __ldg(keys + i * kTableListCapacity + lane) : WarpSortedList::kEmptyKey;
+  }
+  if (__any_sync(kFullWarpMask, count > static_cast<uint32_t>(kTableListCapacity))) {
+    return MatchQuery(query, q, target, params, scratch);
+  }
   QueryRanking ranking(static_cast<uint32_t>(params.tau));
   __syncwarp();  // the previous query's reads of the scratch are done
-  for (uint32_t first = 0; first < total; first += 64) {
-    const uint32_t pos0 = first + lane, pos1 = pos0 + 32;
-    uint32_t key0 = pos0 < total ? __ldg(keys + pos0) : WarpSortedList::kEmptyKey;
-    uint32_t key1 = pos1 < total ? __ldg(keys + pos1) : WarpSortedList::kEmptyKey;
-    if (key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
-    if (key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
-    ranking.Add(key0, key1, scratch.pending, params.top_k);
+  for (int first = 0; first < num_tables; first += kListTablesPerStep) {
+    if (first > 0) {
+#pragma unroll
+      for (int i = 0; i < kListTablesPerStep; ++i) {
+        key[i] = first + i < num_tables ? __ldg(keys + (first + i) * kTableListCapacity + lane)
+                                        : WarpSortedList::kEmptyKey;
+      }
+    }
+#pragma unroll
+    for (int i = 0; i < kListTablesPerStep; i += 2) {
+      const uint32_t count0 = __shfl_sync(kFullWarpMask, count, (first + i) & 31);
+      const uint32_t count1 = __shfl_sync(kFullWarpMask, count, (first + i + 1) & 31);
+      uint32_t key0 = lane < count0 && first + i < num_tables ? key[i] : WarpSortedList::kEmptyKey;
+      uint32_t key1 = lane < count1 && first + i + 1 < num_tables ? key[i + 1] : WarpSortedList::kEmptyKey;
+      if (key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
+      if (key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
+      ranking.Add(key0, key1, scratch.pending, params.top_k);
+    }
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
   return DecideFromRanked(query, q, target, ranking.ranked, params);
