@@ -110,6 +110,18 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"CasHash.tau"}, &o.cashash.tau, "Largest 128-bit remap Hamming distance ranked");
   table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
 
+  if (command == "guided_matcher") o.guided.enabled = true;
+  table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
+            "Ga-CasHash: match the top-scale features first, then only pairs with a good F, within epipolar bands");
+  table.Add({"GuidedMatching.top_scale_fraction"}, &o.guided.top_scale_fraction,
+            "Share of each image's features (largest scales) matched in stage 1");
+  table.Add({"GuidedMatching.min_num_matches"}, &o.guided.min_num_matches,
+            "Fewest stage-1 matches for which F is estimated");
+  table.Add({"GuidedMatching.min_inlier_ratio"}, &o.guided.min_inlier_ratio,
+            "Smallest share of stage-1 matches that are F inliers for a pair to be matched in stage 2");
+  table.Add({"GuidedMatching.max_epipolar_distance"}, &o.guided.max_epipolar_distance,
+            "Half-width in pixels of the band around the epipolar line where stage 2 looks for candidates");
+
   po::variables_map vm;
   try {
     po::store(po::command_line_parser(argc, argv).options(description).run(), vm);
@@ -148,6 +160,13 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (!message.empty()) return message;
   message = o.cashash.Check();
   if (!message.empty()) return message;
+  if (o.guided.enabled) {
+    message = o.guided.Check();
+    if (!message.empty()) return message;
+    if (o.cashash.matcher != MatcherType::kCascade) {
+      return "--GuidedMatching.enabled needs --CasHash.matcher cascade (the band filter is part of the cascade)";
+    }
+  }
   return o.two_view.Check();
 }
 

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cashash/guided_matching.h"
 #include "cashash/matching_options.h"
 #include "cashash/two_view_geometry.h"
 
@@ -18,6 +19,9 @@ struct MatcherCommandOptions {
   SiftMatchingOptions sift;
   CasHashOptions cashash;
   TwoViewGeometryOptions two_view;
+  // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
+  // guided_matcher command sets enabled).
+  GuidedMatchingOptions guided;
   int block_size = 50;  // ExhaustiveMatching.block_size
   // Exhaustive matching derives the block size from the memory caps (at
   // most block_size) instead; the command line sets it unless
@@ -45,7 +49,8 @@ struct MatcherCommandOptions {
 enum class ParseOutcome { kRun, kHelpShown, kError };
 
 // Parses argv (after the command name). On error prints one line naming the
-// option to stderr. `command` is "exhaustive_matcher" or "matches_importer".
+// option to stderr. `command` is "exhaustive_matcher", "guided_matcher" or
+// "matches_importer".
 ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
                                         MatcherCommandOptions* options);
 

@@ -178,12 +178,19 @@ struct Database::Impl {
     if (std::filesystem::is_directory(path, error)) {
       throw DatabaseError("not a SQLite database: " + path + " is a directory");
     }
-    const int flags = read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE;
+    // Readers open read-write too and are made query-only below: SQLite
+    // deletes a WAL database's -wal and -shm files when the last connection
+    // closes, but only a connection that may write can, so a run whose reader
+    // closed after its writer left both files beside the database. A
+    // write-protected file still opens (read-only) for reading.
+    const int flags = SQLITE_OPEN_READWRITE;
     if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
       const std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
       throw DatabaseError("cannot open database " + path + ": " + message);
     }
     sqlite3_busy_timeout(db, BusyTimeoutMs());
+    // Nothing can be written through a reader (SQLITE_READONLY otherwise).
+    if (read_only) ExecuteSql(db, "PRAGMA query_only = 1");
     // SQLite silently opens a write-protected file read-only; say so now
     // rather than after matching everything.
     if (!read_only && sqlite3_db_readonly(db, "main") == 1) {
@@ -353,25 +360,36 @@ size_t Database::NumDescriptors(image_t image_id) const {
   return s->Step() ? static_cast<size_t>(std::max<int64_t>(s->ColumnInt64(0), 0)) : 0;
 }
 
-std::unordered_set<pair_t> Database::ReadCompletedPairIds() const {
+void Database::ForEachCompletedPairId(const std::function<void(pair_t)>& visit) const {
   // A read-only connection opens without the match tables.
   impl_->RequireTable("matches");
   impl_->RequireTable("two_view_geometries");
-  SqliteStatement s(impl_->db,
-                    "SELECT matches.pair_id FROM matches JOIN two_view_geometries "
-                    "ON matches.pair_id = two_view_geometries.pair_id");
-  std::unordered_set<pair_t> pair_ids;
-  while (s.Step()) pair_ids.insert(static_cast<pair_t>(s.ColumnInt64(0)));
+  // Both tables in pair_id order (their INTEGER PRIMARY KEY: a plain scan,
+  // no sort), merged here: one pass over each, no lookup per row.
+  SqliteStatement matches(impl_->db, "SELECT pair_id FROM matches ORDER BY pair_id");
+  SqliteStatement geometries(impl_->db, "SELECT pair_id FROM two_view_geometries ORDER BY pair_id");
+  bool more_matches = matches.Step(), more_geometries = geometries.Step();
+  while (more_matches && more_geometries) {
+    const int64_t m = matches.ColumnInt64(0), g = geometries.ColumnInt64(0);
+    if (m == g) visit(static_cast<pair_t>(m));
+    if (m <= g) more_matches = matches.Step();
+    if (g <= m) more_geometries = geometries.Step();
+  }
   if (impl_->HasTableNow(kEmptyPairsTable)) {
     SqliteStatement empty(impl_->db, std::string("SELECT rowid, data FROM ") + kEmptyPairsTable);
     while (empty.Step()) {
       DecodePairIdRuns(empty.ColumnBlob(1), empty.ColumnBytes(1),
                        std::string(kEmptyPairsTable) + " row " + std::to_string(empty.ColumnInt64(0)),
                        [&](pair_t first, pair_t last) {
-                         for (pair_t id = first; id <= last; ++id) pair_ids.insert(id);
+                         for (pair_t id = first; id <= last; ++id) visit(id);
                        });
     }
   }
+}
+
+std::unordered_set<pair_t> Database::ReadCompletedPairIds() const {
+  std::unordered_set<pair_t> pair_ids;
+  ForEachCompletedPairId([&](pair_t id) { pair_ids.insert(id); });
   return pair_ids;
 }
 

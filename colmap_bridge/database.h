@@ -2,6 +2,7 @@
 // COLMAP 3.8 and by COLMAP 4.x: the schema is detected when opening.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -59,7 +60,13 @@ class Database {
   size_t NumDescriptors(image_t image_id) const;
 
   // Pairs that already have both a matches and a two_view_geometries row,
-  // and pairs recorded by RecordEmptyPairs (these are skipped on resume).
+  // and pairs recorded by RecordEmptyPairs (these are skipped on resume),
+  // streamed: each id once or more (a pair with rows can be recorded empty
+  // too), in no promised order. Memory does not grow with the table.
+  void ForEachCompletedPairId(const std::function<void(pair_t)>& visit) const;
+  // The same pairs collected in a set: for small databases and tests (at
+  // 200 million pairs the set alone takes gigabytes; runs use
+  // ReadCompletedPairs of completed_pairs.h).
   std::unordered_set<pair_t> ReadCompletedPairIds() const;
 
   // Records pairs that were matched and found no match, for runs that write

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <iomanip>
 #include <map>
 #include <memory>
@@ -18,6 +19,7 @@
 
 #include "cashash/feature_matcher.h"
 #include "cashash/random_sampler.h"
+#include "cashash/thread_pool.h"
 #include "colmap_bridge/colmap38_schema.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/sift_descriptor_variation.h"
@@ -391,6 +393,7 @@ std::string DatabaseGeneratorOptions::Check() const {
     return "--descriptor_noise must be between 0 and 255";
   }
   if (images_per_transaction < 1) return "--images_per_transaction must be >= 1";
+  if (num_threads == 0 || num_threads < -1) return "--num_threads must be -1 (all cores) or at least 1";
   if (source_max_images < 1 || source_max_images > 1000) return "--source_max_images must be between 1 and 1000";
   return "";
 }
@@ -437,13 +440,26 @@ GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
   summary.pool_descriptors = pool.size();
 
   CreateColmap38Database(options.database_path);
+  // Images of transaction t + 1 are made on the worker threads while this
+  // thread writes those of transaction t.
+  auto make_batch = [&](int first) {
+    const int end = std::min(options.num_images, first + options.images_per_transaction);
+    std::vector<GeneratedImage> batch(static_cast<size_t>(std::max(0, end - first)));
+    ParallelFor(batch.size(), options.num_threads,
+                [&](size_t i) { batch[i] = generator.Generate(first + static_cast<int>(i)); });
+    return batch;
+  };
+  std::future<std::vector<GeneratedImage>> next;
   try {
     Database database(options.database_path);
+    next = std::async(std::launch::async, make_batch, 0);
     for (int first = 0; first < options.num_images; first += options.images_per_transaction) {
       const int end = std::min(options.num_images, first + options.images_per_transaction);
+      const std::vector<GeneratedImage> batch = next.get();
+      if (end < options.num_images) next = std::async(std::launch::async, make_batch, end);
       database.BeginTransaction();
       for (int k = first; k < end; ++k) {
-        const GeneratedImage image = generator.Generate(k);
+        const GeneratedImage& image = batch[static_cast<size_t>(k - first)];
         const camera_t camera_id = database.WriteCamera(camera);
         const image_t image_id = database.WriteImage(ImageName(k, options.num_images), camera_id);
         database.WriteKeypoints(image_id, image.keypoints, pool.keypoint_columns);
@@ -463,6 +479,7 @@ GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
       }
     }
   } catch (...) {
+    if (next.valid()) next.wait();  // the workers read the generator
     RemoveDatabaseFiles(options.database_path);
     throw;
   }

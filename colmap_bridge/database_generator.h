@@ -35,6 +35,9 @@ struct DatabaseGeneratorOptions {
   // between 0.25 and 1.5 times this.
   double descriptor_noise = 8.0;
   int images_per_transaction = 50;
+  // Threads that make images (each image has its own seed: the database is
+  // the same for any count); one more writes them. -1 = all cores.
+  int num_threads = -1;
   // Source images whose descriptors are used (spread evenly over the source).
   // Views of one point in several of them are kept once; finding those costs
   // a matching of every pair of them.

@@ -40,6 +40,8 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
       "Descriptor noise per value, stored uint8 units (standard deviation)")(
       "images_per_transaction", po::value(&o.images_per_transaction)->default_value(o.images_per_transaction),
       "Images written per database transaction")(
+      "num_threads", po::value(&o.num_threads)->default_value(o.num_threads),
+      "Threads making images (-1 = all cores); any count writes the same database")(
       "source_max_images", po::value(&o.source_max_images)->default_value(o.source_max_images),
       "Source images whose descriptors are used (their repeated views of a point are kept once)")(
       "ground_truth_path", po::value(&o.ground_truth_path),

@@ -8,20 +8,30 @@ namespace cashash {
 namespace colmap {
 
 size_t GpuFreeMemoryBytes(int gpu_index) {
+  size_t free_bytes = 0, total_bytes = 0;
+  return GpuMemoryInfo(gpu_index, &free_bytes, &total_bytes) ? free_bytes : 0;
+}
+
+bool GpuMemoryInfo(int gpu_index, size_t* free_bytes, size_t* total_bytes) {
+  *free_bytes = 0;
+  *total_bytes = 0;
 #ifdef CASHASH_WITH_CUDA
   int previous = 0;
-  if (cudaGetDevice(&previous) != cudaSuccess) return 0;
-  size_t free_bytes = 0, total_bytes = 0;
-  const bool ok = cudaSetDevice(gpu_index) == cudaSuccess && cudaMemGetInfo(&free_bytes, &total_bytes) == cudaSuccess;
+  if (cudaGetDevice(&previous) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return false;
+  }
+  const bool ok = cudaSetDevice(gpu_index) == cudaSuccess && cudaMemGetInfo(free_bytes, total_bytes) == cudaSuccess;
   cudaSetDevice(previous);
   if (!ok) {
     (void)cudaGetLastError();
-    return 0;
+    *free_bytes = 0;
+    *total_bytes = 0;
   }
-  return free_bytes;
+  return ok;
 #else
   (void)gpu_index;
-  return 0;
+  return false;
 #endif
 }
 

@@ -13,6 +13,7 @@ void PrintUsage() {
   std::cout << "cashash -- Cascade Hashing feature matching for COLMAP databases\n\n"
                "Usage:\n"
                "  cashash exhaustive_matcher --database_path DB [options]\n"
+               "  cashash guided_matcher --database_path DB [options]   (two-stage Ga-CasHash, all pairs)\n"
                "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
                "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n"
                "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n\n"
@@ -31,6 +32,7 @@ int main(int argc, char** argv) {
   }
   const std::string command = argv[1];
   if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
+  if (command == "guided_matcher") return cashash::colmap::RunGuidedMatcher(argc - 1, argv + 1);
   if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
   if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
   if (command == "generate_database") return cashash::colmap::RunGenerateDatabase(argc - 1, argv + 1);

@@ -4,18 +4,22 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <mutex>
+#include <sstream>
 #include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
 
 #include "cashash/fallback_feature_matcher.h"
 #include "cashash/feature_cache.h"
+#include "cashash/guided_matching.h"
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
 #include "cashash/retaining_feature_matcher.h"
 #include "cashash/schedule_sizing.h"
+#include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/gpu_memory_query.h"
@@ -123,11 +127,50 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
   stats->inlier_matches += other.inlier_matches;
   stats->seconds_total = std::max(stats->seconds_total, other.seconds_total);
   stats->seconds_loading = std::max(stats->seconds_loading, other.seconds_loading);
+  stats->seconds_hashing = std::max(stats->seconds_hashing, other.seconds_hashing);
   stats->seconds_matching = std::max(stats->seconds_matching, other.seconds_matching);
   stats->seconds_verification = std::max(stats->seconds_verification, other.seconds_verification);
   stats->seconds_writing = std::max(stats->seconds_writing, other.seconds_writing);
   stats->stopped = stats->stopped || other.stopped;
 }
+
+// Device memory in use on the run's GPU: before the matcher exists, then
+// after every committed block (the writer thread, and the MPI receiver's).
+class GpuMemorySampler {
+ public:
+  explicit GpuMemorySampler(int gpu_index) : gpu_index_(gpu_index) {
+    size_t free_bytes = 0;
+    if (gpu_index_ < 0 || !GpuMemoryInfo(gpu_index_, &free_bytes, &total_bytes_)) {
+      gpu_index_ = -1;
+      return;
+    }
+    before_bytes_ = total_bytes_ - free_bytes;
+    peak_bytes_ = before_bytes_;
+  }
+
+  void Sample() {
+    if (gpu_index_ < 0) return;
+    size_t free_bytes = 0, total_bytes = 0;
+    if (!GpuMemoryInfo(gpu_index_, &free_bytes, &total_bytes)) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    peak_bytes_ = std::max(peak_bytes_, total_bytes - free_bytes);
+  }
+
+  void Fill(MatchingSummary* summary) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    summary->gpu_index = gpu_index_;
+    summary->gpu_total_bytes = total_bytes_;
+    summary->gpu_used_before_bytes = before_bytes_;
+    summary->gpu_peak_used_bytes = peak_bytes_;
+  }
+
+ private:
+  int gpu_index_;
+  size_t total_bytes_ = 0, before_bytes_ = 0, peak_bytes_ = 0;
+  std::mutex mutex_;
+};
+
+int GpuIndexForRun(const MatcherCommandOptions& options);
 
 // Runs the pipeline over `chunks`, leaving out pairs already in the database
 // unless options.overwrite is set. With `cache_groups` (chunks of
@@ -148,11 +191,11 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   MatchingSummary summary;
   summary.pairs_requested = num_pairs_requested;
   if (!options.overwrite) {
-    const std::unordered_set<pair_t> done = source.database().ReadCompletedPairIds();
-    if (!done.empty()) {
-      chunks = RemovePairs(std::move(chunks), [&](const ImagePair& pair) {
-        return done.count(ImagePairToPairId(pair.first, pair.second)) > 0;
-      });
+    // One bit per pair of the run, whatever the database holds.
+    const CompletedPairs done = ReadCompletedPairs(source.database(), image_ids, chunks);
+    if (done.num_completed() > 0) {
+      chunks = RemovePairs(std::move(chunks),
+                           [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
     }
   }
   if (num_ranks > 1) {
@@ -185,16 +228,36 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     if (devices > 1) run_options.gpu_index = std::to_string(MpiLocalRank() % devices);
   }
 #endif
+  GpuMemorySampler gpu_memory(GpuIndexForRun(run_options));
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
   std::unique_ptr<FeatureMatcher> matcher =
       CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); });
+  // Guided matching (Ga-CasHash, cashash/guided_matching.h): a second
+  // matcher for the top-scale subsets, the stage-1 F estimator, and the
+  // pipeline's features read through a source that keeps the keypoints.
+  std::unique_ptr<KeypointRecordingSource> keypoint_source;
+  GuidedFeatureMatcher* guided = nullptr;
+  if (options.guided.enabled) {
+    keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
+    auto guided_matcher = std::make_unique<GuidedFeatureMatcher>(
+        std::move(matcher), CreateMatcherForOptions(run_options, mean, nullptr),
+        CreateFundamentalEstimatorForOptions(run_options), keypoint_source.get(), options.guided,
+        options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
+    guided = guided_matcher.get();
+    matcher = std::move(guided_matcher);
+  }
   RetainingFeatureMatcher* retaining = nullptr;
   if (matcher_keep_bytes > 0) {
     const size_t max_rows = static_cast<size_t>(std::max(1, options.sift.max_num_matches));
+    // A guided matcher also holds the top-scale subset and the positions.
+    const double share = options.guided.enabled ? 1.0 + options.guided.top_scale_fraction : 1.0;
+    const size_t position_bytes = options.guided.enabled ? 24 : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
-        std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables](
-                                                    const FeatureDescriptors& d) {
-          return MatcherBytesPerImage(std::min(d.rows(), max_rows), tables);
+        std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables, share,
+                                                 position_bytes](const FeatureDescriptors& d) {
+          const size_t rows = std::min(d.rows(), max_rows);
+          return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
+                 rows * position_bytes;
         });
     retaining = keeping.get();
     matcher = std::move(keeping);
@@ -226,12 +289,17 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   std::unique_ptr<GroupFeatureCache> cache;
   if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, my_chunks);
   FeatureSource* features = cache ? static_cast<FeatureSource*>(cache.get()) : &source;
+  if (keypoint_source) {
+    keypoint_source->SetInner(features);
+    features = keypoint_source.get();
+  }
   MatchingPipeline pipeline(pipeline_options, features, matcher.get(), sink);
 
   // Progress counts the pairs of every rank written so far.
   std::mutex progress_mutex;
   const auto run_start = std::chrono::steady_clock::now();
   auto report_progress = [&](PipelineProgress progress) {
+    gpu_memory.Sample();
     if (!callbacks.progress || locked_sink == nullptr) return;
     std::lock_guard<std::mutex> lock(progress_mutex);
     progress.pairs_done = locked_sink->pairs_written();
@@ -240,7 +308,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
         std::chrono::duration<double>(std::chrono::steady_clock::now() - run_start).count();
     callbacks.progress(progress);
   };
-  if (callbacks.progress) pipeline.SetProgressCallback(report_progress);
+  pipeline.SetProgressCallback(report_progress);
   if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
   // Verification on the GPU too when use_gpu is set (the matcher has
   // already warned when no GPU can be used).
@@ -260,6 +328,16 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
                           std::to_string(kept.images_dropped) + " dropped to stay within " +
                           FormatMemorySize(matcher_keep_bytes));
     }
+    if (guided != nullptr) {
+      const GuidedMatchingStats& g = guided->stats();
+      std::ostringstream text;
+      text << std::fixed << std::setprecision(3) << "Guided matching: " << g.pairs << " pairs, "
+           << g.pairs_enough_matches << " with >= " << options.guided.min_num_matches << " top-scale matches ("
+           << g.stage1_matches << " in all), " << g.pairs_guided << " matched within the epipolar band ("
+           << g.stage2_matches << " matches); stage 1 " << g.seconds_stage1 << " s, F " << g.seconds_fundamental
+           << " s, stage 2 " << g.seconds_stage2 << " s";
+      Info(callbacks, text.str());
+    }
     if (!cache) return;
     const FeatureCacheStats stats = cache->stats();
     Info(callbacks, "Features: " + std::to_string(stats.source_loads) + " image reads for " +
@@ -270,6 +348,8 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     summary.pipeline = pipeline.Run(my_chunks);
     // The GPU matcher may have handed over to the CPU on running out of memory.
     summary.matcher_name = matcher->Name();
+    gpu_memory.Sample();
+    gpu_memory.Fill(&summary);
     report_cache();
     return summary;
   }
@@ -293,6 +373,8 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   }
   for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
   summary.matcher_name = matcher->Name();
+  gpu_memory.Sample();
+  gpu_memory.Fill(&summary);  // rank 0's device
   report_cache();  // rank 0's share
   Info(callbacks, "Matched by " + std::to_string(num_ranks) + " MPI processes");
   return summary;

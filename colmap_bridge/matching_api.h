@@ -43,6 +43,13 @@ struct MatchingSummary {
   size_t pairs_skipped = 0;    // already in the database and not overwritten
   std::string matcher_name;    // "" when nothing was matched
   PipelineStats pipeline;
+  // Memory of the GPU the run matched on (gpu_index -1: none or not
+  // queryable), from cudaMemGetInfo before the run and after each committed
+  // block; the whole device is counted, other processes included.
+  int gpu_index = -1;
+  size_t gpu_total_bytes = 0;
+  size_t gpu_used_before_bytes = 0;  // in use before the matcher was made
+  size_t gpu_peak_used_bytes = 0;    // most in use at a sample
 };
 
 // Matches every pair of images of the database (options.database_path is

@@ -7,7 +7,9 @@
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
+#include <sys/resource.h>
 
+#include "cashash/schedule_sizing.h"
 #include "colmap_bridge/command_options.h"
 #include "colmap_bridge/matching_api.h"
 
@@ -61,6 +63,13 @@ MatchingCallbacks ConsoleCallbacks(const std::string& heading) {
   return callbacks;
 }
 
+// Largest resident set of this process so far (getrusage; Linux counts KiB).
+size_t PeakResidentBytes() {
+  struct rusage usage {};
+  if (getrusage(RUSAGE_SELF, &usage) != 0) return 0;
+  return static_cast<size_t>(usage.ru_maxrss) * 1024;
+}
+
 // Prints the closing summary; returns the exit code (130 when stopped).
 int ReportSummary(const MatchingSummary& summary) {
   if (summary.matcher_name.empty()) return EXIT_SUCCESS;  // nothing was matched
@@ -72,9 +81,18 @@ int ReportSummary(const MatchingSummary& summary) {
             << " pairs/s) with " << summary.matcher_name << "; " << stats.raw_matches << " raw matches, "
             << stats.verified_pairs << " verified pairs, " << stats.inlier_matches << " inlier matches"
             << std::endl;
-  std::cout << std::setprecision(3) << "Time: loading " << stats.seconds_loading << " s, matching "
-            << stats.seconds_matching << " s, verification " << stats.seconds_verification << " s, writing "
-            << stats.seconds_writing << " s" << std::endl;
+  // Busy time of each stage; loading, hashing and matching share one thread,
+  // verification and writing run beside them.
+  std::cout << std::setprecision(3) << "Time: loading " << stats.seconds_loading << " s, hashing "
+            << stats.seconds_hashing << " s, matching " << stats.seconds_matching << " s, verification "
+            << stats.seconds_verification << " s, writing " << stats.seconds_writing << " s" << std::endl;
+  std::cout << "Memory: peak resident " << FormatMemorySize(PeakResidentBytes());
+  if (summary.gpu_index >= 0) {
+    std::cout << "; GPU " << summary.gpu_index << " at most " << FormatMemorySize(summary.gpu_peak_used_bytes)
+              << " of " << FormatMemorySize(summary.gpu_total_bytes) << " in use ("
+              << FormatMemorySize(summary.gpu_used_before_bytes) << " before the run; sampled after each block)";
+  }
+  std::cout << std::endl;
   if (stats.stopped) {
     std::cout << "Stopped after " << stats.pairs_done << " of " << stats.pairs_total
               << " pairs; every finished block is committed, run again to resume." << std::endl;
@@ -124,6 +142,15 @@ int RunExhaustiveMatcher(int argc, const char* const* argv) {
   if (early >= 0) return early;
   return RunGuarded([&]() {
     return MatchExhaustive(options.database_path, options, ConsoleCallbacks("Exhaustive feature matching"));
+  });
+}
+
+int RunGuidedMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("guided_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded([&]() {
+    return MatchExhaustive(options.database_path, options, ConsoleCallbacks("Guided feature matching (Ga-CasHash)"));
   });
 }
 

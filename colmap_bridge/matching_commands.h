@@ -7,6 +7,8 @@ namespace colmap {
 
 int RunExhaustiveMatcher(int argc, const char* const* argv);
 int RunMatchesImporter(int argc, const char* const* argv);
+// exhaustive_matcher with --GuidedMatching.enabled 1 (Ga-CasHash).
+int RunGuidedMatcher(int argc, const char* const* argv);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -172,8 +172,8 @@ std::vector<uint8_t> EncodeRankReport(const RankReport& report) {
   for (size_t value : {s.pairs_total, s.pairs_done, s.raw_matches, s.verified_pairs, s.inlier_matches}) {
     w.Put<uint64_t>(value);
   }
-  for (double value : {s.seconds_total, s.seconds_loading, s.seconds_matching, s.seconds_verification,
-                       s.seconds_writing}) {
+  for (double value : {s.seconds_total, s.seconds_loading, s.seconds_hashing, s.seconds_matching,
+                       s.seconds_verification, s.seconds_writing}) {
     w.Put<double>(value);
   }
   w.Put<uint8_t>(s.stopped ? 1 : 0);
@@ -188,8 +188,8 @@ RankReport DecodeRankReport(const std::vector<uint8_t>& bytes) {
   for (size_t* value : {&s.pairs_total, &s.pairs_done, &s.raw_matches, &s.verified_pairs, &s.inlier_matches}) {
     *value = r.Get<uint64_t>();
   }
-  for (double* value : {&s.seconds_total, &s.seconds_loading, &s.seconds_matching, &s.seconds_verification,
-                        &s.seconds_writing}) {
+  for (double* value : {&s.seconds_total, &s.seconds_loading, &s.seconds_hashing, &s.seconds_matching,
+                        &s.seconds_verification, &s.seconds_writing}) {
     *value = r.Get<double>();
   }
   s.stopped = r.Get<uint8_t>() != 0;

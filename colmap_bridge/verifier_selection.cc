@@ -5,6 +5,7 @@
 
 #ifdef CASHASH_WITH_CUDA
 #include "cashash_cuda/gpu_feature_matcher.h"
+#include "cashash_cuda/gpu_guided_matching.h"
 #include "cashash_cuda/gpu_two_view_geometry.h"
 #endif
 
@@ -32,6 +33,23 @@ std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherComman
 #endif
   }
   return CreateCpuBatchVerifier(options.two_view, options.sift.num_threads);
+}
+
+std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options) {
+#ifdef CASHASH_WITH_CUDA
+  if (options.use_gpu) {
+    int gpu_index = 0;
+    try {
+      gpu_index = std::max(0, std::stoi(options.gpu_index.substr(0, options.gpu_index.find(','))));
+    } catch (const std::exception&) {
+      gpu_index = 0;  // CreateBatchVerifierForOptions reports the bad value
+    }
+    if (cuda::CudaDeviceUsable(gpu_index, nullptr)) {
+      return cuda::CreateGpuFundamentalEstimator(options.two_view, gpu_index);
+    }
+  }
+#endif
+  return CreateCpuFundamentalEstimator(options.two_view, options.sift.num_threads);
 }
 
 }  // namespace colmap

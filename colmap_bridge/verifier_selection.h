@@ -7,6 +7,7 @@
 #include <string>
 
 #include "cashash/batch_verifier.h"
+#include "cashash/guided_matching.h"
 #include "colmap_bridge/command_options.h"
 
 namespace cashash {
@@ -15,6 +16,9 @@ namespace colmap {
 // `warning` hears why the GPU was not used when it was asked for.
 std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
                                                              const std::function<void(const std::string&)>& warning);
+
+// The F estimator of guided matching's stage 1, chosen the same way.
+std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <csignal>
@@ -14,6 +15,7 @@
 
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
+#include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/sqlite_statement.h"
 #include "colmap_bridge/verifier_selection.h"
@@ -154,10 +156,11 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
   const size_t block = static_cast<size_t>(checked.block_size);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
   if (!checked.overwrite) {
-    const std::unordered_set<pair_t> done = database_source.database().ReadCompletedPairIds();
-    chunks = RemovePairs(std::move(chunks), [&](const ImagePair& pair) {
-      return done.count(ImagePairToPairId(pair.first, pair.second)) > 0;
-    });
+    std::vector<image_t> image_ids(known_images.begin(), known_images.end());
+    std::sort(image_ids.begin(), image_ids.end());
+    const CompletedPairs done = ReadCompletedPairs(database_source.database(), image_ids, chunks);
+    chunks = RemovePairs(std::move(chunks),
+                         [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
   }
   size_t num_pairs = 0;
   for (const PairChunk& chunk : chunks) num_pairs += chunk.pairs.size();

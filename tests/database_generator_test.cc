@@ -92,11 +92,15 @@ TEST_F(DatabaseGeneratorTest, WritesAValidColmapDatabaseWithExactlyTheFeatureCou
   }
 }
 
-TEST_F(DatabaseGeneratorTest, SameSeedSameDatabaseOtherSeedOtherFeatures) {
+TEST_F(DatabaseGeneratorTest, SameSeedSameDatabaseOtherSeedOtherFeaturesAnyThreadCount) {
   DatabaseGeneratorOptions a = Options("a.db", 4, 300);
   DatabaseGeneratorOptions b = Options("b.db", 4, 300);
   DatabaseGeneratorOptions c = Options("c.db", 4, 300);
   c.random_seed = 6;
+  // Threads and transactions do not change what is written.
+  a.num_threads = 1;
+  b.num_threads = 3;
+  b.images_per_transaction = 3;
   colmap::GenerateDatabase(a);
   colmap::GenerateDatabase(b);
   colmap::GenerateDatabase(c);

@@ -75,7 +75,10 @@ struct BatchSlot {
   DeviceBuffer cursor;      // one uint32
   DeviceBuffer list_keys;   // tiled kernels: num_tables x kTableListCapacity uint32 per list row
   DeviceBuffer list_counts; // tiled kernels: num_tables uint8 per list row
+  DeviceBuffer guides;      // guided matching: EpipolarGuideDevice per task
   PinnedBuffer host_tasks;  // staging of PairTask[]
+  PinnedBuffer host_guides; // staging of EpipolarGuideDevice[]
+  size_t guide_capacity = 0;
   PinnedBuffer out;         // mapped: uint2 matches
   PinnedBuffer segments;    // mapped: MatchSegment per task
   size_t task_capacity = 0, query_capacity = 0, row_capacity = 0;
@@ -161,6 +164,23 @@ class GpuCascadeMatcher : public FeatureMatcher {
   }
 
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    return MatchPairsImpl(pairs, nullptr, 0.0);
+  }
+
+  bool SupportsEpipolarGuidance() const override { return true; }
+
+  std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& guided, double max_distance) override {
+    std::vector<ImagePair> pairs(guided.size());
+    for (size_t i = 0; i < guided.size(); ++i) pairs[i] = guided[i].pair;
+    return MatchPairsImpl(pairs, &guided, max_distance);
+  }
+
+  std::string Name() const override { return "gpu-cascade"; }
+
+ private:
+  // Matches `pairs`; with `guided` (same order), within the epipolar bands.
+  std::vector<FeatureMatches> MatchPairsImpl(const std::vector<ImagePair>& pairs,
+                                             const std::vector<GuidedPair>* guided, double max_distance) {
     CUDA_CHECK(cudaSetDevice(device_));
     HashPendingImages();
     std::vector<FeatureMatches> results(pairs.size());
@@ -178,6 +198,10 @@ class GpuCascadeMatcher : public FeatureMatcher {
       tasks.push_back(task);
       pair_of_task.push_back(i);
     }
+    guides_.clear();
+    guided_ = guided != nullptr;
+    max_distance_ = max_distance;
+    if (guided_) UploadGuidance(*guided, pair_of_task);
 
     int next_slot = 0;
     size_t start = 0;
@@ -197,9 +221,65 @@ class GpuCascadeMatcher : public FeatureMatcher {
     return results;
   }
 
-  std::string Name() const override { return "gpu-cascade"; }
-
- private:
+  // Guided matching: every distinct keypoint array of the call in one device
+  // buffer (float2 pixels), and guides_[task] with F and the offsets of the
+  // task's two arrays in it.
+  void UploadGuidance(const std::vector<GuidedPair>& guided, const std::vector<size_t>& pair_of_task) {
+    // Each distinct array once: its offset and the rows the matcher holds.
+    struct Placed {
+      const std::vector<float>* xy;
+      uint32_t offset;
+      uint32_t rows;
+    };
+    std::unordered_map<const std::vector<float>*, size_t> index_of;
+    std::vector<Placed> arrays;
+    size_t total = 0;  // float2 entries
+    auto place = [&](const std::vector<float>* xy, const Image& image, size_t pair) -> uint32_t {
+      if (xy == nullptr || xy->size() < 2 * size_t(image.num_features)) {
+        throw std::invalid_argument("GPU guided matching: pair " + std::to_string(pair) +
+                                    " lacks keypoint positions for its features");
+      }
+      const auto it = index_of.find(xy);
+      if (it != index_of.end()) {
+        Placed& placed = arrays[it->second];
+        if (placed.rows < image.num_features) {
+          throw std::invalid_argument("GPU guided matching: one keypoint array given for images of different sizes");
+        }
+        return placed.offset;
+      }
+      if (total + image.num_features >= (size_t{1} << 32)) {
+        throw std::runtime_error("GPU guided matching: too many keypoints in one call");
+      }
+      index_of.emplace(xy, arrays.size());
+      arrays.push_back(Placed{xy, static_cast<uint32_t>(total), image.num_features});
+      total += image.num_features;
+      return arrays.back().offset;
+    };
+    guides_.resize(pair_of_task.size());
+    for (size_t t = 0; t < pair_of_task.size(); ++t) {
+      const GuidedPair& g = guided[pair_of_task[t]];
+      std::copy(g.F.begin(), g.F.end(), guides_[t].F);
+      guides_[t].points_a = place(g.points1, Find(g.pair.first), pair_of_task[t]);
+      guides_[t].points_b = place(g.points2, Find(g.pair.second), pair_of_task[t]);
+    }
+    const size_t bytes = std::max<size_t>(total, 1) * sizeof(float2);
+    if (points_.bytes() < bytes) {
+      used_ -= points_.bytes();
+      points_.Release();
+      Reserve(bytes, "keypoint positions");
+      points_.Allocate(bytes, "keypoint positions");
+    }
+    std::vector<float2> staged(total);
+    for (const Placed& placed : arrays) {
+      const std::vector<float>& xy = *placed.xy;
+      for (uint32_t i = 0; i < placed.rows; ++i) staged[placed.offset + i] = make_float2(xy[2 * i], xy[2 * i + 1]);
+    }
+    if (total > 0) {
+      CUDA_CHECK(cudaMemcpyAsync(points_.as<float2>(), staged.data(), total * sizeof(float2),
+                                 cudaMemcpyHostToDevice, slots_[0].stream));
+      CUDA_CHECK(cudaStreamSynchronize(slots_[0].stream));
+    }
+  }
   struct Image {
     DeviceBuffer memory;
     DeviceImageParts parts;
@@ -381,6 +461,21 @@ class GpuCascadeMatcher : public FeatureMatcher {
     slot->pair_of_task.assign(pair_of_task.begin() + start, pair_of_task.begin() + end);
     CUDA_CHECK(cudaMemcpyAsync(slot->tasks.as<PairTask>(), staged, num_tasks * sizeof(PairTask),
                                cudaMemcpyHostToDevice, slot->stream));
+    if (guided_) {
+      if (slot->guide_capacity < num_tasks) {
+        used_ -= slot->guides.bytes();
+        slot->guides.Release();
+        slot->guide_capacity = 0;
+        Reserve(num_tasks * sizeof(EpipolarGuideDevice), "epipolar guides");
+        slot->guides.Allocate(num_tasks * sizeof(EpipolarGuideDevice), "epipolar guides");
+        slot->host_guides.Allocate(num_tasks * sizeof(EpipolarGuideDevice), false, "epipolar guides");
+        slot->guide_capacity = num_tasks;
+      }
+      EpipolarGuideDevice* staged_guides = slot->host_guides.host<EpipolarGuideDevice>();
+      std::copy(guides_.begin() + start, guides_.begin() + end, staged_guides);
+      CUDA_CHECK(cudaMemcpyAsync(slot->guides.as<EpipolarGuideDevice>(), staged_guides,
+                                 num_tasks * sizeof(EpipolarGuideDevice), cudaMemcpyHostToDevice, slot->stream));
+    }
     CUDA_CHECK(cudaMemsetAsync(slot->cursor.as<uint32_t>(), 0, sizeof(uint32_t), slot->stream));
     MatchParams params;
     params.num_tables = options_.num_tables;
@@ -402,8 +497,18 @@ class GpuCascadeMatcher : public FeatureMatcher {
       lists.num_tables = options_.num_tables;
       CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * options_.num_tables, slot->stream));
       LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream);
-      LaunchCascadeSelect(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
-                          sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+      if (guided_) {
+        LaunchCascadeSelectGuided(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
+                                  slot->guides.as<EpipolarGuideDevice>(), points_.as<float2>(), max_distance_,
+                                  sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+      } else {
+        LaunchCascadeSelect(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
+                            sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
+      }
+    } else if (guided_) {
+      LaunchCascadeMatchGuided(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params,
+                               slot->guides.as<EpipolarGuideDevice>(), points_.as<float2>(), max_distance_,
+                               sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
     } else {
       LaunchCascadeMatch(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params,
                          sift_options_.cross_check, grid_size_, slot->best.as<int32_t>(), slot->stream);
@@ -442,6 +547,12 @@ class GpuCascadeMatcher : public FeatureMatcher {
   std::unordered_map<image_t, Image> images_;
   std::vector<image_t> pending_;
   BatchSlot slots_[2];
+  // Guided matching (MatchPairsGuided): guides of the current call's tasks,
+  // the keypoint pixels they point into, the band half-width.
+  std::vector<EpipolarGuideDevice> guides_;
+  DeviceBuffer points_;
+  bool guided_ = false;
+  double max_distance_ = 0;
 };
 
 }  // namespace

@@ -14,6 +14,7 @@
 // dots by (dot descending, index ascending).
 #include "impl/cascade_match_kernels.cuh"
 
+#include "cashash/epipolar_band.h"
 #include "impl/cascade_tile_kernels.cuh"
 #include "utils/cuda_check.cuh"
 #include "utils/warp_primitives.cuh"
@@ -234,14 +235,33 @@ __device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, ui
   return static_cast<int>(best_index);
 }
 
+// Candidate filters of MatchQuery / SelectQuery: every candidate
+// (exhaustive matching) or those within the query's epipolar band (guided
+// matching). Filter(key) gives key or kEmptyKey.
+struct NoBand {
+  __device__ __forceinline__ uint32_t Filter(uint32_t key) const { return key; }
+};
+
+struct InBand {
+  EpipolarLine line;
+  const float2* target_points;
+  double max_distance;
+  __device__ __forceinline__ uint32_t Filter(uint32_t key) const {
+    if (key == WarpSortedList::kEmptyKey) return key;
+    const float2 p = target_points[key & kIndexMask];
+    return line.Contains(p.x, p.y, max_distance) ? key : WarpSortedList::kEmptyKey;
+  }
+};
+
 // Accepted best match in `target` of feature q of `query`, or -1 (the same
 // value in every lane).
 //
 // The buckets of all tables form one stream of candidates, processed two
 // chunks of 32 (one entry per lane) at a time with all four loads issued
 // before either chunk is ranked.
+template <class Band>
 __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const DeviceImageView& target,
-                          const MatchParams& params, WarpScratch& scratch) {
+                          const MatchParams& params, WarpScratch& scratch, const Band& band) {
   const unsigned lane = LaneId();
   const int num_tables = params.num_tables;
   const int bits = params.bits_per_table;
@@ -294,10 +314,10 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
       const uint4* entry1 = reinterpret_cast<const uint4*>(
           entries + ChunkEntryIndex(my_start, my_base, first + 32, total, slot_before));
       const uint4 c1 = __ldg(entry1), s1 = __ldg(entry1 + 1);
-      key1 = EntryKey(c1, s1, pos1 < total, signature, code, ranking.limit, params);
+      key1 = band.Filter(EntryKey(c1, s1, pos1 < total, signature, code, ranking.limit, params));
     }
-    ranking.Add(EntryKey(c0, s0, pos0 < total, signature, code, ranking.limit, params), key1, scratch.pending,
-                params.top_k);
+    ranking.Add(band.Filter(EntryKey(c0, s0, pos0 < total, signature, code, ranking.limit, params)), key1,
+                scratch.pending, params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
   return DecideFromRanked(query, q, target, ranking.ranked, params);
@@ -309,8 +329,10 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
 // with an overflowing list (more candidates than it holds) is answered by
 // MatchQuery itself. Counts and keys go out together (the keys of a list
 // past its count are ignored), so a query costs one round trip, not two.
+template <class Band>
 __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row, const DeviceImageView& target,
-                           const CandidateLists& lists, const MatchParams& params, WarpScratch& scratch) {
+                           const CandidateLists& lists, const MatchParams& params, WarpScratch& scratch,
+                           const Band& band) {
   const unsigned lane = LaneId();
   const int num_tables = lists.num_tables;
   const uint32_t* keys = lists.keys + row * num_tables * kTableListCapacity;
@@ -321,7 +343,7 @@ __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row,
     key[i] = i < num_tables ? __ldg(keys + i * kTableListCapacity + lane) : WarpSortedList::kEmptyKey;
   }
   if (__any_sync(kFullWarpMask, count > static_cast<uint32_t>(kTableListCapacity))) {
-    return MatchQuery(query, q, target, params, scratch);
+    return MatchQuery(query, q, target, params, scratch, band);
   }
   QueryRanking ranking(static_cast<uint32_t>(params.tau));
   __syncwarp();  // the previous query's reads of the scratch are done
@@ -341,7 +363,7 @@ __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row,
       uint32_t key1 = lane < count1 && first + i + 1 < num_tables ? key[i + 1] : WarpSortedList::kEmptyKey;
       if (key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
       if (key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
-      ranking.Add(key0, key1, scratch.pending, params.top_k);
+      ranking.Add(band.Filter(key0), band.Filter(key1), scratch.pending, params.top_k);
     }
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
@@ -353,7 +375,7 @@ __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row,
 struct DirectQuery {
   __device__ __forceinline__ int operator()(const PairTask* task, bool reverse, uint32_t q,
                                             const MatchParams& params, WarpScratch& scratch) const {
-    return MatchQuery(reverse ? task->b : task->a, q, reverse ? task->a : task->b, params, scratch);
+    return MatchQuery(reverse ? task->b : task->a, q, reverse ? task->a : task->b, params, scratch, NoBand{});
   }
 };
 
@@ -362,7 +384,54 @@ struct ListQuery {
   __device__ __forceinline__ int operator()(const PairTask* task, bool reverse, uint32_t q,
                                             const MatchParams& params, WarpScratch& scratch) const {
     const size_t row = size_t(task->list_offset) + (reverse ? task->a.num_features : 0u) + q;
-    return SelectQuery(reverse ? task->b : task->a, q, row, reverse ? task->a : task->b, lists, params, scratch);
+    return SelectQuery(reverse ? task->b : task->a, q, row, reverse ? task->a : task->b, lists, params, scratch,
+                       NoBand{});
+  }
+};
+
+// The band of query q of the task (forward: a's feature, line F x in b;
+// reverse: b's feature, line F^T x in a).
+struct Guidance {
+  const PairTask* tasks;
+  const EpipolarGuideDevice* guides;
+  const float2* points;
+  double max_distance;
+  __device__ __forceinline__ InBand Band(const PairTask* task, bool reverse, uint32_t q) const {
+    const EpipolarGuideDevice& guide = guides[task - tasks];
+    const float2* points_a = points + guide.points_a;
+    const float2* points_b = points + guide.points_b;
+    InBand band;
+    if (!reverse) {
+      const float2 x = points_a[q];
+      band.line = LineInSecondImage(guide.F, x.x, x.y);
+      band.target_points = points_b;
+    } else {
+      const float2 x = points_b[q];
+      band.line = LineInFirstImage(guide.F, x.x, x.y);
+      band.target_points = points_a;
+    }
+    band.max_distance = max_distance;
+    return band;
+  }
+};
+
+struct GuidedDirectQuery {
+  Guidance guidance;
+  __device__ __forceinline__ int operator()(const PairTask* task, bool reverse, uint32_t q,
+                                            const MatchParams& params, WarpScratch& scratch) const {
+    return MatchQuery(reverse ? task->b : task->a, q, reverse ? task->a : task->b, params, scratch,
+                      guidance.Band(task, reverse, q));
+  }
+};
+
+struct GuidedListQuery {
+  CandidateLists lists;
+  Guidance guidance;
+  __device__ __forceinline__ int operator()(const PairTask* task, bool reverse, uint32_t q,
+                                            const MatchParams& params, WarpScratch& scratch) const {
+    const size_t row = size_t(task->list_offset) + (reverse ? task->a.num_features : 0u) + q;
+    return SelectQuery(reverse ? task->b : task->a, q, row, reverse ? task->a : task->b, lists, params, scratch,
+                       guidance.Band(task, reverse, q));
   }
 };
 
@@ -482,6 +551,21 @@ void LaunchCascadeSelect(const PairTask* tasks, int num_tasks, uint32_t total_it
                          const CandidateLists& lists, bool cross_check, int grid_size, int32_t* best,
                          cudaStream_t stream) {
   LaunchMatchKernel(tasks, num_tasks, total_items, params, ListQuery{lists}, cross_check, grid_size, best, stream);
+}
+
+void LaunchCascadeMatchGuided(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                              const EpipolarGuideDevice* guides, const float2* points, double max_distance,
+                              bool cross_check, int grid_size, int32_t* best, cudaStream_t stream) {
+  const GuidedDirectQuery query{Guidance{tasks, guides, points, max_distance}};
+  LaunchMatchKernel(tasks, num_tasks, total_items, params, query, cross_check, grid_size, best, stream);
+}
+
+void LaunchCascadeSelectGuided(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                               const CandidateLists& lists, const EpipolarGuideDevice* guides, const float2* points,
+                               double max_distance, bool cross_check, int grid_size, int32_t* best,
+                               cudaStream_t stream) {
+  const GuidedListQuery query{lists, Guidance{tasks, guides, points, max_distance}};
+  LaunchMatchKernel(tasks, num_tasks, total_items, params, query, cross_check, grid_size, best, stream);
 }
 
 void LaunchCompactMatches(const PairTask* tasks, int num_tasks, const int32_t* best, uint2* out,

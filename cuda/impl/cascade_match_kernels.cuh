@@ -68,6 +68,28 @@ void LaunchCascadeSelect(const PairTask* tasks, int num_tasks, uint32_t total_it
                          const CandidateLists& lists, bool cross_check, int grid_size, int32_t* best,
                          cudaStream_t stream);
 
+// Epipolar guidance of one task (Ga-CasHash stage 2, cascade_matcher.h
+// EpipolarGuidance): F (row-major, x2^T F x1 = 0 for x1 in a, x2 in b) and
+// where the pixel positions of a's and b's features start in the points
+// array passed with it.
+struct EpipolarGuideDevice {
+  double F[9];
+  uint32_t points_a = 0;
+  uint32_t points_b = 0;
+};
+
+// LaunchCascadeMatch / LaunchCascadeSelect with each query's candidates
+// restricted to the band of max_distance pixels around its epipolar line
+// (guides[task], points: float2 pixel positions); the band is tested before
+// the top_k ranking, as on the CPU.
+void LaunchCascadeMatchGuided(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                              const EpipolarGuideDevice* guides, const float2* points, double max_distance,
+                              bool cross_check, int grid_size, int32_t* best, cudaStream_t stream);
+void LaunchCascadeSelectGuided(const PairTask* tasks, int num_tasks, uint32_t total_items, const MatchParams& params,
+                               const CandidateLists& lists, const EpipolarGuideDevice* guides, const float2* points,
+                               double max_distance, bool cross_check, int grid_size, int32_t* best,
+                               cudaStream_t stream);
+
 // Writes each task's surviving matches (point2D_idx1, point2D_idx2) in
 // ascending idx1 into out (device-visible, e.g. mapped host memory) and its
 // segment into segments[task]; *cursor (device memory, zeroed before)

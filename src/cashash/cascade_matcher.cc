@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "cashash/descriptor_distance.h"
+#include "cashash/epipolar_band.h"
 
 #if defined(__AVX2__)
 #include <immintrin.h>
@@ -97,7 +98,8 @@ class CascadeQuery {
  public:
   CascadeQuery(const CascadeImage& query, const CascadeImage& target,
                const SiftMatchingOptions& sift_options, const CasHashOptions& options,
-               CascadeScratch* scratch, CascadeStats* stats)
+               CascadeScratch* scratch, CascadeStats* stats,
+               const EpipolarGuidance* guidance = nullptr, bool reverse = false)
       : query_(query),
         target_(target),
         max_ratio_(static_cast<float>(sift_options.max_ratio)),
@@ -105,7 +107,9 @@ class CascadeQuery {
         tau_(options.tau),
         top_k_(static_cast<size_t>(options.top_k)),
         scratch_(*scratch),
-        stats_(stats) {
+        stats_(stats),
+        guidance_(guidance),
+        reverse_(reverse) {
     if (query.hashed.num_tables != target.hashed.num_tables ||
         query.buckets.bits_per_table != target.buckets.bits_per_table) {
       throw std::invalid_argument("Cascade matching: images hashed with different tables");
@@ -117,8 +121,21 @@ class CascadeQuery {
     if (stats_ != nullptr) stats_->Add(local_stats_);
   }
 
-  // Index of the accepted best match in the target, or -1.
+  // Index of the accepted best match in the target, or -1. With guidance,
+  // only candidates within the band around q's epipolar line are ranked.
   int Match(size_t q) {
+    if (guidance_ == nullptr) return MatchInBand<false>(q, EpipolarLine(), nullptr);
+    const float* query_points = reverse_ ? guidance_->points2 : guidance_->points1;
+    const float* target_points = reverse_ ? guidance_->points1 : guidance_->points2;
+    const EpipolarLine line = reverse_ ? LineInFirstImage(guidance_->F, query_points[2 * q], query_points[2 * q + 1])
+                                       : LineInSecondImage(guidance_->F, query_points[2 * q], query_points[2 * q + 1]);
+    return MatchInBand<true>(q, line, target_points);
+  }
+
+ private:
+  template <bool kBand>
+  int MatchInBand(size_t q, const EpipolarLine& line, const float* target_points) {
+    const double max_band_distance = kBand ? guidance_->max_distance : 0.0;
     const int num_tables = query_.hashed.num_tables;
     const uint64_t code0 = query_.hashed.remap_codes[2 * q];
     const uint64_t code1 = query_.hashed.remap_codes[2 * q + 1];
@@ -149,7 +166,8 @@ class CascadeQuery {
         const uint32_t f = features[p];
         const uint64_t bit = uint64_t{1} << (f % 64);
         const uint64_t word = seen[f / 64];
-        const bool keep = hamming <= tau && (word & bit) == 0;
+        bool keep = hamming <= tau && (word & bit) == 0;
+        if (kBand) keep = keep && line.Contains(target_points[2 * f], target_points[2 * f + 1], max_band_distance);
         seen[f / 64] = word | (keep ? bit : 0);
         // Key order = (Hamming distance, feature index) ascending.
         keys[num_keys] = (static_cast<uint64_t>(hamming) << 32) | f;
@@ -211,7 +229,6 @@ class CascadeQuery {
     return static_cast<int>(best_index);
   }
 
- private:
   const CascadeImage& query_;
   const CascadeImage& target_;
   const float max_ratio_;
@@ -221,6 +238,8 @@ class CascadeQuery {
   CascadeScratch& scratch_;
   CascadeStats* stats_;
   CascadeStats local_stats_;
+  const EpipolarGuidance* guidance_;
+  const bool reverse_;  // queries are features of image 2 (lines in image 1)
 };
 
 std::vector<int> CascadeMatchOneWay(const CascadeImage& query, const CascadeImage& target,
@@ -234,14 +253,18 @@ std::vector<int> CascadeMatchOneWay(const CascadeImage& query, const CascadeImag
   return matches;
 }
 
-FeatureMatches CascadeMatchPair(const CascadeImage& image1, const CascadeImage& image2,
-                                const SiftMatchingOptions& sift_options,
-                                const CasHashOptions& options, CascadeScratch* scratch,
-                                CascadeStats* stats) {
+namespace {
+
+FeatureMatches MatchPairImpl(const CascadeImage& image1, const CascadeImage& image2,
+                             const SiftMatchingOptions& sift_options, const CasHashOptions& options,
+                             CascadeScratch* scratch, CascadeStats* stats, const EpipolarGuidance* guidance) {
   FeatureMatches matches;
   if (image1.num_features() == 0 || image2.num_features() == 0) return matches;
-  const std::vector<int> forward =
-      CascadeMatchOneWay(image1, image2, sift_options, options, scratch, stats);
+  std::vector<int> forward(image1.num_features(), -1);
+  {
+    CascadeQuery forward_matcher(image1, image2, sift_options, options, scratch, stats, guidance, false);
+    for (size_t q = 0; q < forward.size(); ++q) forward[q] = forward_matcher.Match(q);
+  }
   if (!sift_options.cross_check) {
     for (size_t i = 0; i < forward.size(); ++i) {
       if (forward[i] >= 0) {
@@ -254,7 +277,7 @@ FeatureMatches CascadeMatchPair(const CascadeImage& image1, const CascadeImage& 
   // asking only for the hit features equals the full reverse pass.
   constexpr int kNotQueried = -2;
   std::vector<int> reverse(image2.num_features(), kNotQueried);
-  CascadeQuery reverse_matcher(image2, image1, sift_options, options, scratch, stats);
+  CascadeQuery reverse_matcher(image2, image1, sift_options, options, scratch, stats, guidance, true);
   for (size_t i = 0; i < forward.size(); ++i) {
     const int j = forward[i];
     if (j < 0) continue;
@@ -264,6 +287,28 @@ FeatureMatches CascadeMatchPair(const CascadeImage& image1, const CascadeImage& 
     }
   }
   return matches;
+}
+
+}  // namespace
+
+FeatureMatches CascadeMatchPair(const CascadeImage& image1, const CascadeImage& image2,
+                                const SiftMatchingOptions& sift_options,
+                                const CasHashOptions& options, CascadeScratch* scratch,
+                                CascadeStats* stats) {
+  return MatchPairImpl(image1, image2, sift_options, options, scratch, stats, nullptr);
+}
+
+FeatureMatches CascadeMatchPairGuided(const CascadeImage& image1, const CascadeImage& image2,
+                                      const EpipolarGuidance& guidance, const SiftMatchingOptions& sift_options,
+                                      const CasHashOptions& options, CascadeScratch* scratch,
+                                      CascadeStats* stats) {
+  if (guidance.F == nullptr || guidance.points1 == nullptr || guidance.points2 == nullptr) {
+    throw std::invalid_argument("CascadeMatchPairGuided: F and both images' keypoint positions are needed");
+  }
+  if (!(guidance.max_distance >= 0)) {
+    throw std::invalid_argument("CascadeMatchPairGuided: the band's max_distance must be >= 0");
+  }
+  return MatchPairImpl(image1, image2, sift_options, options, scratch, stats, &guidance);
 }
 
 }  // namespace cashash

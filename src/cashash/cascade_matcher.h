@@ -96,4 +96,24 @@ FeatureMatches CascadeMatchPair(const CascadeImage& image1, const CascadeImage& 
                                 const CasHashOptions& options, CascadeScratch* scratch,
                                 CascadeStats* stats = nullptr);
 
+// Epipolar guidance of one pair (Ga-CasHash stage 2, guided_matching.h): a
+// candidate j of query i is ranked only if it lies within max_distance pixels
+// of i's epipolar line (epipolar_band.h); in the reverse direction of the
+// cross-check the line is F^T x_j in image 1. Tested before the top_k
+// selection, so the top_k candidates are the nearest ones inside the band.
+struct EpipolarGuidance {
+  const double* F = nullptr;  // row-major 3x3, x2^T F x1 = 0 in pixels
+  // Keypoint pixels, x and y of feature i at [2 i] and [2 i + 1], for at
+  // least the hashed rows of each image.
+  const float* points1 = nullptr;
+  const float* points2 = nullptr;
+  double max_distance = 0;
+};
+
+// CascadeMatchPair with the candidates restricted to the epipolar band.
+FeatureMatches CascadeMatchPairGuided(const CascadeImage& image1, const CascadeImage& image2,
+                                      const EpipolarGuidance& guidance, const SiftMatchingOptions& sift_options,
+                                      const CasHashOptions& options, CascadeScratch* scratch,
+                                      CascadeStats* stats = nullptr);
+
 }  // namespace cashash

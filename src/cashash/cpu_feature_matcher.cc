@@ -74,6 +74,36 @@ class CpuFeatureMatcher : public FeatureMatcher {
     return options_.matcher == MatcherType::kCascade ? "cpu-cascade" : "cpu-bruteforce";
   }
 
+  bool SupportsEpipolarGuidance() const override { return options_.matcher == MatcherType::kCascade; }
+
+  std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override {
+    if (!SupportsEpipolarGuidance()) return FeatureMatcher::MatchPairsGuided(pairs, max_distance);
+    std::vector<const CpuImage*> firsts(pairs.size()), seconds(pairs.size());
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      firsts[i] = Find(pairs[i].pair.first);
+      seconds[i] = Find(pairs[i].pair.second);
+      if (pairs[i].points1 == nullptr || pairs[i].points2 == nullptr ||
+          pairs[i].points1->size() < 2 * firsts[i]->cascade.num_features() ||
+          pairs[i].points2->size() < 2 * seconds[i]->cascade.num_features()) {
+        throw std::invalid_argument("MatchPairsGuided: pair " + std::to_string(i) +
+                                    " lacks keypoint positions for its features");
+      }
+    }
+    std::vector<FeatureMatches> results(pairs.size());
+    const size_t num_workers = NumParallelWorkers(pairs.size(), sift_options_.num_threads);
+    std::vector<CascadeScratch> scratch(num_workers);
+    ParallelForWorkers(pairs.size(), sift_options_.num_threads, [&](size_t i, size_t worker) {
+      EpipolarGuidance guidance;
+      guidance.F = pairs[i].F.data();
+      guidance.points1 = pairs[i].points1->data();
+      guidance.points2 = pairs[i].points2->data();
+      guidance.max_distance = max_distance;
+      results[i] = CascadeMatchPairGuided(firsts[i]->cascade, seconds[i]->cascade, guidance, sift_options_,
+                                          options_, &scratch[worker]);
+    });
+    return results;
+  }
+
  private:
   const CpuImage* Find(image_t image_id) const {
     const auto it = images_.find(image_id);

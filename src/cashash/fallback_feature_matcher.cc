@@ -36,6 +36,14 @@ class FallbackFeatureMatcher : public FeatureMatcher {
 
   std::string Name() const override { return active_->Name(); }
 
+  bool SupportsEpipolarGuidance() const override { return active_->SupportsEpipolarGuidance(); }
+
+  std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override {
+    std::vector<FeatureMatches> result;
+    Run([&] { result = active_->MatchPairsGuided(pairs, max_distance); });
+    return result;
+  }
+
  private:
   template <typename Step>
   void Run(Step step) {

@@ -18,6 +18,17 @@ namespace cashash {
 // the original CasHash). Computed once per run over the images to match.
 using MeanDescriptor = std::array<float, kDescriptorDim>;
 
+// One pair of guided matching (Ga-CasHash stage 2, guided_matching.h): its
+// fundamental matrix and the keypoint pixels of both images. The pointers
+// must stay valid during the call.
+struct GuidedPair {
+  ImagePair pair;
+  std::array<double, 9> F{};  // row-major, x2^T F x1 = 0 (pixels of first, second image)
+  // x, y of feature i at [2 i], [2 i + 1]; at least the rows added.
+  const std::vector<float>* points1 = nullptr;
+  const std::vector<float>* points2 = nullptr;
+};
+
 class FeatureMatcher {
  public:
   virtual ~FeatureMatcher() = default;
@@ -32,6 +43,13 @@ class FeatureMatcher {
   virtual std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) = 0;
   // A short name for logs: "cpu-cascade", "gpu-bruteforce", ...
   virtual std::string Name() const = 0;
+
+  // Whether MatchPairsGuided is implemented (the cascade backends).
+  virtual bool SupportsEpipolarGuidance() const { return false; }
+  // MatchPairs with each query's candidates restricted to the band of
+  // max_distance pixels around its epipolar line (cascade_matcher.h,
+  // EpipolarGuidance). Throws std::logic_error where not supported.
+  virtual std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance);
 };
 
 // CPU backends (multi-threaded over pairs).

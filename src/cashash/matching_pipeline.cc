@@ -199,14 +199,17 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
           it = loaded.erase(it);
         }
       }
-      const Clock::time_point t_load = Clock::now();
+      double load_seconds = 0, hash_seconds = 0;
       for (image_t image_id : chunk.images) {
         if (loaded.count(image_id)) continue;
+        const Clock::time_point t_load = Clock::now();
         auto features = std::make_shared<ImageFeatures>(source_->LoadFeatures(image_id));
+        const Clock::time_point t_hash = Clock::now();
+        load_seconds += std::chrono::duration<double>(t_hash - t_load).count();
         matcher_->AddImage(image_id, features->descriptors);
+        hash_seconds += SecondsSince(t_hash);
         loaded.emplace(image_id, std::move(features));
       }
-      const double load_seconds = SecondsSince(t_load);
 
       const Clock::time_point t_match = Clock::now();
       MatchedChunk item;
@@ -216,6 +219,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       {
         std::lock_guard<std::mutex> lock(stats_mutex);
         stats.seconds_loading += load_seconds;
+        stats.seconds_hashing += hash_seconds;
         stats.seconds_matching += SecondsSince(t_match);
       }
       for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));

@@ -65,7 +65,11 @@ struct PipelineStats {
   size_t verified_pairs = 0;  // config >= CALIBRATED
   size_t inlier_matches = 0;
   double seconds_total = 0;
-  double seconds_loading = 0;
+  // Busy time of each stage (loading and hashing on the loading thread,
+  // matching after them on the same thread; verification and writing on
+  // their own threads, overlapping the others).
+  double seconds_loading = 0;  // features from the source (waits on a cache's loader too)
+  double seconds_hashing = 0;  // adding images to the matcher (hash codes, device upload)
   double seconds_matching = 0;
   double seconds_verification = 0;  // summed wall time of verification stage
   double seconds_writing = 0;

@@ -1,0 +1,121 @@
+// Two views of a synthetic scene for the guided-matching tests: image 2
+// holds a perturbed copy of every feature of image 1 at its true position
+// (known F), and, for every third feature, a decoy: a copy at least as close
+// in descriptor space placed far from the feature's epipolar line. Exhaustive
+// matching loses those features (the ratio test sees two equally good
+// candidates, or picks the decoy); guided matching only sees the true one.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <random>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "cashash/epipolar_band.h"
+#include "cashash/types.h"
+#include "synthetic_sift.h"
+#include "synthetic_two_view.h"
+
+namespace cashash {
+namespace testing_support {
+
+struct GuidedScene {
+  ImageFeatures image1, image2;
+  std::vector<int> truth;  // image-2 row of the true match of image-1 row i
+  std::vector<int> decoy;  // image-2 row of its decoy, or -1
+  std::array<double, 9> F{};  // true F, row-major
+  std::vector<float> xy1, xy2;  // interleaved keypoint pixels
+};
+
+inline Keypoint MakeKeypoint(const Eigen::Vector2d& p, float scale) {
+  Keypoint k;
+  k.x = static_cast<float>(p.x());
+  k.y = static_cast<float>(p.y());
+  k.a11 = scale;
+  k.a12 = 0.f;
+  k.a21 = 0.f;
+  k.a22 = scale;
+  return k;
+}
+
+inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
+  SceneOptions options;
+  options.num_inliers = num_features;
+  options.outlier_ratio = 0;
+  options.noise_px = 0.3;
+  options.seed = seed;
+  const SyntheticScene scene = MakeScene(options);
+  GuidedScene g;
+  const Eigen::Matrix3d F = scene.TrueF();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F(r, c);
+  std::mt19937 rng(seed * 7919u + 1);
+  std::uniform_int_distribution<int> noise(-6, 6);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::uniform_real_distribution<float> scale(1.0f, 8.0f);
+  auto perturb = [&](std::vector<uint8_t> d) {
+    for (uint8_t& x : d) x = static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255));
+    return d;
+  };
+  const int n = static_cast<int>(scene.points1.size());
+  struct Row {
+    std::vector<uint8_t> desc;
+    Keypoint kp;
+    int source;  // image-1 feature, -1 for none
+    bool decoy;
+  };
+  std::vector<Row> rows2;
+  for (int i = 0; i < n; ++i) {
+    const std::vector<uint8_t> d = RandomSift(&rng);
+    const float s = scale(rng);
+    g.image1.keypoints.push_back(MakeKeypoint(scene.points1[i], s));
+    g.image1.descriptors.data.insert(g.image1.descriptors.data.end(), d.begin(), d.end());
+    rows2.push_back(Row{perturb(d), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
+    if (i % 3 == 0) {
+      // A decoy at a point at least 40 px off the feature's epipolar line.
+      const EpipolarLine line =
+          LineInSecondImage(g.F.data(), static_cast<float>(scene.points1[i].x()), static_cast<float>(scene.points1[i].y()));
+      Eigen::Vector2d p;
+      do {
+        p = Eigen::Vector2d(unit(rng) * scene.width, unit(rng) * scene.height);
+      } while (line.Contains(static_cast<float>(p.x()), static_cast<float>(p.y()), 40.0));
+      rows2.push_back(Row{perturb(d), MakeKeypoint(p, 1.1f * s), i, true});
+    }
+  }
+  std::shuffle(rows2.begin(), rows2.end(), rng);
+  g.truth.assign(n, -1);
+  g.decoy.assign(n, -1);
+  for (size_t r = 0; r < rows2.size(); ++r) {
+    g.image2.keypoints.push_back(rows2[r].kp);
+    g.image2.descriptors.data.insert(g.image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
+    (rows2[r].decoy ? g.decoy : g.truth)[rows2[r].source] = static_cast<int>(r);
+  }
+  for (const Keypoint& k : g.image1.keypoints) {
+    g.xy1.push_back(k.x);
+    g.xy1.push_back(k.y);
+  }
+  for (const Keypoint& k : g.image2.keypoints) {
+    g.xy2.push_back(k.x);
+    g.xy2.push_back(k.y);
+  }
+  return g;
+}
+
+// An image that shares nothing with the others.
+inline ImageFeatures MakeUnrelatedImage(int num_features, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::uniform_real_distribution<float> scale(1.0f, 8.0f);
+  ImageFeatures image;
+  for (int i = 0; i < num_features; ++i) {
+    const std::vector<uint8_t> d = RandomSift(&rng);
+    image.descriptors.data.insert(image.descriptors.data.end(), d.begin(), d.end());
+    image.keypoints.push_back(MakeKeypoint(Eigen::Vector2d(unit(rng) * 1280, unit(rng) * 960), scale(rng)));
+  }
+  return image;
+}
+
+}  // namespace testing_support
+}  // namespace cashash
