@@ -38,8 +38,8 @@ constexpr size_t kMaxBatchQueries = size_t{1} << 22;
 // ... and at most this many pairs ...
 constexpr size_t kMaxBatchPairs = 8192;
 // ... and candidate lists of at most this many bytes (tiled kernels): with
-// 8 tables x 32 keys per feature, 2 x 8192 features per pair take 17 MB, so
-// ~60 such pairs per batch, ~1.2 ms of work at 50k pairs/s.
+// 256 keys per list, 2 x 8192 features per pair take 17 MB, so ~60 such
+// pairs per batch, ~1.2 ms of work at 50k pairs/s.
 constexpr size_t kMaxBatchListBytes = size_t{1} << 30;
 
 // Which matching kernels run: the bucket-tile kernels (default) or the older
@@ -73,8 +73,8 @@ struct BatchSlot {
   DeviceBuffer tasks;       // PairTask[]
   DeviceBuffer best;        // int32 per forward query
   DeviceBuffer cursor;      // one uint32
-  DeviceBuffer list_keys;   // tiled kernels: num_tables x kTableListCapacity uint32 per list row
-  DeviceBuffer list_counts; // tiled kernels: num_tables uint8 per list row
+  DeviceBuffer list_keys;   // tiled kernels: kCandidateListCapacity uint32 per list row
+  DeviceBuffer list_counts; // tiled kernels: uint32 per list row
   DeviceBuffer guides;      // guided matching: EpipolarGuideDevice per task
   PinnedBuffer host_tasks;  // staging of PairTask[]
   PinnedBuffer host_guides; // staging of EpipolarGuideDevice[]
@@ -95,7 +95,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
         options_(options),
         device_(gpu_index),
         tiled_(UseTiledKernels()),
-        list_row_keys_(static_cast<size_t>(options.num_tables) * kTableListCapacity) {
+        list_capacity_(kCandidateListCapacity) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
     if (error.empty()) error = CheckGpuCascadeOptions(options);
@@ -369,7 +369,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
 
   // Bytes of the candidate lists of `rows` features (tiled kernels).
   size_t ListBytes(size_t rows) const {
-    return tiled_ ? rows * (list_row_keys_ * sizeof(uint32_t) + options_.num_tables) : 0;
+    return tiled_ ? rows * (list_capacity_ + 1) * sizeof(uint32_t) : 0;
   }
 
   // Device bytes of a batch slot sized for `tasks` pairs, `queries` forward
@@ -425,8 +425,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
     slot->tasks.Allocate(new_tasks * sizeof(PairTask), "pair tasks");
     slot->best.Allocate(new_queries * sizeof(int32_t), "match results");
     if (tiled_ && new_rows > 0) {
-      slot->list_keys.Allocate(new_rows * list_row_keys_ * sizeof(uint32_t), "candidate lists");
-      slot->list_counts.Allocate(new_rows * options_.num_tables, "candidate list counts");
+      slot->list_keys.Allocate(new_rows * list_capacity_ * sizeof(uint32_t), "candidate lists");
+      slot->list_counts.Allocate(new_rows * sizeof(uint32_t), "candidate list counts");
     }
     if (slot->cursor.bytes() == 0) slot->cursor.Allocate(256, "match cursor");
     slot->host_tasks.Allocate(new_tasks * sizeof(PairTask), false, "pair tasks");
@@ -493,9 +493,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
     if (tiled_) {
       CandidateLists lists;
       lists.keys = slot->list_keys.as<uint32_t>();
-      lists.counts = slot->list_counts.as<uint8_t>();
-      lists.num_tables = options_.num_tables;
-      CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * options_.num_tables, slot->stream));
+      lists.counts = slot->list_counts.as<uint32_t>();
+      lists.capacity = list_capacity_;
+      CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * sizeof(uint32_t), slot->stream));
       LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream);
       if (guided_) {
         LaunchCascadeSelectGuided(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
@@ -537,7 +537,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
   const CasHashOptions options_;
   const int device_;
   const bool tiled_;
-  const size_t list_row_keys_;  // keys of one list row (all tables)
+  const int list_capacity_;
   size_t budget_ = 0;
   size_t used_ = 0;
   int rows_padded_ = 0;

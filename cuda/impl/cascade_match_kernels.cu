@@ -66,9 +66,6 @@ struct WarpScratch {
   uint32_t pending[64 + 1];       // survivors not yet merged into the ranked list; [64]: discard slot
 };
 
-// Lists of this many tables are loaded together by SelectQuery (even).
-constexpr int kListTablesPerStep = 4;
-
 // Capacity of WarpScratch::pending: two chunks' survivors always fit.
 constexpr int kPendingCapacity = 64;
 
@@ -323,48 +320,27 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
   return DecideFromRanked(query, q, target, ranking.ranked, params);
 }
 
-// The same answer from the query's candidate lists (list row `row`, one
-// list per table): every candidate within tau, de-duplicated already, in no
-// particular order. The keys are ranked exactly as in MatchQuery; a query
-// with an overflowing list (more candidates than it holds) is answered by
-// MatchQuery itself. Counts and keys go out together (the keys of a list
-// past its count are ignored), so a query costs one round trip, not two.
+// The same answer from the query's candidate list (list row `row`): every
+// candidate within tau, de-duplicated already, in no particular order. The
+// keys are ranked exactly as in MatchQuery; a list that overflowed (more
+// candidates than it holds) is answered by MatchQuery itself.
 template <class Band>
 __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row, const DeviceImageView& target,
                            const CandidateLists& lists, const MatchParams& params, WarpScratch& scratch,
                            const Band& band) {
   const unsigned lane = LaneId();
-  const int num_tables = lists.num_tables;
-  const uint32_t* keys = lists.keys + row * num_tables * kTableListCapacity;
-  const uint32_t count = static_cast<int>(lane) < num_tables ? lists.counts[row * num_tables + lane] : 0u;
-  uint32_t key[kListTablesPerStep];
-#pragma unroll
-  for (int i = 0; i < kListTablesPerStep; ++i) {
-    key[i] = i < num_tables ? __ldg(keys + i * kTableListCapacity + lane) : WarpSortedList::kEmptyKey;
-  }
-  if (__any_sync(kFullWarpMask, count > static_cast<uint32_t>(kTableListCapacity))) {
-    return MatchQuery(query, q, target, params, scratch, band);
-  }
+  const uint32_t total = lists.counts[row];
+  if (total > static_cast<uint32_t>(lists.capacity)) return MatchQuery(query, q, target, params, scratch, band);
+  const uint32_t* keys = lists.keys + row * lists.capacity;
   QueryRanking ranking(static_cast<uint32_t>(params.tau));
   __syncwarp();  // the previous query's reads of the scratch are done
-  for (int first = 0; first < num_tables; first += kListTablesPerStep) {
-    if (first > 0) {
-#pragma unroll
-      for (int i = 0; i < kListTablesPerStep; ++i) {
-        key[i] = first + i < num_tables ? __ldg(keys + (first + i) * kTableListCapacity + lane)
-                                        : WarpSortedList::kEmptyKey;
-      }
-    }
-#pragma unroll
-    for (int i = 0; i < kListTablesPerStep; i += 2) {
-      const uint32_t count0 = __shfl_sync(kFullWarpMask, count, (first + i) & 31);
-      const uint32_t count1 = __shfl_sync(kFullWarpMask, count, (first + i + 1) & 31);
-      uint32_t key0 = lane < count0 && first + i < num_tables ? key[i] : WarpSortedList::kEmptyKey;
-      uint32_t key1 = lane < count1 && first + i + 1 < num_tables ? key[i + 1] : WarpSortedList::kEmptyKey;
-      if (key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
-      if (key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
-      ranking.Add(band.Filter(key0), band.Filter(key1), scratch.pending, params.top_k);
-    }
+  for (uint32_t first = 0; first < total; first += 64) {
+    const uint32_t pos0 = first + lane, pos1 = pos0 + 32;
+    uint32_t key0 = pos0 < total ? __ldg(keys + pos0) : WarpSortedList::kEmptyKey;
+    uint32_t key1 = pos1 < total ? __ldg(keys + pos1) : WarpSortedList::kEmptyKey;
+    if (key0 >= ranking.limit) key0 = WarpSortedList::kEmptyKey;
+    if (key1 >= ranking.limit) key1 = WarpSortedList::kEmptyKey;
+    ranking.Add(band.Filter(key0), band.Filter(key1), scratch.pending, params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
   return DecideFromRanked(query, q, target, ranking.ranked, params);

@@ -1,17 +1,22 @@
 // Kernels of cascade_tile_kernels.cuh.
 //
 // Cost model (8192 features per image, 8 tables x 7 bits, tau 43, real
-// SIFT): a pair has ~8k tiles of 32 x 32 (a, b, table) candidates, ~6M in
-// all, of which ~10 % are within tau (~600k survivors, each appended to two
+// SIFT): a pair has ~6M (a, b, table) candidate pairs in ~8k tiles of
+// 32 x 32, ~10 % of them within tau (~600k survivors, each appended to two
 // lists). Per tile: eight single-bit tensor-core products give the 1024
-// distances, ~100 lane instructions turn them into one 32-bit tau mask per A
-// row, and the survivors are queued so that all 32 lanes share their work
-// (duplicate test, exact distance, two appends). History (H100/H200, same
-// benchmark): per-table sorted lists kept by replacing the largest key spent
-// most of the time on list upkeep; append-only lists with a lane per A row
-// and 32 x 32 lane popcounts reached 26.5k pairs/s on the H200, the tensor-
-// core tiles 28.5k, still waiting on global atomics that reserved list
-// slots; these per-(feature, table) lists need none.
+// distances, ~100 lane instructions turn them into one 32-bit tau mask per
+// A row, and the survivors are queued so that all 32 lanes share their work
+// (duplicate test, exact distance, ranks, two appends).
+//
+// History (same benchmark; H200 figures from one run, docs/gpu_cascade_design.md):
+// per-table lists kept in order by replacing the largest key spent most of
+// the time on list upkeep; append-only lists with one lane per A row and
+// 32 x 32 lane popcounts (each lane walking its own survivors, so the warp
+// ran as many steps as its busiest lane: ~8 for ~3.5 on average) reached
+// 28.0k pairs/s, these tensor-core tiles 31.1k. Per-(feature, table) lists
+// filled without global atomics (one warp owns each) were tried and dropped:
+// 32 keys per table overflowed for so many features that the per-query
+// fallback halved the rate (15.4k).
 #include "impl/cascade_tile_kernels.cuh"
 
 #include "utils/bit_mma.cuh"
@@ -31,23 +36,22 @@ constexpr int kTileThreads = 32;
 // Survivors queued per round; a 32 x 32 tile has at most 1024.
 constexpr int kQueueCapacity = 512;
 
-// Shared memory of the warp (~4.4 KB, so 32 one-warp blocks fit an SM).
+// Shared memory of the warp (~4.3 KB, so 32 one-warp blocks fit an SM).
 struct TileScratch {
   // Staged A rows (one chunk of 32 of A's bucket) and B entries.
   uint4 code_a[32];
   uint64_t signature_a[32];
   uint32_t index_a[32];
   uint32_t pop_a[32];   // popcount of the code; 255 past the bucket's end
-  uint32_t kept_a[32];  // keys appended to the row's list so far (this table)
+  uint32_t kept_a[32];  // survivors of the row in this round (then: its first list slot)
   uint4 code_b[32];
   uint64_t signature_b[32];
   uint32_t index_b[32];
   uint32_t pop_b[32];
-  uint32_t kept_b[32];  // keys for the entry in this round
-  uint32_t base_b[32];  // the entry's list length before this round
+  uint32_t kept_b[32];
   // Queued survivors: row | col << 5 on entry; after the duplicate test
-  // row | col << 5 | rank in col << 10 | min(slot in row, 63) << 15 |
-  // distance << 21, or kDropped.
+  // row | col << 5 | rank in row << 10 | rank in col << 15 | distance << 20,
+  // or kDropped.
   uint32_t queue[kQueueCapacity];
 };
 constexpr uint32_t kDropped = 0xffffffffu;
@@ -79,27 +83,28 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
 
   const BucketEntry* entries_a = task.a.entries + size_t(table) * task.a.num_features;
   const BucketEntry* entries_b = task.b.entries + size_t(table) * task.b.num_features;
-  // List (row, table) of row r starts at key (r * num_tables + table) * capacity.
-  const size_t lists_a = size_t(task.list_offset) * num_tables + table;
-  const size_t lists_b = (size_t(task.list_offset) + task.a.num_features) * num_tables + table;
-  constexpr uint32_t kCapacity = kTableListCapacity;
+  const size_t rows_a = task.list_offset;
+  const size_t rows_b = size_t(task.list_offset) + task.a.num_features;
+  const uint32_t capacity = static_cast<uint32_t>(lists.capacity);
   const int tau = min(params.tau, 128);
+  // Duplicate test (see EntryKey in cascade_match_kernels.cu): fields of the
+  // tables before this one must all differ.
   const uint64_t below = (uint64_t{1} << (table * bits)) - 1;
   const uint64_t high_from_t = params.field_high_bits & ~below;
 
+  s.kept_a[lane] = 0;
   s.kept_b[lane] = 0;
   for (uint32_t a0 = a_begin; a0 < a_end; a0 += 32) {
     __syncwarp();
-    const bool row_valid = a0 + lane < a_end;
     {
+      const bool valid = a0 + lane < a_end;
       const uint4* entry = reinterpret_cast<const uint4*>(entries_a + min(a0 + lane, a_end - 1));
-      const uint4 code = row_valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+      const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
       const uint4 meta = __ldg(entry + 1);
       s.code_a[lane] = code;
       s.signature_a[lane] = uint64_t(meta.y) << 32 | meta.x;
       s.index_a[lane] = meta.z;
-      s.pop_a[lane] = row_valid ? Popc128(code) : 255u;
-      s.kept_a[lane] = 0;
+      s.pop_a[lane] = valid ? Popc128(code) : 255u;
     }
     __syncwarp();
     // This lane's A fragments (rows mi * 16 + g + 8h, word t) and the
@@ -115,21 +120,16 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
     }
 
     for (uint32_t b0 = b_begin; b0 < b_end; b0 += 32) {
-      const bool col_valid = b0 + lane < b_end;
-      uint32_t list_b = 0;  // this lane's B entry: its list length (this table) before the step
       {
+        const bool valid = b0 + lane < b_end;
         const uint4* entry = reinterpret_cast<const uint4*>(entries_b + min(b0 + lane, b_end - 1));
-        const uint4 code = col_valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+        const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
         const uint4 meta = __ldg(entry + 1);
-        // Only this warp writes the entry's list of this table: after the
-        // first chunk of A rows its length is this lane's own earlier store.
-        // Issued now, used only after the tile's survivors are ranked.
-        if (a0 != a_begin && col_valid) list_b = lists.counts[lists_b + size_t(meta.z) * num_tables];
         __syncwarp();  // the previous chunk's queue passes are done with these
         s.code_b[lane] = code;
         s.signature_b[lane] = uint64_t(meta.y) << 32 | meta.x;
         s.index_b[lane] = meta.z;
-        s.pop_b[lane] = col_valid ? Popc128(code) : 255u;
+        s.pop_b[lane] = valid ? Popc128(code) : 255u;
       }
       __syncwarp();
 
@@ -183,11 +183,7 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
 
       for (uint32_t round = 0; round < total; round += kQueueCapacity) {
         const uint32_t in_round = min(total - round, static_cast<uint32_t>(kQueueCapacity));
-        if (total <= static_cast<uint32_t>(kQueueCapacity)) {
-          // Common case: one round, no position checks.
-          uint32_t position = first;
-          for (uint32_t m = row_mask; m != 0; m &= m - 1) s.queue[position++] = lane | (__ffs(m) - 1) << 5;
-        } else {
+        {
           uint32_t position = first, m = row_mask;
           while (m != 0 && position < round + in_round) {
             const uint32_t col = __ffs(m) - 1;
@@ -206,39 +202,32 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
           if (((v - params.field_low_bits) & ~v & params.field_high_bits) == 0) {
             const uint4 x = s.code_a[row], y = s.code_b[col];
             const uint32_t distance = __popc(x.x ^ y.x) + __popc(x.y ^ y.y) + __popc(x.z ^ y.z) + __popc(x.w ^ y.w);
-            const uint32_t slot_a = atomicAdd(&s.kept_a[row], 1u);
+            const uint32_t rank_a = atomicAdd(&s.kept_a[row], 1u);
             const uint32_t rank_b = atomicAdd(&s.kept_b[col], 1u);
-            out = row | col << 5 | rank_b << 10 | min(slot_a, 63u) << 15 | distance << 21;
+            out = row | col << 5 | rank_a << 10 | rank_b << 15 | distance << 20;
           }
           s.queue[p] = out;
         }
         __syncwarp();
-        s.base_b[lane] = list_b;
-        list_b += s.kept_b[lane];
-        s.kept_b[lane] = 0;
+        // One list reservation per row and per column of the round.
+        const uint32_t kept_a = s.kept_a[lane], kept_b = s.kept_b[lane];
+        if (kept_a > 0) s.kept_a[lane] = atomicAdd(lists.counts + rows_a + s.index_a[lane], kept_a);
+        if (kept_b > 0) s.kept_b[lane] = atomicAdd(lists.counts + rows_b + s.index_b[lane], kept_b);
         __syncwarp();
         for (uint32_t p = lane; p < in_round; p += 32) {
           const uint32_t e = s.queue[p];
           if (e == kDropped) continue;
           const uint32_t row = e & 31u, col = (e >> 5) & 31u;
-          const uint32_t rank_b = (e >> 10) & 31u, slot_a = (e >> 15) & 63u, distance = e >> 21;
+          const uint32_t rank_a = (e >> 10) & 31u, rank_b = (e >> 15) & 31u, distance = e >> 20;
           const uint32_t index_a = s.index_a[row], index_b = s.index_b[col];
-          const uint32_t slot_b = s.base_b[col] + rank_b;
-          if (slot_a < kCapacity) {
-            lists.keys[(lists_a + size_t(index_a) * num_tables) * kCapacity + slot_a] = distance << 24 | index_b;
-          }
-          if (slot_b < kCapacity) {
-            lists.keys[(lists_b + size_t(index_b) * num_tables) * kCapacity + slot_b] = distance << 24 | index_a;
-          }
+          const uint32_t slot_a = s.kept_a[row] + rank_a, slot_b = s.kept_b[col] + rank_b;
+          if (slot_a < capacity) lists.keys[(rows_a + index_a) * capacity + slot_a] = distance << 24 | index_b;
+          if (slot_b < capacity) lists.keys[(rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
         }
         __syncwarp();
+        s.kept_a[lane] = 0;
+        s.kept_b[lane] = 0;
       }
-      if (col_valid && total > 0) {
-        lists.counts[lists_b + size_t(s.index_b[lane]) * num_tables] = static_cast<uint8_t>(min(list_b, 255u));
-      }
-    }
-    if (row_valid) {
-      lists.counts[lists_a + size_t(s.index_a[lane]) * num_tables] = static_cast<uint8_t>(min(s.kept_a[lane], 255u));
     }
   }
 }
@@ -249,8 +238,8 @@ void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams&
                         cudaStream_t stream) {
   if (num_tasks == 0) return;
   const uint64_t items = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
-  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, 0, stream>>>(tasks, static_cast<uint32_t>(items),
-                                                                               params, lists);
+  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, 0, stream>>>(
+      tasks, static_cast<uint32_t>(items), params, lists);
   CUDA_CHECK_LAUNCH();
 }
 

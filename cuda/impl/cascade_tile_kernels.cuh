@@ -7,24 +7,19 @@
 // warp takes such a tile: lanes hold 32 features of A's bucket, B's bucket
 // is staged in shared memory 32 entries at a time and broadcast, and each
 // distance is computed once for both directions (the per-query kernel loaded
-// every entry from L2 once per query and direction). By default the 32 x 32
-// distances of a tile come from eight single-bit tensor-core products
-// (popc(a ^ b) = popc(a) + popc(b) - 2 popc(a & b)) and all lanes share the
-// survivors' work; CASHASH_GPU_TILE_KERNEL=popc selects the lane-popcount
-// version, kept to compare against.
+// every entry from L2 once per query and direction). The 32 x 32 distances
+// of a tile come from eight single-bit tensor-core products
+// (popc(a ^ b) = popc(a) + popc(b) - 2 popc(a & b)).
 //
 // What a tile keeps: every candidate within tau, de-duplicated across tables
 // exactly as cascade_hashing.h says (a candidate counts only in the first
 // table where the two share a bucket), is appended as a key
-// (distance << 24 | other feature) to the candidate list of *both* features
-// for this table. Lists are per (feature, table): a feature lies in exactly
-// one bucket of each table, so exactly one warp ever writes its list of that
-// table, and slots are plain counters of that warp: no global atomics (the
-// first tensor-core version reserved slots of per-feature lists with global
-// atomic adds, and 39 % of its stall samples waited for their return). A
-// list that would exceed its capacity keeps counting (saturating at 255) and
-// its feature is answered by the per-query kernel instead; the selection
-// kernel (cascade_match_kernels.cuh) ranks the others.
+// (distance << 24 | other feature) to the candidate list of *both* features.
+// A list is append-only and unordered; its slots are reserved with one
+// atomic add per lane and staged chunk, so no list is ever searched or
+// sorted here. A feature with more candidates than a list holds keeps its
+// count (above the capacity) and is answered by the per-query kernel
+// instead; the selection kernel (cascade_match_kernels.cuh) ranks the others.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -38,19 +33,19 @@ namespace cuda {
 
 // Candidate lists of one batch of pairs. Feature f of side A of task k has
 // list row `task.list_offset + f`, feature f of side B row
-// `task.list_offset + task.a.num_features + f`; row r and table t own
-// keys[(r * num_tables + t) * kTableListCapacity ...] and
-// counts[r * num_tables + t] (zeroed before the tile launch).
+// `task.list_offset + task.a.num_features + f`; row r owns
+// keys[r * capacity ...] and counts[r] (keys appended; above capacity when
+// the list overflowed; zeroed before the tile launch).
 struct CandidateLists {
   uint32_t* keys = nullptr;
-  uint8_t* counts = nullptr;
-  int num_tables = 0;
+  uint32_t* counts = nullptr;
+  int capacity = 0;
 };
 
-// Keys per (feature, table) list: one warp-wide load. Real SIFT at 8192
-// features per image has ~73 candidates within tau per query over 8 tables
-// (~9 per table), so only features in very dense buckets overflow.
-constexpr int kTableListCapacity = 32;
+// Keys per list. Real SIFT at 8192 features per image has ~44 candidates
+// within tau per query on average (8 x 7 tables) with a long tail; 256
+// leaves the per-query fallback to the few features in very dense buckets.
+constexpr int kCandidateListCapacity = 256;
 
 // Fills `lists` for every task (one warp per (task, table, bucket)).
 // Asynchronous on `stream`.
