@@ -185,27 +185,36 @@ __device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, ui
   const unsigned lane = LaneId();
 
   // Exact dot products of the ranked candidates: 8 per pass, 4 lanes of 32
-  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum).
+  // bytes each (two 16-byte loads per lane, 8 dp4a, a 4-lane sum). Passes go
+  // two at a time with all four loads issued first: the descriptors are a
+  // round trip to L2, and top_k 16 needs exactly two passes.
   const int count = min(__popc(__ballot_sync(kFullWarpMask, ranked.key != WarpSortedList::kEmptyKey)), params.top_k);
   if (count == 0) return -1;
   const unsigned part = lane & 3, group = lane >> 2;
   const uint4* mine = reinterpret_cast<const uint4*>(query.descriptors + size_t(q) * 128) + 2 * part;
   const uint4 mine0 = mine[0], mine1 = mine[1];
   int my_dot = 0;
-  for (int first = 0; first < count; first += 8) {
-    const int j = first + static_cast<int>(group);
-    const uint32_t key = ranked.At(min(j, 31));
-    uint4 other0 = make_uint4(0, 0, 0, 0), other1 = other0;
-    if (j < count) {
-      const uint4* other = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
-      other0 = other[0];
-      other1 = other[1];
+  for (int first = 0; first < count; first += 16) {
+    uint4 other[2][2];
+#pragma unroll
+    for (int h = 0; h < 2; ++h) {
+      const int j = first + 8 * h + static_cast<int>(group);
+      const uint32_t key = ranked.At(min(j, 31));
+      other[h][0] = other[h][1] = make_uint4(0, 0, 0, 0);
+      if (j < count) {
+        const uint4* row = reinterpret_cast<const uint4*>(target.descriptors + size_t(key & kIndexMask) * 128) + 2 * part;
+        other[h][0] = row[0];
+        other[h][1] = row[1];
+      }
     }
-    const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other0) + Dot16(mine1, other1)));
-    // Lane L in [first, first + 8) takes the dot of candidate L.
-    const int rel = static_cast<int>(lane) - first;
-    const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
-    if (rel >= 0 && rel < 8) my_dot = got;
+#pragma unroll
+    for (int h = 0; h < 2; ++h) {
+      const int dot = GroupSum<4>(static_cast<int>(Dot16(mine0, other[h][0]) + Dot16(mine1, other[h][1])));
+      // Lane L in [first + 8h, first + 8h + 8) takes the dot of candidate L.
+      const int rel = static_cast<int>(lane) - first - 8 * h;
+      const int got = __shfl_sync(kFullWarpMask, dot, (rel * 4) & 31);
+      if (rel >= 0 && rel < 8) my_dot = got;
+    }
   }
   // Best by (dot descending, index ascending), second = largest dot of the
   // others (0 when none): three single-instruction warp reductions. Dots of

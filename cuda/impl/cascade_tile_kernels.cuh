@@ -7,7 +7,9 @@
 // warp takes such a tile: lanes hold 32 features of A's bucket, B's bucket
 // is staged in shared memory 32 entries at a time and broadcast, and each
 // distance is computed once for both directions (the per-query kernel loaded
-// every entry from L2 once per query and direction).
+// every entry from L2 once per query and direction). The 32 x 32 distances
+// of a tile come from eight single-bit tensor-core products
+// (popc(a ^ b) = popc(a) + popc(b) - 2 popc(a & b)).
 //
 // What a tile keeps: every candidate within tau, de-duplicated across tables
 // exactly as cascade_hashing.h says (a candidate counts only in the first
