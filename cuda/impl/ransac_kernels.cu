@@ -352,8 +352,15 @@ __global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaun
 }
 
 // E blocks: a kernel of their own, so the 5-point solver's registers and
-// stack do not weigh on the F/H kernel's occupancy.
-__global__ void __launch_bounds__(kRansacThreads) EssentialRansacKernel(RansacLaunch E) {
+// stack do not weigh on the F/H kernel's occupancy. By default it takes 255
+// registers (two blocks per SM); CASHASH_ESSENTIAL_MIN_BLOCKS=3 at compile
+// time caps them for three (168 registers, more spills) to compare.
+#if defined(CASHASH_ESSENTIAL_MIN_BLOCKS) && CASHASH_ESSENTIAL_MIN_BLOCKS > 1
+#define CASHASH_ESSENTIAL_LAUNCH_BOUNDS __launch_bounds__(kRansacThreads, CASHASH_ESSENTIAL_MIN_BLOCKS)
+#else
+#define CASHASH_ESSENTIAL_LAUNCH_BOUNDS __launch_bounds__(kRansacThreads)
+#endif
+__global__ void CASHASH_ESSENTIAL_LAUNCH_BOUNDS EssentialRansacKernel(RansacLaunch E) {
   extern __shared__ float4 cached_points[];
   __shared__ BlockScratch s;
   LoRansacBlock<EssentialModel>(E, static_cast<int>(blockIdx.x), cached_points, s);
