@@ -48,6 +48,26 @@ TEST(ScheduleSizing, AmpleMemoryKeepsColmapBlocksAndOneGroup) {
   EXPECT_TRUE(sizes.warning.empty());
 }
 
+TEST(ScheduleSizing, GpuRunKeepsEveryImageWhenTheDeviceHoldsThem) {
+  // 5000 images of 8192 features, 16 GiB of host memory, a 139 GiB GPU: the
+  // device holds every image's tables (3.1 MB each) and the host the CPU
+  // fallback's copies of their descriptors (1 MB each), so every image is
+  // hashed once.
+  const std::vector<size_t> features(5000, 8192);
+  ScheduleLimits limits;
+  limits.max_host_bytes = 16 * kGiB;
+  limits.max_gpu_bytes = 139 * kGiB;
+  const ScheduleSizes sizes = ChooseScheduleSizes(features, limits);
+  EXPECT_GE(sizes.matcher_keep_bytes, 5000 * sizes.matcher_bytes_per_image);
+  // Kept descriptors and the predicted host use stay within the host cap.
+  const size_t kept = sizes.matcher_keep_bytes / sizes.matcher_bytes_per_image;
+  EXPECT_LE(sizes.predicted_host_bytes + kept * (8192 * 128 + 1024), limits.max_host_bytes);
+  // Without a GPU the same images cost host memory: far fewer are kept.
+  limits.max_gpu_bytes = 0;
+  const ScheduleSizes cpu = ChooseScheduleSizes(features, limits);
+  EXPECT_LT(cpu.matcher_keep_bytes, sizes.matcher_keep_bytes / 2);
+}
+
 TEST(ScheduleSizing, HostCapMakesGroupsSmaller) {
   const std::vector<size_t> features(3000, 12000);  // 1.8 MB of features per image
   ScheduleLimits limits;

@@ -134,13 +134,28 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   sizes.predicted_host_bytes =
       fixed_host(bs) + images(kCacheGroups * sizes.blocks_per_group * bs) * sizes.host_bytes_per_image;
   sizes.predicted_gpu_bytes = gpu ? images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image : 0;
-  // Kept images cost matcher memory (device or host) and, on the GPU, a host
-  // copy of their descriptors (for the CPU fallback), less than the former.
-  const size_t in_use = images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image;
-  const size_t host_left = limits.max_host_bytes - std::min(limits.max_host_bytes, sizes.predicted_host_bytes);
-  size_t left = host_left;
-  if (gpu) left = std::min(left, gpu_for_images - std::min(gpu_for_images, in_use));
-  sizes.matcher_keep_bytes = in_use + static_cast<size_t>(0.8 * left);
+  // Kept images cost matcher memory: on the CPU backend host memory; on the
+  // GPU device memory, plus on the host only the copy of their descriptors
+  // that the CPU fallback keeps (a third of the device layout at 8 tables).
+  // Counting the device layout against host memory too (as before) kept
+  // 2.7k of 5000 images of 8192 features under --max_host_memory 16G, and
+  // the block order then re-hashed nearly every image for every block pair
+  // (184k hashings in 9.6M pairs, 41 % of the run; H200, docs/BENCHMARKS.md).
+  const size_t in_use_images = images(kMatcherBlocks * bs);
+  const size_t in_use = in_use_images * sizes.matcher_bytes_per_image;
+  const size_t host_copy =
+      std::min(largest, static_cast<size_t>(std::max(1, limits.max_num_matches))) * kDescriptorDim + 1024;
+  size_t host_left = limits.max_host_bytes - std::min(limits.max_host_bytes, sizes.predicted_host_bytes);
+  size_t keep_images = 0;
+  if (gpu) {
+    host_left -= std::min(host_left, in_use_images * host_copy);
+    const size_t gpu_left = gpu_for_images - std::min(gpu_for_images, in_use);
+    keep_images = std::min(host_left / host_copy, gpu_left / sizes.matcher_bytes_per_image);
+  } else {
+    keep_images = host_left / sizes.matcher_bytes_per_image;
+  }
+  sizes.matcher_keep_bytes =
+      in_use + static_cast<size_t>(0.8 * static_cast<double>(keep_images * sizes.matcher_bytes_per_image));
   return sizes;
 }
 
