@@ -64,7 +64,7 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"FeatureMatching.use_gpu", "SiftMatching.use_gpu"}, &o.use_gpu,
             "Match on the GPU (falls back to the CPU with a warning where there is none)");
   table.Add({"FeatureMatching.gpu_index", "SiftMatching.gpu_index"}, &o.gpu_index,
-            "CUDA device index, -1 for the first device");
+            "CUDA device index, -1 for the first device; a list (0,1) matches on several devices, each block pair split among them");
   table.Add({"FeatureMatching.max_num_matches", "SiftMatching.max_num_matches"}, &o.sift.max_num_matches,
             "Features per image considered (first rows)");
   table.Add({"FeatureMatching.guided_matching", "SiftMatching.guided_matching"}, &o.guided_matching,

@@ -18,6 +18,7 @@
 #include "cashash/pair_generation.h"
 #include "cashash/pair_id.h"
 #include "cashash/retaining_feature_matcher.h"
+#include "cashash/split_feature_matcher.h"
 #include "cashash/schedule_sizing.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database.h"
@@ -476,21 +477,64 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
 
 }  // namespace
 
+#ifdef CASHASH_WITH_CUDA
+namespace {
+
+// The devices of --FeatureMatching.gpu_index: "-1" (the first), "2", or a
+// comma-separated list "0,1" (one matcher per device, SplitFeatureMatcher).
+std::vector<int> GpuIndices(const std::string& gpu_index) {
+  std::vector<int> indices;
+  size_t at = 0;
+  while (at <= gpu_index.size()) {
+    const size_t comma = std::min(gpu_index.find(',', at), gpu_index.size());
+    const std::string item = gpu_index.substr(at, comma - at);
+    size_t used = 0;
+    int value = -1;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size()) {
+      throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+                                  gpu_index + "'");
+    }
+    value = std::max(0, value);
+    if (std::find(indices.begin(), indices.end(), value) == indices.end()) indices.push_back(value);
+    at = comma + 1;
+  }
+  return indices;
+}
+
+}  // namespace
+#endif
+
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning) {
   if (options.use_gpu) {
 #ifdef CASHASH_WITH_CUDA
-    const int gpu_index = FirstGpuIndex(options.gpu_index);
+    std::vector<std::unique_ptr<FeatureMatcher>> parts;
     std::string reason;
-    if (cuda::CudaDeviceUsable(gpu_index, &reason)) {
+    for (const int gpu_index : GpuIndices(options.gpu_index)) {
+      std::string why;
+      if (!cuda::CudaDeviceUsable(gpu_index, &why)) {
+        reason += (reason.empty() ? "" : "; ") + std::string("device ") + std::to_string(gpu_index) + ": " + why;
+        continue;
+      }
       // A run that outgrows the card (device memory) finishes on the CPU.
-      return CreateFallbackFeatureMatcher(
+      parts.push_back(CreateFallbackFeatureMatcher(
           cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, gpu_index),
           [sift = options.sift, cashash = options.cashash, mean]() {
             return CreateCpuFeatureMatcher(sift, cashash, mean);
           },
-          IsDeviceMemoryError, warning);
+          IsDeviceMemoryError, warning));
+    }
+    if (!parts.empty()) {
+      if (!reason.empty() && warning) warning("not every listed GPU is usable (" + reason + "); matching on the others");
+      if (parts.size() == 1) return std::move(parts[0]);
+      // Several devices share every chunk of pairs.
+      return std::make_unique<SplitFeatureMatcher>(std::move(parts));
     }
     if (warning) warning("no usable CUDA device (" + reason + "); matching on the CPU");
 #else
