@@ -3,6 +3,8 @@
 // rounding in the acceptance test. Skipped when no CUDA device is usable.
 #include <gtest/gtest.h>
 
+#include "gpu_test_support.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -20,14 +22,6 @@
 
 namespace cashash {
 namespace {
-
-#define SKIP_WITHOUT_CUDA()                                                       \
-  do {                                                                            \
-    std::string reason;                                                           \
-    if (cuda::NumCudaDevices() == 0 || !cuda::CudaDeviceUsable(0, &reason)) {     \
-      GTEST_SKIP() << "no CUDA device: " << (reason.empty() ? "none found" : reason); \
-    }                                                                             \
-  } while (0)
 
 // Descriptor source: real SIFT rows from a raw N x 128 uint8 file
 // (CASHASH_SIFT_SAMPLE, or .devbin/sift_sample.u8 of the checkout) when
@@ -152,7 +146,7 @@ Agreement CompareWithCpu(const std::vector<FeatureDescriptors>& images, const st
 }
 
 TEST(GpuCascadeTest, AgreesWithCpuCascade) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(1);
   std::printf("descriptors: %s\n", source.real() ? "real SIFT sample" : "synthetic SIFT-like");
   std::vector<FeatureDescriptors> images{source.Image(4000)};
@@ -163,7 +157,7 @@ TEST(GpuCascadeTest, AgreesWithCpuCascade) {
 }
 
 TEST(GpuCascadeTest, AgreesWithoutCrossCheckAndOtherParameters) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(2);
   std::vector<FeatureDescriptors> images{source.Image(3000)};
   images.push_back(source.Related(images[0], 2500, 0.4));
@@ -182,7 +176,7 @@ TEST(GpuCascadeTest, AgreesWithoutCrossCheckAndOtherParameters) {
 }
 
 TEST(GpuCascadeTest, SkewedBucketsAreNotTruncated) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(3);
   FeatureDescriptors a = source.Image(6000), b = source.Related(a, 5000, 0.5);
   // 3000 identical rows in a and 2000 in b: one bucket of >= 2000 per table.
@@ -197,7 +191,7 @@ TEST(GpuCascadeTest, SkewedBucketsAreNotTruncated) {
 }
 
 TEST(GpuCascadeTest, EmptySingleAndLargeImages) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(4);
   SiftMatchingOptions sift;
   sift.max_num_matches = 50000;
@@ -233,7 +227,7 @@ class ScopedEnv {
 };
 
 TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(5);
   std::vector<FeatureDescriptors> images{source.Image(3000)};
   for (int i = 1; i < 12; ++i) images.push_back(source.Related(images[i - 1], 3000, 0.4));
@@ -273,7 +267,7 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
 // same definition: identical matches, pair for pair, on real descriptors,
 // with and without cross-check and with full candidate lists (skewed).
 TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(8);
   std::vector<FeatureDescriptors> images{source.Image(5000)};
   for (int i = 1; i < 5; ++i) images.push_back(source.Related(images[i - 1], 4000 + 700 * i, 0.5));
@@ -313,7 +307,7 @@ TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
 }
 
 TEST(GpuCascadeTest, DeviceOutOfMemoryIsAnError) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   cuda::DeviceBuffer buffer;
   try {
     buffer.Allocate(size_t{1} << 50, "a petabyte");
@@ -327,7 +321,7 @@ TEST(GpuCascadeTest, DeviceOutOfMemoryIsAnError) {
 }
 
 TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(6);
   std::vector<FeatureDescriptors> images{source.Image(2000)};
   images.push_back(source.Related(images[0], 2500, 0.5));
@@ -340,7 +334,7 @@ TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {
 }
 
 TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   CasHashOptions cas;
   cas.top_k = 33;
   EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);

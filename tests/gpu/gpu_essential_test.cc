@@ -7,6 +7,8 @@
 // against itself under another seed. Skipped without a CUDA device.
 #include <gtest/gtest.h>
 
+#include "gpu_test_support.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -35,14 +37,6 @@ namespace {
 using testing_support::MakeScene;
 using testing_support::SceneOptions;
 using testing_support::SyntheticScene;
-
-#define SKIP_WITHOUT_CUDA_DEVICE()                                                   \
-  do {                                                                               \
-    std::string reason;                                                              \
-    if (cuda::NumCudaDevices() == 0 || !cuda::CudaDeviceUsable(0, &reason)) {        \
-      GTEST_SKIP() << "no CUDA device: " << (reason.empty() ? "none found" : reason); \
-    }                                                                                \
-  } while (0)
 
 bool Close(int a, int reference, double ratio = 0.03, int slack = 3) {
   return std::abs(a - reference) <= std::max(static_cast<double>(slack), ratio * reference);

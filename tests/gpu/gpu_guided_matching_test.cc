@@ -8,6 +8,8 @@
 // matches, then CPU and GPU guided matching with that F.
 #include <gtest/gtest.h>
 
+#include "gpu_test_support.h"
+
 #include <cstdlib>
 #include <memory>
 #include <string>
@@ -29,14 +31,6 @@ namespace {
 using testing_support::GuidedScene;
 using testing_support::MakeGuidedScene;
 using testing_support::MakeUnrelatedImage;
-
-#define SKIP_WITHOUT_CUDA()                                                           \
-  do {                                                                                \
-    std::string reason;                                                               \
-    if (cuda::NumCudaDevices() == 0 || !cuda::CudaDeviceUsable(0, &reason)) {         \
-      GTEST_SKIP() << "no CUDA device: " << (reason.empty() ? "none found" : reason); \
-    }                                                                                 \
-  } while (0)
 
 // Matches of a and b that differ, counted both ways.
 size_t Differences(const FeatureMatches& a, const FeatureMatches& b) {
@@ -117,7 +111,7 @@ SyntheticPairs MakeSyntheticPairs(std::vector<GuidedPair>* pairs) {
 }
 
 TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnSyntheticScenes) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   std::vector<GuidedPair> pairs;
   const SyntheticPairs s = MakeSyntheticPairs(&pairs);
   std::vector<const ImageFeatures*> images;
@@ -129,7 +123,7 @@ TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnSyntheticScenes) {
 }
 
 TEST(GpuGuidedMatching, UnboundedBandEqualsUnguidedMatching) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   std::vector<GuidedPair> pairs;
   const SyntheticPairs s = MakeSyntheticPairs(&pairs);
   std::vector<const FeatureDescriptors*> descriptors;
@@ -147,7 +141,7 @@ TEST(GpuGuidedMatching, UnboundedBandEqualsUnguidedMatching) {
 }
 
 TEST(GpuGuidedMatching, GuidedMatcherFromGpuPartsDecidesAsTheCpuOne) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   const GuidedScene scene = MakeGuidedScene(1500, 21);
   std::vector<ImageFeatures> images = {scene.image1, scene.image2, MakeUnrelatedImage(1500, 22)};
   const MeanDescriptor mean = ComputeMeanDescriptor({&images[0].descriptors, &images[1].descriptors});
@@ -180,7 +174,7 @@ TEST(GpuGuidedMatching, GuidedMatcherFromGpuPartsDecidesAsTheCpuOne) {
 }
 
 TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnARealDatabase) {
-  SKIP_WITHOUT_CUDA();
+  SKIP_WITHOUT_CUDA_DEVICE();
   const char* path = std::getenv("CASHASH_GUIDED_DB");
   if (path == nullptr) GTEST_SKIP() << "CASHASH_GUIDED_DB is not set (a COLMAP feature database)";
   colmap::DatabaseFeatureSource source(path);

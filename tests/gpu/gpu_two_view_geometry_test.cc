@@ -6,6 +6,8 @@
 // borderline pairs, and the GPU's F must explain the CPU's inliers.
 #include <gtest/gtest.h>
 
+#include "gpu_test_support.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -28,14 +30,6 @@ namespace {
 using testing_support::MakeScene;
 using testing_support::SceneOptions;
 using testing_support::SyntheticScene;
-
-#define SKIP_WITHOUT_CUDA_DEVICE()                                                   \
-  do {                                                                               \
-    std::string reason;                                                              \
-    if (cuda::NumCudaDevices() == 0 || !cuda::CudaDeviceUsable(0, &reason)) {        \
-      GTEST_SKIP() << "no CUDA device: " << (reason.empty() ? "none found" : reason); \
-    }                                                                                \
-  } while (0)
 
 // Counts agree within max(slack, ratio x reference).
 bool Close(int a, int reference, double ratio = 0.03, int slack = 3) {
