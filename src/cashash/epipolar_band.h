@@ -15,11 +15,7 @@
 
 #include <cmath>
 
-#if defined(__CUDACC__)
-#define CASHASH_HOST_DEVICE __host__ __device__
-#else
-#define CASHASH_HOST_DEVICE
-#endif
+#include "cashash/host_device.h"
 
 namespace cashash {
 

@@ -18,11 +18,7 @@
 
 #include <cmath>
 
-#if defined(__CUDACC__)
-#define CASHASH_HOST_DEVICE __host__ __device__
-#else
-#define CASHASH_HOST_DEVICE
-#endif
+#include "cashash/host_device.h"
 
 namespace cashash {
 namespace five_point {
@@ -39,18 +35,8 @@ using std::sqrt;
 
 constexpr int kMaxSolutions = 10;
 
-// Coefficients of x2^T E x1 in the row-major entries of E.
-CASHASH_HOST_DEVICE inline void EpipolarCoefficients(double x1, double y1, double x2, double y2, double* row) {
-  row[0] = x2 * x1;
-  row[1] = x2 * y1;
-  row[2] = x2;
-  row[3] = y2 * x1;
-  row[4] = y2 * y1;
-  row[5] = y2;
-  row[6] = x1;
-  row[7] = y1;
-  row[8] = 1.0;
-}
+// Coefficients of x2^T E x1 in the row-major entries of E (host_device.h).
+using ::cashash::EpipolarCoefficients;
 
 // Orthonormal basis of the null space of the 5 x 9 system `rows`, as the
 // last four columns of Q in the Householder QR of its 9 x 5 transpose (what

@@ -10,6 +10,8 @@
 
 #include <Eigen/Core>
 
+#include "cashash/host_device.h"
+
 namespace cashash {
 
 struct PointPairs {
@@ -42,16 +44,7 @@ struct PointPairs {
 // Coefficients of x2^T M x1 in the row-major entries of M for pair k: one
 // row of the linear epipolar system shared by the F and E solvers.
 inline void EpipolarRow(const PointPairs& pairs, size_t k, double* row) {
-  const double x1 = pairs.x1[k], y1 = pairs.y1[k], x2 = pairs.x2[k], y2 = pairs.y2[k];
-  row[0] = x2 * x1;
-  row[1] = x2 * y1;
-  row[2] = x2;
-  row[3] = y2 * x1;
-  row[4] = y2 * y1;
-  row[5] = y2;
-  row[6] = x1;
-  row[7] = y1;
-  row[8] = 1.0;
+  EpipolarCoefficients(pairs.x1[k], pairs.y1[k], pairs.x2[k], pairs.y2[k], row);
 }
 
 // Moves each image's points to their centroid and scales both images by the
