@@ -53,15 +53,33 @@ MeanDescriptor ComputeDatabaseMean(DatabaseFeatureSource& source, const std::vec
 }
 
 #ifdef CASHASH_WITH_CUDA
-int FirstGpuIndex(const std::string& gpu_index) {
-  const std::string first = gpu_index.substr(0, gpu_index.find(','));
-  try {
-    return std::max(0, std::stoi(first));
-  } catch (const std::exception&) {
-    throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
-                                gpu_index + "'");
+// The devices of --FeatureMatching.gpu_index: "-1" (the first), "2", or a
+// comma-separated list "0,1" (one matcher per device, SplitFeatureMatcher).
+std::vector<int> GpuIndices(const std::string& gpu_index) {
+  std::vector<int> indices;
+  size_t at = 0;
+  while (at <= gpu_index.size()) {
+    const size_t comma = std::min(gpu_index.find(',', at), gpu_index.size());
+    const std::string item = gpu_index.substr(at, comma - at);
+    size_t used = 0;
+    int value = -1;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size()) {
+      throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+                                  gpu_index + "'");
+    }
+    value = std::max(0, value);
+    if (std::find(indices.begin(), indices.end(), value) == indices.end()) indices.push_back(value);
+    at = comma + 1;
   }
+  return indices;
 }
+
+int FirstGpuIndex(const std::string& gpu_index) { return GpuIndices(gpu_index).front(); }
 #endif
 
 // Callers that set no warning sink still see warnings, on stderr as the
@@ -477,37 +495,6 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
 
 }  // namespace
 
-#ifdef CASHASH_WITH_CUDA
-namespace {
-
-// The devices of --FeatureMatching.gpu_index: "-1" (the first), "2", or a
-// comma-separated list "0,1" (one matcher per device, SplitFeatureMatcher).
-std::vector<int> GpuIndices(const std::string& gpu_index) {
-  std::vector<int> indices;
-  size_t at = 0;
-  while (at <= gpu_index.size()) {
-    const size_t comma = std::min(gpu_index.find(',', at), gpu_index.size());
-    const std::string item = gpu_index.substr(at, comma - at);
-    size_t used = 0;
-    int value = -1;
-    try {
-      value = std::stoi(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (item.empty() || used != item.size()) {
-      throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
-                                  gpu_index + "'");
-    }
-    value = std::max(0, value);
-    if (std::find(indices.begin(), indices.end(), value) == indices.end()) indices.push_back(value);
-    at = comma + 1;
-  }
-  return indices;
-}
-
-}  // namespace
-#endif
 
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
