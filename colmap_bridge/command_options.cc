@@ -121,6 +121,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Smallest share of stage-1 matches that are F inliers for a pair to be matched in stage 2");
   table.Add({"GuidedMatching.max_epipolar_distance"}, &o.guided.max_epipolar_distance,
             "Half-width in pixels of the band around the epipolar line where stage 2 looks for candidates");
+  table.Add({"GuidedMatching.unguided_fallback"}, &o.guided.unguided_fallback,
+            "Match pairs with enough stage-1 matches but too few F inliers without the band (not in the paper; "
+            "for unordered collections)");
 
   po::variables_map vm;
   try {

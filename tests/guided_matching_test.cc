@@ -322,6 +322,44 @@ TEST(GuidedFeatureMatcher, StrictThresholdsSkipThePair) {
   EXPECT_TRUE(result[0].empty());
 }
 
+TEST(GuidedFeatureMatcher, UnguidedFallbackMatchesPairsThatFailTheInlierTest) {
+  // With a ratio of 1 the overlapping pair fails the inlier test: its
+  // stage-1 matches hold a few chance ones that no F explains.
+  GuidedMatchingOptions options;
+  options.min_inlier_ratio = 1.0;
+  std::unique_ptr<GuidedRig> without = MakeRig(options);
+  const std::vector<ImagePair> pairs = {{1, 2}, {1, 3}};
+  const std::vector<FeatureMatches> none = without->matcher->MatchPairs(pairs);
+  ASSERT_EQ(without->matcher->last_outcomes()[0], GuidedStage1Outcome::kFewInliers);
+  EXPECT_TRUE(none[0].empty());
+  EXPECT_EQ(without->matcher->stats().pairs_fallback, 0u);
+
+  options.unguided_fallback = true;
+  std::unique_ptr<GuidedRig> with = MakeRig(options);
+  const std::vector<FeatureMatches> result = with->matcher->MatchPairs(pairs);
+  EXPECT_EQ(with->matcher->last_outcomes()[0], GuidedStage1Outcome::kFewInliers);
+  EXPECT_EQ(with->matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
+  EXPECT_TRUE(result[1].empty());  // too few stage-1 matches: still nothing
+  // The failed pair gets exactly what unguided matching of all features gives.
+  const GuidedScene scene = MakeGuidedScene(1500, 21);
+  const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
+  auto plain = CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean);
+  plain->AddImage(1, scene.image1.descriptors);
+  plain->AddImage(2, scene.image2.descriptors);
+  const std::vector<FeatureMatches> expected = plain->MatchPairs({{1, 2}});
+  ASSERT_GT(expected[0].size(), 500u);
+  ASSERT_EQ(result[0].size(), expected[0].size());
+  for (size_t i = 0; i < result[0].size(); ++i) {
+    EXPECT_EQ(result[0][i].point2D_idx1, expected[0][i].point2D_idx1);
+    EXPECT_EQ(result[0][i].point2D_idx2, expected[0][i].point2D_idx2);
+  }
+  const GuidedMatchingStats& stats = with->matcher->stats();
+  EXPECT_EQ(stats.pairs_guided, 0u);
+  EXPECT_EQ(stats.pairs_fallback, 1u);
+  EXPECT_EQ(stats.fallback_matches, result[0].size());
+  EXPECT_EQ(stats.stage2_matches, 0u);
+}
+
 TEST(GuidedFeatureMatcher, NeedsKeypointsAndACascade) {
   std::unique_ptr<GuidedRig> rig = MakeRig(GuidedMatchingOptions());
   // An image not read through the recording source has no keypoints.

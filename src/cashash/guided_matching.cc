@@ -237,9 +237,15 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   stats_.pairs_enough_matches += candidates.size();
   std::vector<GuidedPair> guided;
   std::vector<size_t> guided_index;
+  std::vector<ImagePair> fallback;
+  std::vector<size_t> fallback_index;
   for (size_t c = 0; c < candidates.size(); ++c) {
     const size_t k = candidates[c];
     last_outcomes_[k] = DecideGuidedStage1(stage1[k].size(), &fundamentals[c], options_);
+    if (last_outcomes_[k] == GuidedStage1Outcome::kFewInliers && options_.unguided_fallback) {
+      fallback.push_back(pairs[k]);
+      fallback_index.push_back(k);
+    }
     if (last_outcomes_[k] != GuidedStage1Outcome::kGuided) continue;
     GuidedPair g;
     g.pair = pairs[k];
@@ -263,6 +269,18 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
     }
   }
   stats_.seconds_stage2 += SecondsSince(t0);
+
+  // Pairs that failed the inlier test, without the band (unguided_fallback).
+  t0 = Clock::now();
+  if (!fallback.empty()) {
+    std::vector<FeatureMatches> unguided = full_->MatchPairs(fallback);
+    for (size_t f = 0; f < fallback.size(); ++f) {
+      stats_.fallback_matches += unguided[f].size();
+      results[fallback_index[f]] = std::move(unguided[f]);
+    }
+  }
+  stats_.pairs_fallback += fallback.size();
+  stats_.seconds_fallback += SecondsSince(t0);
   return results;
 }
 

@@ -12,7 +12,10 @@
 // max_epipolar_distance pixels around its epipolar line (cascade_matcher.h,
 // EpipolarGuidance). Every other pair gets no matches: the pipeline then
 // verifies and writes it exactly as a pair for which exhaustive matching
-// found none. Stage-2 matches are verified as usual.
+// found none. Stage-2 matches are verified as usual. With unguided_fallback,
+// a pair that has enough stage-1 matches but fails the inlier test is matched
+// without the band instead (an addition to the paper, for unordered
+// collections; see the option).
 //
 // GuidedFeatureMatcher does all of this behind the FeatureMatcher interface,
 // so the pipeline, the scheduling, resuming and the database writer are the
@@ -61,6 +64,17 @@ struct GuidedMatchingOptions {
   // verified at every d). Wider bands let more distractors into the ratio
   // test, narrower ones cut true matches where F is extrapolated.
   double max_epipolar_distance = 4.0;
+  // Not in the paper. A pair with at least min_num_matches stage-1 matches
+  // whose F explains fewer than min_inlier_ratio of them gets no matches in
+  // the paper's method; with this set it is matched like exhaustive matching
+  // does (all features, no band) and verified as usual. On an unordered
+  // internet collection (sacre_coeur, docs/guided_matching.md) the pairs that
+  // fail the test include the wide-baseline ones that join the view clusters:
+  // without them colmap mapper found no initial pair there, with them every
+  // image registered. Pairs with too few stage-1 matches still get none, so
+  // far pairs of a large collection stay cheap. Off by default: the paper's
+  // method.
+  bool unguided_fallback = false;
 
   // "" when valid, else a message naming the option.
   std::string Check() const;
@@ -130,11 +144,14 @@ struct GuidedMatchingStats {
   size_t pairs = 0;                 // pairs matched (stage 1)
   size_t pairs_enough_matches = 0;  // with >= min_num_matches stage-1 matches (F estimated)
   size_t pairs_guided = 0;          // passed the inlier test: matched in stage 2
+  size_t pairs_fallback = 0;        // failed it, matched without the band (unguided_fallback)
   size_t stage1_matches = 0;
   size_t stage2_matches = 0;
+  size_t fallback_matches = 0;
   double seconds_stage1 = 0;  // top-scale matching (and the images' subsets)
   double seconds_fundamental = 0;
   double seconds_stage2 = 0;  // guided matching
+  double seconds_fallback = 0;  // matching without the band (unguided_fallback)
 };
 
 class GuidedFeatureMatcher : public FeatureMatcher {

@@ -21,6 +21,7 @@ if "$CASHASH" guided_matcher --database_path "$DB" --GuidedMatching.min_inlier_r
 fi
 grep -q "GuidedMatching.min_inlier_ratio" "$WORK/bad.log" || { cat "$WORK/bad.log"; exit 1; }
 
+cp "$DB" "$WORK/fallback.db"  # features only, for the fallback run below
 "$CASHASH" guided_matcher --database_path "$DB" --FeatureMatching.use_gpu 0 | tee "$WORK/match.log"
 grep -q "^Guided matching: 55 pairs" "$WORK/match.log" || { echo "FAIL: no guided-matching report"; exit 1; }
 
@@ -38,6 +39,19 @@ PY
 # A rerun finds every pair done.
 "$CASHASH" guided_matcher --database_path "$DB" --FeatureMatching.use_gpu 0 | tee "$WORK/rerun.log"
 grep -q "Nothing to match" "$WORK/rerun.log" || { echo "FAIL: the rerun matched again"; exit 1; }
+
+# --GuidedMatching.unguided_fallback 1: the pairs that fail the inlier test
+# are matched without the band, so at least as many pairs are verified.
+"$CASHASH" guided_matcher --database_path "$WORK/fallback.db" --FeatureMatching.use_gpu 0 \
+  --GuidedMatching.unguided_fallback 1 | tee "$WORK/fallback.log"
+grep -q "^Guided matching: 55 pairs, .* without it (" "$WORK/fallback.log" || { echo "FAIL: no fallback report"; exit 1; }
+python3 - "$DB" "$WORK/fallback.db" <<'PY'
+import sqlite3, sys
+paper, fallback = (sqlite3.connect(p).execute("SELECT SUM(config >= 2) FROM two_view_geometries").fetchone()[0]
+                   for p in sys.argv[1:3])
+print(f"verified pairs: {paper} (paper's Ga), {fallback} (with the fallback)")
+assert fallback >= paper, "the fallback lost verified pairs"
+PY
 
 mkdir -p "$WORK/sparse"
 start=$SECONDS
