@@ -9,6 +9,8 @@
 #   ga   cashash guided_matcher --FeatureMatching.use_gpu 1
 #   cpu  CASHASH_VERIFIER=cpu cashash exhaustive_matcher --FeatureMatching.use_gpu 1
 #        (GPU cascade, verification on all cores)
+#   fb   cashash guided_matcher --GuidedMatching.unguided_fallback 1 (not run
+#        unless CONFIGS names it)
 #
 # Usage: guided_benchmark.sh CASHASH FEATURE_DB OUT_DIR [IMAGE_DIR]
 # Environment (defaults in brackets):
@@ -40,7 +42,8 @@ if [[ "$MATCH" == 1 ]]; then
       ex)  command=(env "$CASHASH" exhaustive_matcher) ;;
       ga)  command=(env "$CASHASH" guided_matcher) ;;
       cpu) command=(env CASHASH_VERIFIER=cpu "$CASHASH" exhaustive_matcher) ;;
-      *)   echo "ERROR: unknown configuration '$config' in CONFIGS (ex, ga, cpu)" >&2; exit 1 ;;
+      fb)  command=(env "$CASHASH" guided_matcher --GuidedMatching.unguided_fallback 1) ;;
+      *)   echo "ERROR: unknown configuration '$config' in CONFIGS (ex, ga, cpu, fb)" >&2; exit 1 ;;
     esac
     for ((n = 1; n <= REPEATS; n++)); do
       cp "$FEATURE_DB" "$OUT_DIR/$config.db" || exit 1
