@@ -6,6 +6,8 @@
 
 #include <cstdint>
 
+#include "cashash/host_device.h"
+
 namespace cashash {
 namespace cuda {
 namespace ransac {
@@ -305,19 +307,9 @@ __device__ inline int CubicRoots(double c3, double c2, double c1, double c0, dou
 
 // --- Fundamental matrix ----------------------------------------------------
 
-// Coefficients of x2^T F x1 in the row-major entries of F.
-__device__ inline void EpipolarRow(float4 p, double* row) {
-  const double x1 = p.x, y1 = p.y, x2 = p.z, y2 = p.w;
-  row[0] = x2 * x1;
-  row[1] = x2 * y1;
-  row[2] = x2;
-  row[3] = y2 * x1;
-  row[4] = y2 * y1;
-  row[5] = y2;
-  row[6] = x1;
-  row[7] = y1;
-  row[8] = 1.0;
-}
+// Coefficients of x2^T F x1 in the row-major entries of F, for a packed
+// correspondence (x1, y1, x2, y2).
+__device__ inline void EpipolarRow(float4 p, double* row) { EpipolarCoefficients(p.x, p.y, p.z, p.w, row); }
 
 // Two vectors spanning the null space of the 7 x 9 system, by Gauss-Jordan
 // elimination with full pivoting; false when the sample is degenerate
