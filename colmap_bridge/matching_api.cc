@@ -502,7 +502,6 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
 
 }  // namespace
 
-
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning) {
