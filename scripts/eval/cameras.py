@@ -13,13 +13,18 @@ from summarize_model import quaternion_to_rotation as quaternion_to_matrix  # sc
 
 
 def read_gt_cameras(scene_dir):
-    """{image name: (R camera-to-world, centre)} from gt_dense_cameras/*.camera.
+    """{image name: (R camera-to-world, centre)} from gt_dense_cameras/*.camera."""
+    return read_gt_camera_files(os.path.join(scene_dir, "gt_dense_cameras"))
+
+
+def read_gt_camera_files(directory):
+    """{image name: (R camera-to-world, centre)} from directory/*.camera (Strecha's format).
 
     File layout: K (3 lines), distortion (1 line), R camera-to-world (3 lines),
     centre C (1 line), image size; P = K [R^T | -R^T C].
     """
     cameras = {}
-    for path in sorted(glob.glob(os.path.join(scene_dir, "gt_dense_cameras", "*.camera"))):
+    for path in sorted(glob.glob(os.path.join(directory, "*.camera"))):
         rows = [[float(v) for v in line.split()] for line in open(path) if line.strip()]
         rotation = np.array(rows[4:7])
         centre = np.array(rows[7])
