@@ -2,6 +2,13 @@
 # Installs what building, testing and the demo need, and only what is missing:
 # running it again on a ready machine changes nothing and takes a second.
 # Debian 12 packages through apt-get, Python packages through pip.
+# Environment:
+#   CASHASH_PYCOLMAP  which pycolmap 4.2.1 wheel (scripts/compare_with_colmap.py
+#                     runs COLMAP's matcher and mapper through it):
+#                     cpu (default) the PyPI package pycolmap, CPU only;
+#                     cuda12 the PyPI package pycolmap-cuda12, whose matcher
+#                     runs on an NVIDIA GPU (replaces pycolmap);
+#                     auto  cuda12 where nvidia-smi lists a GPU, else cpu.
 set -euo pipefail
 
 log() { echo "[install_deps] $*"; }
@@ -41,9 +48,32 @@ python3 -c "import matplotlib" 2>/dev/null || python_missing+=(matplotlib)  # ac
 python3 -c "import pybind11" 2>/dev/null || python_missing+=(pybind11)
 python3 -c "import scikit_build_core" 2>/dev/null || python_missing+=(scikit-build-core)
 python3 -c "import pytest" 2>/dev/null || python_missing+=(pytest)
-if ! python3 -c "import pycolmap, sys; sys.exit(pycolmap.__version__ != '4.2.1')" 2>/dev/null; then
-  python_missing+=("pycolmap==4.2.1")
+pycolmap_kind="${CASHASH_PYCOLMAP:-cpu}"
+if [[ "$pycolmap_kind" == auto ]]; then
+  pycolmap_kind=cpu
+  if command -v nvidia-smi >/dev/null && nvidia-smi -L 2>/dev/null | grep -q GPU; then
+    pycolmap_kind=cuda12
+  fi
 fi
+python_remove=()
+case "$pycolmap_kind" in
+  cpu)
+    if ! python3 -c "import pycolmap, sys; sys.exit(pycolmap.__version__ != '4.2.1')" 2>/dev/null; then
+      python_missing+=("pycolmap==4.2.1")
+    fi ;;
+  cuda12)
+    # Both wheels install the module pycolmap: the CPU one goes first.
+    if ! python3 -c "import pycolmap, sys; sys.exit(pycolmap.__version__ != '4.2.1' or not pycolmap.has_cuda)" \
+        2>/dev/null; then
+      python_missing+=("pycolmap-cuda12==4.2.1")
+      if python3 -m pip show pycolmap >/dev/null 2>&1; then
+        python_remove+=(pycolmap)
+      fi
+    fi ;;
+  *)
+    echo "CASHASH_PYCOLMAP must be cpu, cuda12 or auto, not '$pycolmap_kind'" >&2
+    exit 1 ;;
+esac
 if [[ ${#python_missing[@]} -gt 0 ]] && ! python3 -m pip --version >/dev/null 2>&1; then
   missing+=(python3-pip)
 fi
@@ -55,6 +85,11 @@ if [[ ${#missing[@]} -gt 0 ]]; then
   $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 else
   log "Debian packages: all present"
+fi
+
+if [[ ${#python_remove[@]} -gt 0 ]]; then
+  log "pip uninstall ${python_remove[*]} (replaced by the CUDA wheel)"
+  PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip uninstall --quiet --yes "${python_remove[@]}"
 fi
 
 if [[ ${#python_missing[@]} -gt 0 ]]; then
