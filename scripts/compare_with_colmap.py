@@ -598,7 +598,8 @@ def markdown(report):
             for key, label in (("position_median", "camera centre error, median"),
                                ("position_max", "camera centre error, max"),
                                ("rotation_median_deg", "rotation error, median, deg"),
-                               ("rotation_max_deg", "rotation error, max, deg")):
+                               ("rotation_max_deg", "rotation error, max, deg"),
+                               ("relative_rotation_median_deg", "pairwise relative rotation error, median, deg")):
                 lines.append("| %s | %s | %s |" % (label, fmt(rec["colmap"].get("gt", {}).get(key)),
                                                    fmt(rec["cashash"].get("gt", {}).get(key))))
     lines.append("")
