@@ -738,7 +738,8 @@ def parse_args(argv):
     parser.add_argument("--colmap", default="pycolmap", help="'pycolmap' (default) or a colmap executable")
     parser.add_argument("--mapper", type=int, choices=(0, 1), default=0,
                         help="also reconstruct both with pycolmap's incremental mapper (needs --image_path)")
-    parser.add_argument("--image_path", help="the images (for --mapper 1)")
+    parser.add_argument("--image_path", help="the images (for --mapper 1; colours are not extracted, so the "
+                        "mapper does not read them and an empty folder will do where they are absent)")
     parser.add_argument("--gt_cameras", help="folder of Strecha *.camera files (with --mapper 1)")
     parser.add_argument("--cashash", default=os.path.join(REPO, "build", "colmap_bridge", "cashash"))
     parser.add_argument("--num_threads", type=int, default=-1, help="CPU threads of both matchers and the mapper")
