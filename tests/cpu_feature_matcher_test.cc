@@ -197,11 +197,16 @@ TEST(MatchingOptions, Check) {
   o.tau = 129;
   EXPECT_NE(o.Check().find("tau"), std::string::npos);
   o = CasHashOptions();
-  o.bits_per_table = 0;
+  o.bits_per_table = -1;
   EXPECT_NE(o.Check().find("bits_per_table"), std::string::npos);
   o = CasHashOptions();
-  o.num_tables = 0;
+  o.num_tables = -1;
   EXPECT_NE(o.Check().find("num_tables"), std::string::npos);
+  // 0 = chosen from the feature counts (the defaults).
+  o = CasHashOptions();
+  EXPECT_EQ(o.num_tables, 0);
+  EXPECT_EQ(o.bits_per_table, 0);
+  EXPECT_EQ(o.Check(), "");
 }
 
 TEST(MatchingOptions, MatcherTypeNames) {

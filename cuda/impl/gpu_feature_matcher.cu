@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "cashash/table_shape.h"
 #include "impl/brute_force_kernels.cuh"
 #include "impl/cascade_feature_matcher.cuh"
 #include "impl/cascade_match_kernels.cuh"
@@ -167,7 +168,9 @@ std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOption
   if (cashash_options.matcher == MatcherType::kBruteForce) {
     return std::make_unique<GpuBruteForceMatcher>(sift_options, gpu_index);
   }
-  return CreateGpuCascadeMatcher(sift_options, cashash_options, mean, gpu_index);
+  // Tables still at 0 (chosen per run, table_shape.h): the shape of 8,192
+  // features, as the CPU backend.
+  return CreateGpuCascadeMatcher(sift_options, ResolveTableShape(cashash_options, 0), mean, gpu_index);
 }
 
 }  // namespace cuda

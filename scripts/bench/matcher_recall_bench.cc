@@ -2,8 +2,12 @@
 // force on the SIFT descriptors of a COLMAP database, for several
 // (tables, bits, tau, top_k) settings. Prints a markdown table.
 //
-//   matcher_recall_bench --database DB [--max_pairs N] [--threads T]
-//       [--seed S] [--settings "6,8,48,10;8,10,48,10"]
+//   matcher_recall_bench --database DB [--max_pairs N] [--max_images N]
+//       [--threads T] [--seed S] [--settings "6,8,48,10;8,10,48,10;auto"]
+//
+// "auto" (or "auto,tau,top_k") is the shape cashash chooses for the
+// database's median features per image (table_shape.h), tau 43 / top_k 16
+// unless given. --max_images reads only the first N images.
 //
 // Recall = fraction of the brute-force matches (mutual, ratio test, COLMAP
 // defaults) that the cascade also returns; precision = fraction of the
@@ -26,6 +30,7 @@
 #include "cashash/cascade_hashing.h"
 #include "cashash/cascade_matcher.h"
 #include "cashash/feature_matcher.h"
+#include "cashash/table_shape.h"
 #include "cashash/thread_pool.h"
 
 namespace {
@@ -59,7 +64,7 @@ bool ReadColmapMatches(sqlite3* db, int64_t id1, int64_t id2, FeatureMatches* ma
   return found;
 }
 
-std::vector<FeatureDescriptors> ReadAllDescriptors(const std::string& path,
+std::vector<FeatureDescriptors> ReadAllDescriptors(const std::string& path, size_t max_images,
                                                    std::vector<int64_t>* image_ids) {
   sqlite3* db = nullptr;
   if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
@@ -72,7 +77,7 @@ std::vector<FeatureDescriptors> ReadAllDescriptors(const std::string& path,
     throw std::runtime_error("no descriptors table in " + path);
   }
   std::vector<FeatureDescriptors> images;
-  while (sqlite3_step(stmt) == SQLITE_ROW) {
+  while (images.size() < max_images && sqlite3_step(stmt) == SQLITE_ROW) {
     const int64_t rows = sqlite3_column_int64(stmt, 1);
     const int64_t cols = sqlite3_column_int64(stmt, 2);
     const int bytes = sqlite3_column_bytes(stmt, 3);
@@ -93,15 +98,28 @@ std::vector<FeatureDescriptors> ReadAllDescriptors(const std::string& path,
 
 struct Setting {
   int tables, bits, tau, top_k;
+  bool automatic;
 };
 
-std::vector<Setting> ParseSettings(const std::string& text) {
+// "auto" settings get the shape ChooseTableShape gives `features`.
+std::vector<Setting> ParseSettings(const std::string& text, size_t features) {
   std::vector<Setting> settings;
   std::stringstream all(text);
   std::string item;
   while (std::getline(all, item, ';')) {
     Setting s{};
-    if (std::sscanf(item.c_str(), "%d,%d,%d,%d", &s.tables, &s.bits, &s.tau, &s.top_k) != 4) {
+    if (item.rfind("auto", 0) == 0) {
+      const CasHashOptions defaults;
+      s.tau = defaults.tau;
+      s.top_k = defaults.top_k;
+      if (item != "auto" && std::sscanf(item.c_str(), "auto,%d,%d", &s.tau, &s.top_k) != 2) {
+        throw std::invalid_argument("bad setting '" + item + "' (want auto or auto,tau,top_k)");
+      }
+      const TableShape shape = ChooseTableShape(features);
+      s.tables = shape.num_tables;
+      s.bits = shape.bits_per_table;
+      s.automatic = true;
+    } else if (std::sscanf(item.c_str(), "%d,%d,%d,%d", &s.tables, &s.bits, &s.tau, &s.top_k) != 4) {
       throw std::invalid_argument("bad setting '" + item + "' (want tables,bits,tau,top_k)");
     }
     settings.push_back(s);
@@ -129,6 +147,7 @@ size_t CountCommon(const FeatureMatches& a, const FeatureMatches& b) {
 int main(int argc, char** argv) {
   std::string database = "sceaux_castle.db";  // --database: any COLMAP feature database
   size_t max_pairs = static_cast<size_t>(-1);
+  size_t max_images = static_cast<size_t>(-1);
   int threads = 1;
   uint64_t seed = 0;
   std::string settings_text = "6,8,48,10;6,10,48,10;8,10,48,10;8,10,48,5;10,10,48,10;8,12,48,10";
@@ -137,6 +156,7 @@ int main(int argc, char** argv) {
     const std::string value = argv[i + 1];
     if (flag == "--database") database = value;
     else if (flag == "--max_pairs") max_pairs = std::stoul(value);
+    else if (flag == "--max_images") max_images = std::stoul(value);
     else if (flag == "--threads") threads = std::stoi(value);
     else if (flag == "--seed") seed = std::stoull(value);
     else if (flag == "--settings") settings_text = value;
@@ -149,7 +169,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) command_line += std::string(" ") + argv[i];
 
   std::vector<int64_t> image_ids;
-  const std::vector<FeatureDescriptors> images = ReadAllDescriptors(database, &image_ids);
+  const std::vector<FeatureDescriptors> images = ReadAllDescriptors(database, max_images, &image_ids);
   std::vector<const FeatureDescriptors*> pointers;
   size_t total_features = 0;
   for (const auto& image : images) {
@@ -205,10 +225,18 @@ int main(int argc, char** argv) {
   }
   sqlite3_close(db);
 
+  std::vector<size_t> rows;
+  for (const auto& image : images) rows.push_back(image.rows());
+  const size_t median_features = TypicalFeatureCount(rows, sift.max_num_matches);
+  {
+    const TableShape shape = ChooseTableShape(median_features);
+    std::printf("median %zu features per image: auto shape %d x %d\n\n", median_features, shape.num_tables,
+                shape.bits_per_table);
+  }
   std::printf("| tables x bits | tau | top_k | recall | min pair recall | precision | "
               "bucket entries | within tau | ranked | hash CPU ms/image | pairs per CPU s | speed-up |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-  for (const Setting& s : ParseSettings(settings_text)) {
+  for (const Setting& s : ParseSettings(settings_text, median_features)) {
     CasHashOptions options;
     options.num_tables = s.tables;
     options.bits_per_table = s.bits;
@@ -245,8 +273,8 @@ int main(int argc, char** argv) {
       if (exact[p].size() >= 100) min_recall = std::min(min_recall, double(c) / exact[p].size());
     }
     const double queries = std::max<double>(1.0, total.num_queries);
-    std::printf("| %d x %d | %d | %d | %.4f | %.4f | %.4f | %.1f | %.1f | %.2f | %.1f | %.1f | %.1f |\n",
-                s.tables, s.bits, s.tau, s.top_k, exact_total ? double(common) / exact_total : 1.0,
+    std::printf("| %s%d x %d | %d | %d | %.4f | %.4f | %.4f | %.1f | %.1f | %.2f | %.1f | %.1f | %.1f |\n",
+                s.automatic ? "auto: " : "", s.tables, s.bits, s.tau, s.top_k, exact_total ? double(common) / exact_total : 1.0,
                 min_recall, found ? double(common) / found : 1.0, total.bucket_entries / queries,
                 total.within_tau / queries, total.ranked / queries,
                 1000.0 * hash_seconds / std::max<size_t>(1, images.size()),

@@ -8,6 +8,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "cashash/table_shape.h"
+
 namespace cashash {
 namespace {
 
@@ -52,9 +54,11 @@ int RoundMeanEntry(float v) {
 CascadeProjections GenerateCascadeProjections(const CasHashOptions& options) {
   const std::string error = options.Check();
   if (!error.empty()) throw std::invalid_argument(error);
+  // Tables still at 0 (chosen per run, table_shape.h): the 8,192-feature shape.
+  const TableShape shape = ChooseTableShape(0, options.num_tables, options.bits_per_table);
   CascadeProjections projections;
-  projections.num_tables = options.num_tables;
-  projections.bits_per_table = options.bits_per_table;
+  projections.num_tables = shape.num_tables;
+  projections.bits_per_table = shape.bits_per_table;
   projections.matrix.resize(static_cast<size_t>(projections.num_rows()) * kDescriptorDim);
   uint64_t state = options.random_seed;
   for (float& entry : projections.matrix) entry = static_cast<float>(DrawProjectionEntry(&state));

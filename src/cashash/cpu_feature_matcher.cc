@@ -11,6 +11,7 @@
 #include "cashash/cascade_hashing.h"
 #include "cashash/cascade_matcher.h"
 #include "cashash/feature_matcher.h"
+#include "cashash/table_shape.h"
 #include "cashash/thread_pool.h"
 
 namespace cashash {
@@ -27,7 +28,8 @@ class CpuFeatureMatcher : public FeatureMatcher {
  public:
   CpuFeatureMatcher(const SiftMatchingOptions& sift_options, const CasHashOptions& options,
                     const MeanDescriptor& mean)
-      : sift_options_(sift_options), options_(options), mean_(mean) {
+      // Tables still at 0 (chosen per run, table_shape.h): the shape of 8,192 features.
+      : sift_options_(sift_options), options_(ResolveTableShape(options, 0)), mean_(mean) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
     if (!error.empty()) throw std::invalid_argument(error);

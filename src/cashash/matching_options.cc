@@ -24,11 +24,13 @@ std::string CasHashOptions::Check() const {
   constexpr int kMaxBitsPerTable = 20;
   constexpr int kMaxTables = 64;
   std::ostringstream error;
-  if (num_tables < 1 || num_tables > kMaxTables) {
-    error << "CasHash.num_tables must be in [1, " << kMaxTables << "], got " << num_tables;
-  } else if (bits_per_table < 1 || bits_per_table > kMaxBitsPerTable) {
-    error << "CasHash.bits_per_table must be in [1, " << kMaxBitsPerTable << "], got "
-          << bits_per_table;
+  // 0 = chosen from the feature counts (table_shape.h).
+  if (num_tables < 0 || num_tables > kMaxTables) {
+    error << "CasHash.num_tables must be 0 (from the feature counts) or in [1, " << kMaxTables << "], got "
+          << num_tables;
+  } else if (bits_per_table < 0 || bits_per_table > kMaxBitsPerTable) {
+    error << "CasHash.bits_per_table must be 0 (from the feature counts) or in [1, " << kMaxBitsPerTable
+          << "], got " << bits_per_table;
   } else if (tau < 0 || tau > kRemapBits) {
     error << "CasHash.tau must be in [0, " << kRemapBits << "], got " << tau;
   } else if (top_k < 1) {

@@ -41,8 +41,14 @@ struct CasHashOptions {
   // setting that keeps 95 % of the exact verified inliers; faster settings
   // are one option away (--CasHash.num_tables 7 --CasHash.bits_per_table 8).
   // The GPU backend needs num_tables * bits_per_table <= 64.
-  int num_tables = 8;
-  int bits_per_table = 7;
+  //
+  // 0 (the default) = chosen from the features per image of the run
+  // (table_shape.h): 8 x 7 up to 16,383 features per image, 8 x 8 from
+  // 16,384 (one bit more per doubling, capped by the GPU's 64-bit
+  // signature). A value > 0 is kept.
+  // A matcher created from options still at 0 uses the 8,192-feature shape.
+  int num_tables = 0;
+  int bits_per_table = 0;
   // Length of the second-level remap code used for Hamming ranking. Fixed at
   // 128 bits (two 64-bit words) in every backend.
   static constexpr int kRemapBits = 128;

@@ -7,6 +7,8 @@
 
 #include <Eigen/Core>
 
+#include "cashash/table_shape.h"
+
 namespace cashash {
 namespace {
 
@@ -71,8 +73,11 @@ PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDesc
 
   std::unique_ptr<FeatureMatcher> own_matcher;
   if (matcher == nullptr) {
-    own_matcher = CreateCpuFeatureMatcher(options.sift, options.cashash,
-                                          ComputeMeanDescriptor({&descriptors1, &descriptors2}));
+    // Tables at 0: chosen for the larger of the two images.
+    const CasHashOptions cashash = ResolveTableShape(
+        options.cashash,
+        TypicalFeatureCount({descriptors1.rows(), descriptors2.rows()}, options.sift.max_num_matches));
+    own_matcher = CreateCpuFeatureMatcher(options.sift, cashash, ComputeMeanDescriptor({&descriptors1, &descriptors2}));
     matcher = own_matcher.get();
   }
   matcher->AddImage(0, descriptors1);
