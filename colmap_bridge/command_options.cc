@@ -95,6 +95,10 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"TwoViewGeometry.watermark_border_size"}, &o.two_view.watermark_border_size,
             "Border band for the watermark test, relative to the image diagonal");
   table.Add({"TwoViewGeometry.detect_watermark"}, &o.two_view.detect_watermark, "Run the watermark test");
+  table.Add({"TwoViewGeometry.early_exit"}, &o.two_view.early_exit,
+            "Stop RANSAC early on pairs whose matches look like chance (0 = COLMAP's full trial budget)");
+  table.Add({"TwoViewGeometry.early_exit_max_risk"}, &o.two_view.early_exit_max_risk,
+            "Largest chance, under the fitted chance model, that the full budget would have verified a stopped pair");
 
   table.Add({"ExhaustiveMatching.block_size"}, &o.block_size,
             "Images per block (default: from the memory caps, at most 50)");

@@ -377,6 +377,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     gpu_memory.Sample();
     gpu_memory.Fill(&summary);
     report_cache();
+    if (verifier != nullptr && !verifier->StatsSummary().empty()) Info(callbacks, verifier->StatsSummary());
     return summary;
   }
 

@@ -27,6 +27,8 @@ struct GpuRansacStats {
   long long local_refits_F = 0, local_refits_H = 0;
   size_t pairs_E = 0;  // pairs whose E was estimated on the device
   long long trials_E = 0, local_refits_E = 0;
+  // Model estimations stopped by the chance test (ransac_early_exit.h).
+  long long early_exits_F = 0, early_exits_H = 0, early_exits_E = 0;
 };
 
 // F and H estimation for batches of pairs on one device. Not thread-safe:

@@ -28,6 +28,7 @@
 #include "impl/device_image.cuh"
 #include "impl/device_memory.cuh"
 #include "utils/cuda_check.cuh"
+#include "utils/stream_priority.cuh"
 
 namespace cashash {
 namespace cuda {
@@ -108,7 +109,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
     const CascadeProjections projections = GenerateCascadeProjections(options_);
     UploadProjections(projections, mean);
     for (BatchSlot& slot : slots_) {
-      CUDA_CHECK(cudaStreamCreateWithFlags(&slot.stream, cudaStreamNonBlocking));
+      slot.stream = CreateStageStream(StreamRole::kMatching);
       CUDA_CHECK(cudaEventCreateWithFlags(&slot.done, cudaEventDisableTiming));
     }
     grid_size_ = CascadeMatchGridSize(device_);

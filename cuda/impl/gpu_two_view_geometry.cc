@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -17,6 +18,7 @@
 #include "impl/device_memory.cuh"
 #include "impl/ransac_kernels.cuh"
 #include "utils/cuda_check.cuh"
+#include "utils/stream_priority.cuh"
 
 namespace cashash {
 namespace cuda {
@@ -58,8 +60,8 @@ GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gp
   impl_->options = options;
   impl_->device = gpu_index;
   CUDA_CHECK(cudaSetDevice(gpu_index));
-  CUDA_CHECK(cudaStreamCreateWithFlags(&impl_->stream, cudaStreamNonBlocking));
-  CUDA_CHECK(cudaStreamCreateWithFlags(&impl_->stream_E, cudaStreamNonBlocking));
+  impl_->stream = CreateStageStream(StreamRole::kVerification);
+  impl_->stream_E = CreateStageStream(StreamRole::kVerification);
   CUDA_CHECK(cudaEventCreate(&impl_->start));
   CUDA_CHECK(cudaEventCreate(&impl_->stop));
   CUDA_CHECK(cudaEventCreateWithFlags(&impl_->uploaded, cudaEventDisableTiming));
@@ -188,6 +190,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   F_launch.confidence = d.options.confidence;
   F_launch.trials_multiplier = ransac.num_trials_multiplier;
   F_launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
+  F_launch.early_exit = TwoViewEarlyExitOptions(d.options);
   RansacLaunch H_launch = F_launch;
   RansacLaunch E_launch = F_launch;
   F_launch.pairs = d.inputs.as<RansacPairInput>();
@@ -240,6 +243,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
       e.success = out.success != 0;
       e.num_inliers = e.success ? out.num_inliers : 0;
       e.num_trials = out.num_trials;
+      e.early_exit = out.early_exit != 0;
       if (e.success) {
         e.model = FromRowMajor(out.model);  // normalised camera coordinates, as the CPU's
         const uint8_t* mask = masks + total + inputs[slot].offset;
@@ -254,6 +258,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
       e.success = out.success != 0;
       e.num_inliers = e.success ? out.num_inliers : 0;
       e.num_trials = out.num_trials;
+      e.early_exit = out.early_exit != 0;
       if (e.success) {
         const Eigen::Matrix3d m = FromRowMajor(out.model);
         e.model = model == 0 ? FundamentalToPixels(m, pairs[k]->norm) : HomographyToPixels(m, pairs[k]->norm);
@@ -265,10 +270,12 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   for (size_t j = 0; j < 2 * num_pairs; ++j) {
     (j < num_pairs ? d.stats.trials_F : d.stats.trials_H) += outputs[j].num_trials;
     (j < num_pairs ? d.stats.local_refits_F : d.stats.local_refits_H) += outputs[j].num_local_refits;
+    (j < num_pairs ? d.stats.early_exits_F : d.stats.early_exits_H) += outputs[j].early_exit;
   }
   for (size_t j = 0; j < num_E; ++j) {
     d.stats.trials_E += outputs[2 * num_pairs + j].num_trials;
     d.stats.local_refits_E += outputs[2 * num_pairs + j].num_local_refits;
+    d.stats.early_exits_E += outputs[2 * num_pairs + j].early_exit;
   }
   d.stats.pairs += num_pairs;
   d.stats.pairs_E += num_E;
@@ -293,6 +300,20 @@ class GpuBatchVerifier : public BatchVerifier {
         ransac_(options, gpu_index) {}
 
   std::string Name() const override { return "gpu"; }
+
+  std::string StatsSummary() const override {
+    const GpuRansacStats& st = ransac_.stats();
+    if (st.pairs == 0) return {};
+    auto per_pair = [](long long value, size_t pairs) { return pairs ? static_cast<double>(value) / pairs : 0.0; };
+    char line[512];
+    std::snprintf(line, sizeof(line),
+                  "GPU verification: %zu pairs (%zu with E), device busy %.3f s of %.3f s; trials per pair F %.0f, "
+                  "H %.0f, E %.0f; stopped early as chance F %lld, H %lld, E %lld",
+                  st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, per_pair(st.trials_F, st.pairs),
+                  per_pair(st.trials_H, st.pairs), per_pair(st.trials_E, st.pairs_E), st.early_exits_F,
+                  st.early_exits_H, st.early_exits_E);
+    return line;
+  }
 
   std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
     const size_t n = pairs.size();

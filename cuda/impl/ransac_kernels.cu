@@ -128,6 +128,12 @@ struct BlockScratch {
   int best_count;
   int num_local;
   int num_local_refits;
+  // Early exit (ransac_early_exit.h): supports of the window's hypotheses,
+  // hypotheses so far, and the decision.
+  double window_support_sum;
+  int window_hypotheses;
+  int hypotheses;
+  int exit_early;
 };
 
 // Inlier count and residual sum of one model over the pair, by the block.
@@ -209,6 +215,10 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     s.best_key = 0;
     s.best_count = 0;
     s.num_local_refits = 0;
+    s.window_support_sum = 0;
+    s.window_hypotheses = 0;
+    s.hypotheses = 0;
+    s.exit_early = 0;
   }
   __syncthreads();
   RansacPairOutput* output = launch.outputs + pair;
@@ -218,15 +228,20 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       output->num_inliers = 0;
       output->num_trials = 0;
       output->num_local_refits = 0;
+      output->early_exit = 0;
     }
     return;
   }
 
   int dyn_max_trials = launch.max_trials;
   int trials_done = 0;
+  const RansacEarlyExitOptions& early = launch.early_exit;
   for (int round = 0;; ++round) {
-    const int must_reach = s.best_count;
     const int trial = round * kRansacThreads + threadIdx.x;
+    // Window trials are scored in full: their supports fit the chance model.
+    const bool in_window = early.min_num_inliers > 0 && round * kRansacThreads < early.window;
+    const int must_reach = in_window ? 0 : s.best_count;
+    int my_hypotheses = 0, my_support_sum = 0;
     unsigned long long my_key = 0;
     double models[Model::kMaxModels][9];
     int my_model = -1;
@@ -237,6 +252,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       float4 sample[Model::kSampleSize];
       for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
       const int num_models = Model::Minimal(sample, models);
+      my_hypotheses = num_models;
       for (int m = 0; m < num_models; ++m) {
         float f[9];
         for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
@@ -256,6 +272,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
           }
         }
         if (gave_up) continue;
+        if (in_window && trial < early.window) my_support_sum += count;
         const unsigned long long key = SupportKey(count, sum);
         if (key > my_key) {
           my_key = key;
@@ -269,6 +286,13 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     // would refine lucky wide-band models that a least-squares refit cannot
     // improve, and lose inliers against the CPU).
     s.keys[threadIdx.x] = my_key;
+    if (early.min_num_inliers > 0) {
+      if (my_hypotheses > 0) atomicAdd(&s.hypotheses, my_hypotheses);
+      if (in_window && trial < early.window && my_hypotheses > 0) {
+        atomicAdd(&s.window_hypotheses, my_hypotheses);
+        atomicAdd(&s.window_support_sum, static_cast<double>(my_support_sum));
+      }
+    }
     if (my_model >= 0) {
       for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[my_model][k];
     }
@@ -317,10 +341,15 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       __syncthreads();  // everyone has read the best before thread 0 may change it
     }
     trials_done = min((round + 1) * kRansacThreads, launch.max_trials);
-    __syncthreads();
-    if (trials_done >= launch.max_trials || (trials_done >= dyn_max_trials && trials_done >= launch.min_trials)) {
-      break;
+    const bool stop =
+        trials_done >= launch.max_trials || (trials_done >= dyn_max_trials && trials_done >= launch.min_trials);
+    if (!stop && threadIdx.x == 0 && RansacEarlyExitCheckpoint(early, trials_done) &&
+        RansacShouldExitEarly(early, n, Model::kSampleSize, s.window_support_sum, s.window_hypotheses,
+                              s.best_count, s.hypotheses, trials_done, launch.max_trials - trials_done)) {
+      s.exit_early = 1;
     }
+    __syncthreads();
+    if (stop || s.exit_early) break;
   }
 
   const bool success = s.best_key != 0 && s.best_count >= Model::kSampleSize;
@@ -336,6 +365,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     output->num_inliers = s.best_count;
     output->num_trials = trials_done;
     output->num_local_refits = s.num_local_refits;
+    output->early_exit = s.exit_early;
   }
 }
 

@@ -7,6 +7,8 @@
 
 #include <cstdint>
 
+#include "cashash/ransac_early_exit.h"
+
 namespace cashash {
 namespace cuda {
 
@@ -26,6 +28,7 @@ struct RansacPairOutput {
   int num_inliers;
   int num_trials;
   int num_local_refits;
+  int early_exit;  // 1 when the chance test stopped the pair
 };
 
 struct RansacLaunch {
@@ -39,6 +42,7 @@ struct RansacLaunch {
   double confidence = 0.999;
   double trials_multiplier = 3.0;
   int shared_points = 0;        // pairs with at most this many points are cached in shared memory
+  RansacEarlyExitOptions early_exit;  // the CPU path's chance test; off when min_num_inliers is 0
 };
 
 constexpr int kRansacThreads = 128;

@@ -35,6 +35,9 @@ class BatchVerifier {
   virtual std::string Name() const = 0;
   // Geometries of pairs[k] in the same order. One call at a time.
   virtual std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) = 0;
+  // One line on where the time went (device time, trials, early exits), for
+  // the run's log; empty when there is nothing beyond the pipeline's times.
+  virtual std::string StatsSummary() const { return {}; }
 };
 
 // EstimateTwoViewGeometry per pair on num_threads threads (-1 = all cores).

@@ -29,6 +29,7 @@
 #endif
 
 #include "cashash/random_sampler.h"
+#include "cashash/ransac_early_exit.h"
 
 namespace cashash {
 
@@ -42,6 +43,9 @@ struct RansacOptions {
   // COLMAP multiplies the textbook trial count by 3 to be safe.
   double num_trials_multiplier = 3.0;
   uint64_t seed = 0;
+  // Stop pairs whose supports look like chance (ransac_early_exit.h); off
+  // while early_exit.min_num_inliers is 0.
+  RansacEarlyExitOptions early_exit;
 };
 
 struct RansacSupport {
@@ -60,6 +64,7 @@ template <typename Model>
 struct RansacReport {
   bool success = false;
   int num_trials = 0;
+  bool early_exit = false;  // stopped by the chance test before the cap
   RansacSupport support;
   Model model = Model::Zero();
   std::vector<char> inlier_mask;
@@ -116,11 +121,20 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
   bool have_model = false;
   int trials = 0;
   bool done = false;
+  // Supports of the early-exit window, scored in full (no give-up).
+  const RansacEarlyExitOptions& early = options.early_exit;
+  double window_support_sum = 0, window_hypotheses = 0, hypotheses = 0;
   for (; trials < max_trials && !done; ++trials) {
     SampleDistinct(rng, static_cast<uint32_t>(num_data), kSampleSize, sample.data());
     const int num_models = estimator.MinimalSolve(sample.data(), models.data());
+    const bool in_window = early.min_num_inliers > 0 && trials < early.window;
+    hypotheses += num_models;
     for (int m = 0; m < num_models; ++m) {
-      const RansacSupport support = estimator.Score(models[m], max_residual, best.num_inliers);
+      const RansacSupport support = estimator.Score(models[m], max_residual, in_window ? 0 : best.num_inliers);
+      if (in_window) {
+        window_support_sum += support.num_inliers;
+        window_hypotheses += 1;
+      }
       if (support.BetterThan(best)) {
         best = support;
         best_model = models[m];
@@ -149,6 +163,13 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
         done = true;
         break;
       }
+    }
+    if (!done && RansacEarlyExitCheckpoint(early, trials + 1) &&
+        RansacShouldExitEarly(early, static_cast<int>(num_data), kSampleSize, window_support_sum,
+                              window_hypotheses, best.num_inliers, hypotheses, trials + 1,
+                              max_trials - (trials + 1))) {
+      done = true;
+      report.early_exit = true;
     }
   }
 

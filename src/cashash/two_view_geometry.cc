@@ -29,6 +29,13 @@ RansacOptions MakeRansacOptions(const TwoViewGeometryOptions& options, uint64_t 
   return r;
 }
 
+// E, F and H only: the watermark's translation model keeps the full budget.
+RansacOptions MakeModelRansacOptions(const TwoViewGeometryOptions& options, uint64_t tag) {
+  RansacOptions r = MakeRansacOptions(options, tag);
+  r.early_exit = TwoViewEarlyExitOptions(options);
+  return r;
+}
+
 FeatureMatches ExtractInlierMatches(const FeatureMatches& matches, const std::vector<char>& mask) {
   FeatureMatches inliers;
   for (size_t i = 0; i < matches.size(); ++i) {
@@ -79,6 +86,7 @@ TwoViewModelEstimate ToEstimate(RansacReport<Eigen::Matrix3d>&& report) {
   estimate.success = report.success;
   estimate.num_inliers = report.success ? report.support.num_inliers : 0;
   estimate.num_trials = report.num_trials;
+  estimate.early_exit = report.early_exit;
   estimate.model = report.model;
   estimate.inlier_mask = std::move(report.inlier_mask);
   return estimate;
@@ -104,10 +112,20 @@ std::string TwoViewGeometryOptions::Check() const {
   if (error.tellp() == 0 && min_num_trials < 0) {
     error << "TwoViewGeometry.min_num_trials must be >= 0";
   }
+  if (error.tellp() == 0 && !(early_exit_max_risk > 0 && early_exit_max_risk < 1)) {
+    error << "TwoViewGeometry.early_exit_max_risk must be in (0, 1)";
+  }
   if (error.tellp() == 0 && max_num_trials < min_num_trials) {
     error << "TwoViewGeometry.max_num_trials must be >= min_num_trials";
   }
   return error.str();
+}
+
+RansacEarlyExitOptions TwoViewEarlyExitOptions(const TwoViewGeometryOptions& options) {
+  RansacEarlyExitOptions early;
+  early.min_num_inliers = options.early_exit ? std::max(1, options.min_num_inliers) : 0;
+  early.max_risk = options.early_exit_max_risk;
+  return early;
 }
 
 TwoViewGeometry TwoViewGeometry::Inverted() const {
@@ -167,7 +185,7 @@ Eigen::Matrix3d HomographyToPixels(const Eigen::Matrix3d& H_normalized, const Pa
 }
 
 TwoViewModelEstimate EstimateFundamental(const TwoViewPoints& points, const TwoViewGeometryOptions& options) {
-  RansacOptions f_options = MakeRansacOptions(options, kSeedF);
+  RansacOptions f_options = MakeModelRansacOptions(options, kSeedF);
   f_options.max_error = options.max_error * points.norm.scale;
   TwoViewModelEstimate F = ToEstimate(LoRansac(FundamentalEstimator(points.normalized), f_options));
   F.model = F.success ? FundamentalToPixels(F.model, points.norm) : Eigen::Matrix3d::Zero();
@@ -175,7 +193,7 @@ TwoViewModelEstimate EstimateFundamental(const TwoViewPoints& points, const TwoV
 }
 
 TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options) {
-  RansacOptions h_options = MakeRansacOptions(options, kSeedH);
+  RansacOptions h_options = MakeModelRansacOptions(options, kSeedH);
   h_options.max_error = options.max_error * points.norm.scale;
   TwoViewModelEstimate H = ToEstimate(LoRansac(HomographyEstimator(points.normalized), h_options));
   H.model = H.success ? HomographyToPixels(H.model, points.norm) : Eigen::Matrix3d::Zero();
@@ -205,7 +223,7 @@ EssentialPoints PrepareEssentialPoints(const Camera& camera1, const Camera& came
 }
 
 TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options) {
-  RansacOptions e_options = MakeRansacOptions(options, kSeedE);
+  RansacOptions e_options = MakeModelRansacOptions(options, kSeedE);
   e_options.max_error = points.max_error;
   TwoViewModelEstimate E = ToEstimate(LoRansac(EssentialEstimator(points.world), e_options));
   if (!E.success) E.model = Eigen::Matrix3d::Zero();

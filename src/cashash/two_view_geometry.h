@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 
 #include "cashash/point_pairs.h"
+#include "cashash/ransac_early_exit.h"
 #include "cashash/types.h"
 
 namespace cashash {
@@ -41,6 +42,12 @@ struct TwoViewGeometryOptions {
   int min_num_trials = 100;
   int max_num_trials = 10000;
   double min_inlier_ratio = 0.25;
+  // Stop E, F and H RANSAC early on pairs whose supports look like chance
+  // (ransac_early_exit.h; not in COLMAP, which runs such pairs to
+  // max_num_trials). early_exit_max_risk bounds, under the chance model, the
+  // probability that the full run would have reached min_num_inliers.
+  bool early_exit = true;
+  double early_exit_max_risk = 0.001;
   // Base seed; each pair's RANSAC is seeded from it and the pair, so results
   // do not depend on thread scheduling.
   uint64_t random_seed = 0;
@@ -102,11 +109,15 @@ TwoViewPoints PrepareTwoViewPoints(const std::vector<Eigen::Vector2d>& points1,
 // estimation.
 bool TooFewMatchesForTwoView(size_t num_matches, const TwoViewGeometryOptions& options);
 
+// The chance test of E, F and H RANSAC (both backends) for these options.
+RansacEarlyExitOptions TwoViewEarlyExitOptions(const TwoViewGeometryOptions& options);
+
 // One estimated model of a pair, as the decision reads it.
 struct TwoViewModelEstimate {
   bool success = false;
   int num_inliers = 0;
   int num_trials = 0;
+  bool early_exit = false;  // stopped by the chance test (ransac_early_exit.h)
   // F and H in pixel coordinates (unit Frobenius norm); E in normalised
   // camera coordinates.
   Eigen::Matrix3d model = Eigen::Matrix3d::Zero();

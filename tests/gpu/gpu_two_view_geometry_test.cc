@@ -136,6 +136,69 @@ TEST(GpuTwoViewRansac, SyntheticPairsAgreeWithCpu) {
   }
 }
 
+// Pairs of pure chance matches (two unrelated images): the chance test of
+// ransac_early_exit.h stops F and H on the device at the same trial as on the
+// CPU, long before the cap, with the full budget's decision; a pair with a
+// real model is untouched.
+TEST(GpuTwoViewRansac, ChanceMatchesStopEarlyAsOnTheCpu) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  std::vector<SyntheticScene> scenes;
+  for (unsigned seed = 1; seed <= 6; ++seed) {
+    SceneOptions o;
+    o.num_inliers = 0;
+    o.outlier_ratio = 0.0;
+    SyntheticScene scene = MakeScene(o);
+    std::srand(seed);
+    const int n = 20 + 5 * static_cast<int>(seed);
+    for (int i = 0; i < n; ++i) {
+      auto u = [] { return static_cast<double>(std::rand()) / RAND_MAX; };
+      scene.points1.emplace_back(u() * scene.width, u() * scene.height);
+      scene.points2.emplace_back(u() * scene.width, u() * scene.height);
+      scene.matches.push_back({static_cast<point2D_t>(i), static_cast<point2D_t>(i)});
+    }
+    scenes.push_back(std::move(scene));
+  }
+  SceneOptions real;
+  real.num_inliers = 200;
+  real.outlier_ratio = 0.5;
+  scenes.push_back(MakeScene(real));
+
+  TwoViewGeometryOptions options;
+  std::vector<TwoViewPoints> points;
+  std::vector<uint64_t> seeds;
+  for (size_t k = 0; k < scenes.size(); ++k) {
+    points.push_back(PrepareTwoViewPoints(scenes[k].points1, scenes[k].points2, scenes[k].matches));
+    seeds.push_back(PairRandomSeed(5, ImagePair(1, static_cast<image_t>(k + 2))));
+  }
+  std::vector<const TwoViewPoints*> pointers;
+  for (const TwoViewPoints& p : points) pointers.push_back(&p);
+  cuda::GpuTwoViewRansac ransac(options, 0);
+  std::vector<TwoViewModelEstimate> F, H;
+  ransac.Estimate(pointers, seeds, &F, &H);
+  for (size_t k = 0; k < scenes.size(); ++k) {
+    SCOPED_TRACE(k);
+    TwoViewGeometryOptions pair_options = options;
+    pair_options.random_seed = seeds[k];
+    const TwoViewModelEstimate cpu_F = EstimateFundamental(points[k], pair_options);
+    pair_options.early_exit = false;
+    const TwoViewModelEstimate full_F = EstimateFundamental(points[k], pair_options);
+    const bool chance = k + 1 < scenes.size();
+    std::printf("pair %zu: %zu matches, F trials gpu %d cpu %d full %d, inliers gpu %d cpu %d full %d, H trials %d\n",
+                k, points[k].pixels.size(), F[k].num_trials, cpu_F.num_trials, full_F.num_trials, F[k].num_inliers,
+                cpu_F.num_inliers, full_F.num_inliers, H[k].num_trials);
+    if (chance) {
+      EXPECT_TRUE(F[k].early_exit);
+      EXPECT_LE(F[k].num_trials, 2048);
+      EXPECT_LT(F[k].num_inliers, options.min_num_inliers);
+      EXPECT_LT(full_F.num_inliers, options.min_num_inliers);
+      EXPECT_LE(H[k].num_trials, 2048);
+    } else {
+      EXPECT_FALSE(F[k].early_exit);
+      EXPECT_GE(F[k].num_inliers, 190);
+    }
+  }
+}
+
 TEST(GpuTwoViewRansac, SameSeedSameResult) {
   SKIP_WITHOUT_CUDA_DEVICE();
   SceneOptions o;

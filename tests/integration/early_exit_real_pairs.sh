@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The early exit of RANSAC (--TwoViewGeometry.early_exit) against COLMAP's
+# full trial budget on real photographs: the 10 sacre_coeur images and 5 of
+# sceaux_castle in one database, so that the 50 pairs across the two sets
+# are pure chance matches and the others real ones. The cascade matches
+# every pair (raw matches only); every pair with at least 15 matches is then
+# verified with and without the early exit. The configuration must agree on
+# at least 99.5 % of the pairs, and some F estimations must have stopped
+# early.
+# Usage: early_exit_real_pairs.sh CASHASH_BINARY SHARED_DATA_DIR   (exit 77: skipped)
+set -euo pipefail
+
+CASHASH="$1"
+SHARED_DATA="${2:-}"
+BIN="$(cd "$(dirname "$CASHASH")/../scripts" && pwd)"
+export QT_QPA_PLATFORM=offscreen
+
+for set in sacre_coeur sceaux_castle; do
+  if [[ -z "$SHARED_DATA" || ! -d "$SHARED_DATA/$set/images" ]]; then
+    echo "SKIP: no $set images under '$SHARED_DATA'"; exit 77
+  fi
+done
+if ! command -v colmap >/dev/null; then
+  echo "SKIP: colmap is not installed"; exit 77
+fi
+
+WORK="$(mktemp -d "${TMPDIR:-/tmp}/cashash_early_exit.XXXXXX")"
+trap 'rm -rf "$WORK"' EXIT
+mkdir -p "$WORK/images"
+for f in "$SHARED_DATA"/sacre_coeur/images/*; do ln -s "$f" "$WORK/images/sacre_coeur_$(basename "$f")"; done
+for f in $(ls "$SHARED_DATA"/sceaux_castle/images/* | head -5); do
+  ln -s "$f" "$WORK/images/sceaux_$(basename "$f")"
+done
+
+start=$SECONDS
+# 4,096 features per image keep the extraction short on two cores.
+colmap feature_extractor --database_path "$WORK/db.db" --image_path "$WORK/images" \
+  --SiftExtraction.use_gpu 0 --SiftExtraction.max_num_features 4096 >"$WORK/extract.log" 2>&1 ||
+  { tail -30 "$WORK/extract.log"; exit 1; }
+echo "Feature extraction: $((SECONDS - start)) s"
+
+"$CASHASH" exhaustive_matcher --database_path "$WORK/db.db" --FeatureMatching.use_gpu 0 \
+  --FeatureMatching.skip_geometric_verification 1 | tail -3
+"$BIN/dump_verification_pairs" "$WORK/db.db" "$WORK/pairs.bin" 15
+"$BIN/early_exit_agreement" "$WORK/pairs.bin" --min_agreement 0.995 --min_stopped 1
