@@ -86,6 +86,11 @@ int ReportSummary(const MatchingSummary& summary) {
   std::cout << std::setprecision(3) << "Time: loading " << stats.seconds_loading << " s, hashing "
             << stats.seconds_hashing << " s, matching " << stats.seconds_matching << " s, verification "
             << stats.seconds_verification << " s, writing " << stats.seconds_writing << " s" << std::endl;
+  // Waiting, apart from the busy times: which stage held the others up.
+  std::cout << "Waiting: matching for verification " << stats.seconds_matching_wait_queue
+            << " s, verification for matching " << stats.seconds_verification_wait_input << " s and for writing "
+            << stats.seconds_verification_wait_writer << " s, writing for verification "
+            << stats.seconds_writing_wait_input << " s" << std::endl;
   std::cout << "Memory: peak resident " << FormatMemorySize(PeakResidentBytes());
   if (summary.gpu_index >= 0) {
     std::cout << "; GPU " << summary.gpu_index << " at most " << FormatMemorySize(summary.gpu_peak_used_bytes)

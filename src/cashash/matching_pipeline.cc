@@ -91,7 +91,14 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   // Stage 3: the single writer.
   std::thread writer([&]() {
     try {
-      while (std::optional<VerifiedChunk> item = to_write.Pop()) {
+      for (;;) {
+        const Clock::time_point t_wait = Clock::now();
+        std::optional<VerifiedChunk> item = to_write.Pop();
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_writing_wait_input += SecondsSince(t_wait);
+        }
+        if (!item) break;
         const Clock::time_point t0 = Clock::now();
         sink_->WriteChunk(item->results);
         PipelineProgress progress;
@@ -130,7 +137,14 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   }
   std::thread verifier_thread([&]() {
     try {
-      while (std::optional<MatchedChunk> item = to_verify.Pop()) {
+      for (;;) {
+        const Clock::time_point t_wait = Clock::now();
+        std::optional<MatchedChunk> item = to_verify.Pop();
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_verification_wait_input += SecondsSince(t_wait);
+        }
+        if (!item) break;
         const Clock::time_point t0 = Clock::now();
         VerifiedChunk out;
         out.chunk = item->chunk;
@@ -168,7 +182,13 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
           stats.seconds_verification += SecondsSince(t0);
         }
         item->features.clear();
-        if (!to_write.Push(std::move(out))) break;
+        const Clock::time_point t_push = Clock::now();
+        const bool pushed = to_write.Push(std::move(out));
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_verification_wait_writer += SecondsSince(t_push);
+        }
+        if (!pushed) break;
       }
     } catch (...) {
       error.Set(std::current_exception());
@@ -223,7 +243,13 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         stats.seconds_matching += SecondsSince(t_match);
       }
       for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
-      if (!to_verify.Push(std::move(item))) break;
+      const Clock::time_point t_push = Clock::now();
+      const bool pushed = to_verify.Push(std::move(item));
+      {
+        std::lock_guard<std::mutex> lock(stats_mutex);
+        stats.seconds_matching_wait_queue += SecondsSince(t_push);
+      }
+      if (!pushed) break;
     }
   } catch (...) {
     error.Set(std::current_exception());

@@ -73,6 +73,14 @@ struct PipelineStats {
   double seconds_matching = 0;
   double seconds_verification = 0;  // summed wall time of verification stage
   double seconds_writing = 0;
+  // Waiting, apart from the busy times above: the matching thread for room
+  // in the queue to verification (verification is slower), verification for
+  // a matched chunk (matching is slower) and for room in the queue to the
+  // writer, the writer for a verified chunk.
+  double seconds_matching_wait_queue = 0;
+  double seconds_verification_wait_input = 0;
+  double seconds_verification_wait_writer = 0;
+  double seconds_writing_wait_input = 0;
   bool stopped = false;  // the stop flag was raised before the end
 };
 
