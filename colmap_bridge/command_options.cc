@@ -108,9 +108,13 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "GPU memory for matching, e.g. 8G or 4096 (MiB); default the device's free memory");
 
   std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
-  table.Add({"CasHash.matcher"}, &matcher_name, "cascade | bruteforce (exact reference)");
-  table.Add({"CasHash.num_tables"}, &o.cashash.num_tables, "First-level hash tables");
-  table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table, "Bits per first-level table");
+  table.Add({"CasHash.matcher"}, &matcher_name,
+            "auto (times both on the first pairs, keeps the faster) | cascade | bruteforce (exact reference)");
+  table.Add({"CasHash.num_tables"}, &o.cashash.num_tables,
+            "First-level hash tables; 0 = chosen with the bits from the features per image (8 x 7 below 16384, "
+            "8 x 8 from there)");
+  table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table,
+            "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
   table.Add({"CasHash.tau"}, &o.cashash.tau, "Largest 128-bit remap Hamming distance ranked");
   table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
 
@@ -142,7 +146,7 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
     return ParseOutcome::kHelpShown;
   }
   if (!MatcherTypeFromString(matcher_name, &o.cashash.matcher)) {
-    std::cerr << "ERROR: --CasHash.matcher must be 'cascade' or 'bruteforce', got '" << matcher_name << "'"
+    std::cerr << "ERROR: --CasHash.matcher must be 'auto', 'cascade' or 'bruteforce', got '" << matcher_name << "'"
               << std::endl;
     return ParseOutcome::kError;
   }
@@ -170,8 +174,10 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.guided.enabled) {
     message = o.guided.Check();
     if (!message.empty()) return message;
-    if (o.cashash.matcher != MatcherType::kCascade) {
-      return "--GuidedMatching.enabled needs --CasHash.matcher cascade (the band filter is part of the cascade)";
+    // auto resolves to the cascade (ResolveOptionsForRun).
+    if (o.cashash.matcher == MatcherType::kBruteForce) {
+      return "--GuidedMatching.enabled needs --CasHash.matcher cascade or auto (the band filter is part of the "
+             "cascade)";
     }
   }
   return o.two_view.Check();

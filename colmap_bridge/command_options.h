@@ -17,7 +17,12 @@ namespace colmap {
 struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
-  CasHashOptions cashash;
+  // --CasHash.matcher defaults to auto here: a run measures both matchers.
+  CasHashOptions cashash = [] {
+    CasHashOptions options;
+    options.matcher = MatcherType::kAuto;
+    return options;
+  }();
   TwoViewGeometryOptions two_view;
   // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
   // guided_matcher command sets enabled).

@@ -12,6 +12,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "cashash/auto_feature_matcher.h"
 #include "cashash/fallback_feature_matcher.h"
 #include "cashash/feature_cache.h"
 #include "cashash/guided_matching.h"
@@ -20,6 +21,7 @@
 #include "cashash/retaining_feature_matcher.h"
 #include "cashash/split_feature_matcher.h"
 #include "cashash/schedule_sizing.h"
+#include "cashash/table_shape.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -134,6 +136,14 @@ std::vector<image_t> ImagesOfPairs(const std::vector<ImagePair>& pairs) {
   std::sort(image_ids.begin(), image_ids.end());
   image_ids.erase(std::unique(image_ids.begin(), image_ids.end()), image_ids.end());
   return image_ids;
+}
+
+// Feature rows of each image (row counts only, no descriptors are read).
+std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vector<image_t>& image_ids) {
+  std::vector<size_t> rows;
+  rows.reserve(image_ids.size());
+  for (image_t image_id : image_ids) rows.push_back(source.database().NumDescriptors(image_id));
+  return rows;
 }
 
 // Adds the statistics of another rank's pipeline to rank 0's: counts add
@@ -256,7 +266,8 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   GpuMemorySampler gpu_memory(GpuIndexForRun(run_options));
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
   std::unique_ptr<FeatureMatcher> matcher =
-      CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); });
+      CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); },
+                              [&](const std::string& text) { Info(callbacks, text); });
   // Guided matching (Ga-CasHash, cashash/guided_matching.h): a second
   // matcher for the top-scale subsets, the stage-1 F estimator, and the
   // pipeline's features read through a source that keeps the keypoints.
@@ -503,15 +514,24 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
                              const std::vector<ImagePair>& pairs, const MatchingCallbacks& callbacks) {
   const size_t block = static_cast<size_t>(options.block_size);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
-  return MatchChunks(options, source, ImagesOfPairs(pairs), std::move(chunks), pairs.size(), /*cache_groups=*/false,
+  const std::vector<image_t> image_ids = ImagesOfPairs(pairs);
+  const MatcherCommandOptions resolved = ResolveOptionsForRun(
+      options, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
+  return MatchChunks(resolved, source, image_ids, std::move(chunks), pairs.size(), /*cache_groups=*/false,
                      /*matcher_keep_bytes=*/0, callbacks);
 }
 
 }  // namespace
 
-std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
+namespace {
+
+// The backend of one matcher type (cascade or brute force): on the GPUs of
+// the options where usable, else on the CPU. *on_gpu says which.
+std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
-                                                        const std::function<void(const std::string&)>& warning) {
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        bool* on_gpu) {
+  *on_gpu = false;
   if (options.use_gpu) {
 #ifdef CASHASH_WITH_CUDA
     std::vector<std::unique_ptr<FeatureMatcher>> parts;
@@ -531,6 +551,7 @@ std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOpti
           IsDeviceMemoryError, warning));
     }
     if (!parts.empty()) {
+      *on_gpu = true;
       if (!reason.empty() && warning) warning("not every listed GPU is usable (" + reason + "); matching on the others");
       if (parts.size() == 1) return std::move(parts[0]);
       // Several devices share every chunk of pairs.
@@ -542,6 +563,45 @@ std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOpti
 #endif
   }
   return CreateCpuFeatureMatcher(options.sift, options.cashash, mean);
+}
+
+}  // namespace
+
+std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        const std::function<void(const std::string&)>& info) {
+  bool on_gpu = false;
+  if (options.cashash.matcher != MatcherType::kAuto) return CreateBackendForOptions(options, mean, warning, &on_gpu);
+  // Guided matching filters candidates inside the cascade.
+  MatcherCommandOptions cascade = options, brute_force = options;
+  cascade.cashash.matcher = MatcherType::kCascade;
+  if (options.guided.enabled) return CreateBackendForOptions(cascade, mean, warning, &on_gpu);
+  brute_force.cashash.matcher = MatcherType::kBruteForce;
+  // Both on the same devices (or both on the CPU); the warnings once.
+  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateBackendForOptions(cascade, mean, warning, &on_gpu);
+  bool brute_force_on_gpu = false;
+  std::unique_ptr<FeatureMatcher> brute_force_matcher =
+      CreateBackendForOptions(brute_force, mean, nullptr, &brute_force_on_gpu);
+  return std::make_unique<AutoFeatureMatcher>(std::move(cascade_matcher), std::move(brute_force_matcher),
+                                              on_gpu ? GpuAutoMatcherOptions() : CpuAutoMatcherOptions(options.sift),
+                                              info);
+}
+
+MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
+                                           const std::vector<size_t>& rows_per_image,
+                                           const std::function<void(const std::string&)>& info) {
+  MatcherCommandOptions resolved = options;
+  if (resolved.guided.enabled && resolved.cashash.matcher == MatcherType::kAuto) {
+    resolved.cashash.matcher = MatcherType::kCascade;
+    if (info) info("Matcher: cascade (guided matching needs it)");
+  }
+  const size_t features = TypicalFeatureCount(rows_per_image, options.sift.max_num_matches);
+  resolved.cashash = ResolveTableShape(resolved.cashash, features);
+  if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {
+    info(DescribeTableShape(options.cashash, resolved.cashash, features, rows_per_image.size()));
+  }
+  return resolved;
 }
 
 namespace {
@@ -585,10 +645,12 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
                           (image_ids.size() == 1 ? "" : "s") + "; nothing to match");
       return MatchingSummary();
     }
-    const ScheduleSizes sizes = ChooseSizesForRun(checked, source, image_ids, callbacks);
+    const MatcherCommandOptions resolved = ResolveOptionsForRun(
+        checked, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
+    const ScheduleSizes sizes = ChooseSizesForRun(resolved, source, image_ids, callbacks);
     std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
     const size_t n = image_ids.size();
-    return MatchChunks(checked, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
+    return MatchChunks(resolved, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
                        sizes.matcher_keep_bytes, callbacks);
   });
 }

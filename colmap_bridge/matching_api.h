@@ -72,9 +72,23 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 
 // The matcher backend the options ask for: the GPU one when use_gpu is set
 // and a device is usable, else the CPU one (reporting why through `warning`).
+//
+// --CasHash.matcher auto (the default) gives an AutoFeatureMatcher over one
+// cascade and one brute-force backend on the same device(s), which reports
+// its choice through `info`; with guided matching, the cascade alone.
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
-                                                        const std::function<void(const std::string&)>& warning);
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        const std::function<void(const std::string&)>& info = nullptr);
+
+// The options a run matches with, decided once from the feature rows of its
+// images: the hash tables chosen for their median size where
+// --CasHash.num_tables / --CasHash.bits_per_table are 0 (table_shape.h), and
+// auto resolved to the cascade for guided matching. Says what it chose
+// through `info`.
+MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
+                                           const std::vector<size_t>& rows_per_image,
+                                           const std::function<void(const std::string&)>& info);
 
 }  // namespace colmap
 }  // namespace cashash

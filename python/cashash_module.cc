@@ -13,6 +13,7 @@
 
 #include "cashash/camera_models.h"
 #include "cashash/pair_matching.h"
+#include "cashash/table_shape.h"
 #include "colmap_bridge/matching_api.h"
 
 namespace py = pybind11;
@@ -151,9 +152,14 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   std::optional<Camera> c1, c2;
   if (camera1) c1 = CameraFromDict(*camera1);
   if (camera2) c2 = CameraFromDict(*camera2);
+  // Tables at 0 are chosen for the larger image, the same for the GPU
+  // matcher and MatchImagePair's CPU one.
+  MatcherCommandOptions resolved = options;
+  resolved.cashash =
+      ResolveTableShape(options.cashash, TypicalFeatureCount({d1.rows(), d2.rows()}, options.sift.max_num_matches));
   PairMatchingOptions pair_options;
-  pair_options.sift = options.sift;
-  pair_options.cashash = options.cashash;
+  pair_options.sift = resolved.sift;
+  pair_options.cashash = resolved.cashash;
   pair_options.two_view = options.two_view;
   pair_options.skip_geometric_verification = options.skip_geometric_verification;
 
@@ -162,7 +168,7 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
     py::gil_scoped_release no_gil;
     std::unique_ptr<FeatureMatcher> matcher;
     if (options.use_gpu) {
-      matcher = colmap::CreateMatcherForOptions(options, ComputeMeanDescriptor({&d1, &d2}), nullptr);
+      matcher = colmap::CreateMatcherForOptions(resolved, ComputeMeanDescriptor({&d1, &d2}), nullptr);
     }
     result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get());
   }
@@ -194,7 +200,8 @@ void BindOptions(py::module_& m) {
           "matcher", [](const CasHashOptions& o) { return MatcherTypeToString(o.matcher); },
           [](CasHashOptions& o, const std::string& name) {
             if (!MatcherTypeFromString(name, &o.matcher)) {
-              throw std::invalid_argument("CasHash.matcher must be 'cascade' or 'bruteforce', got '" + name + "'");
+              throw std::invalid_argument("CasHash.matcher must be 'auto', 'cascade' or 'bruteforce', got '" + name +
+                                          "'");
             }
           })
       .def_readwrite("num_tables", &CasHashOptions::num_tables)

@@ -2,12 +2,13 @@
 // speed a fake clock sets: the faster one is kept whichever it is, every
 // pair is matched once by exactly one backend, in the callers' order, the
 // loser's images are removed and it is destroyed, guided matching keeps the
-// cascade.
+// cascade, and an explicit matcher type gets no wrapper.
 #include "cashash/auto_feature_matcher.h"
 
 #include <algorithm>
 #include <map>
 #include <memory>
+#include <random>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -15,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include "synthetic_sift.h"
 
 namespace cashash {
 namespace {
@@ -233,6 +235,50 @@ TEST(AutoFeatureMatcher, GuidedMatchingKeepsTheCascade) {
   EXPECT_TRUE(h.brute_force.destroyed);
   ASSERT_EQ(h.log.size(), 1u);
   EXPECT_NE(h.log[0].find("guided matching needs the cascade"), std::string::npos);
+}
+
+// The CPU factory: auto wraps both CPU backends; an explicit type is that
+// backend alone. Real matches: a pair gets the same matches as the backend
+// that answered it would give alone.
+TEST(AutoFeatureMatcher, CpuFactoryWrapsOnlyAuto) {
+  std::mt19937 rng(9);
+  std::vector<FeatureDescriptors> images(6);
+  std::vector<std::vector<uint8_t>> base;
+  for (int k = 0; k < 300; ++k) base.push_back(testing_support::RandomSift(&rng));
+  for (FeatureDescriptors& d : images) {
+    for (const auto& row : base) {
+      std::vector<uint8_t> noisy = row;
+      noisy[rng() % 128] ^= 1;
+      d.data.insert(d.data.end(), noisy.begin(), noisy.end());
+    }
+  }
+  std::vector<const FeatureDescriptors*> pointers;
+  for (const FeatureDescriptors& d : images) pointers.push_back(&d);
+  const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
+  const std::vector<ImagePair> pairs = AllPairs(0, 6);
+  auto run = [&](MatcherType type, std::string* name) {
+    CasHashOptions options;
+    options.matcher = type;
+    auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), options, mean);
+    for (int i = 0; i < 6; ++i) matcher->AddImage(image_t(i), images[i]);
+    auto results = matcher->MatchPairs(pairs);
+    *name = matcher->Name();
+    return results;
+  };
+  std::string cascade_name, brute_name, auto_name;
+  const auto cascade = run(MatcherType::kCascade, &cascade_name);
+  const auto brute = run(MatcherType::kBruteForce, &brute_name);
+  const auto automatic = run(MatcherType::kAuto, &auto_name);
+  EXPECT_EQ(cascade_name, "cpu-cascade");
+  EXPECT_EQ(brute_name, "cpu-bruteforce");
+  EXPECT_EQ(auto_name.rfind("auto(cpu-cascade|cpu-bruteforce)", 0) == 0 || auto_name == "cpu-cascade" ||
+                auto_name == "cpu-bruteforce",
+            true)
+      << auto_name;
+  ASSERT_EQ(automatic.size(), pairs.size());
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    EXPECT_TRUE(automatic[p] == cascade[p] || automatic[p] == brute[p]) << p;
+  }
 }
 
 }  // namespace

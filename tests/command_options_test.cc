@@ -1,4 +1,5 @@
 #include "colmap_bridge/command_options.h"
+#include "colmap_bridge/matching_api.h"
 
 #include <gtest/gtest.h>
 
@@ -77,6 +78,48 @@ TEST(CommandOptions, BadInputIsAnError) {
   MatcherCommandOptions o5;
   ASSERT_EQ(Parse({}, &o5), ParseOutcome::kRun);
   EXPECT_NE(CheckMatcherCommandOptions(o5).find("--database_path"), std::string::npos);
+}
+
+TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
+  MatcherCommandOptions defaults;
+  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  EXPECT_EQ(defaults.cashash.matcher, MatcherType::kAuto);
+  EXPECT_EQ(defaults.cashash.num_tables, 0);
+  EXPECT_EQ(defaults.cashash.bits_per_table, 0);
+  EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
+  // Given on the command line, the tables are kept for any image size.
+  MatcherCommandOptions set;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "8", "--CasHash.bits_per_table", "7",
+                   "--CasHash.matcher", "cascade"},
+                  &set),
+            ParseOutcome::kRun);
+  EXPECT_EQ(set.cashash.matcher, MatcherType::kCascade);
+  const MatcherCommandOptions run = ResolveOptionsForRun(set, {32768, 32768, 32768}, nullptr);
+  EXPECT_EQ(run.cashash.num_tables, 8);
+  EXPECT_EQ(run.cashash.bits_per_table, 7);
+  // Left at 0, they follow the images: 8 x 8 at 32,768 features.
+  const MatcherCommandOptions chosen = ResolveOptionsForRun(defaults, {32768, 32768, 32768}, nullptr);
+  EXPECT_EQ(chosen.cashash.num_tables, 8);
+  EXPECT_EQ(chosen.cashash.bits_per_table, 8);
+  MatcherCommandOptions auto_named;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "auto"}, &auto_named), ParseOutcome::kRun);
+  EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
+}
+
+TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {
+  const char* argv[] = {"guided_matcher", "--database_path", "x"};
+  MatcherCommandOptions o;
+  ASSERT_EQ(ParseMatcherCommandOptions("guided_matcher", 3, argv, &o), ParseOutcome::kRun);
+  EXPECT_TRUE(o.guided.enabled);
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+  std::vector<std::string> said;
+  const MatcherCommandOptions run =
+      ResolveOptionsForRun(o, {1000, 2000}, [&](const std::string& text) { said.push_back(text); });
+  EXPECT_EQ(run.cashash.matcher, MatcherType::kCascade);
+  ASSERT_FALSE(said.empty());
+  EXPECT_NE(said.front().find("guided"), std::string::npos);
+  o.cashash.matcher = MatcherType::kBruteForce;
+  EXPECT_NE(CheckMatcherCommandOptions(o).find("GuidedMatching.enabled"), std::string::npos);
 }
 
 TEST(CommandOptions, HelpListsOptions) {

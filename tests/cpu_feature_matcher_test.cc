@@ -210,13 +210,17 @@ TEST(MatchingOptions, Check) {
 }
 
 TEST(MatchingOptions, MatcherTypeNames) {
-  for (MatcherType type : {MatcherType::kCascade, MatcherType::kBruteForce}) {
+  for (MatcherType type : {MatcherType::kCascade, MatcherType::kBruteForce, MatcherType::kAuto}) {
     MatcherType parsed;
     ASSERT_TRUE(MatcherTypeFromString(MatcherTypeToString(type), &parsed));
     EXPECT_EQ(parsed, type);
   }
   EXPECT_EQ(MatcherTypeToString(MatcherType::kCascade), "cascade");
   EXPECT_EQ(MatcherTypeToString(MatcherType::kBruteForce), "bruteforce");
+  EXPECT_EQ(MatcherTypeToString(MatcherType::kAuto), "auto");
+  // The library's default is the cascade; runs default to auto
+  // (CommandOptions.MatcherAndTablesDefaultToAutoAndExplicitValuesWin).
+  EXPECT_EQ(CasHashOptions().matcher, MatcherType::kCascade);
   MatcherType parsed = MatcherType::kCascade;
   EXPECT_FALSE(MatcherTypeFromString("exhaustive", &parsed));
   EXPECT_EQ(parsed, MatcherType::kCascade);

@@ -235,6 +235,7 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   callbacks.info = [&](const std::string& text) { notes.push_back(text); };
   callbacks.warning = [&](const std::string& text) { warnings.push_back(text); };
 
+  options_.cashash.matcher = MatcherType::kCascade;  // auto: DefaultsChooseTablesAndMatcherAndSaySo
   const colmap::MatchingSummary first = colmap::MatchExhaustive(path_, options_, callbacks);
   EXPECT_EQ(first.pairs_requested, 3u);
   EXPECT_EQ(first.pairs_skipped, 0u);
@@ -255,6 +256,26 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   EXPECT_TRUE(second.matcher_name.empty());
   EXPECT_EQ(second.pipeline.pairs_done, 0u);
   EXPECT_EQ(notes.back(), "Nothing to match.");
+}
+
+TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
+  std::vector<std::string> notes;
+  colmap::MatchingCallbacks callbacks;
+  callbacks.info = [&](const std::string& text) { notes.push_back(text); };
+  const colmap::MatchingSummary summary = colmap::MatchExhaustive(path_, options_, callbacks);
+  EXPECT_EQ(summary.pipeline.pairs_done, 3u);
+  EXPECT_EQ(summary.pipeline.verified_pairs, 3u);
+  const auto starts = [&](const std::string& prefix) {
+    return std::find_if(notes.begin(), notes.end(),
+                        [&](const std::string& n) { return n.rfind(prefix, 0) == 0; }) != notes.end();
+  };
+  // Hundreds of features per image: the defaults' 8 x 7.
+  EXPECT_TRUE(starts("Hash tables: 8 x 7 bits (chosen for ")) << testing::PrintToString(notes);
+  EXPECT_TRUE(starts("Matcher: auto(cpu-cascade|cpu-bruteforce)")) << testing::PrintToString(notes);
+  // Three pairs are too few to decide: the summary names whoever finished.
+  EXPECT_TRUE(summary.matcher_name == "auto(cpu-cascade|cpu-bruteforce)" || summary.matcher_name == "cpu-cascade" ||
+              summary.matcher_name == "cpu-bruteforce")
+      << summary.matcher_name;
 }
 
 TEST_F(SceneDatabase, PairsByNameMatchOnceAndNameUnknownImages) {

@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "cashash/auto_feature_matcher.h"
 #include "cashash/table_shape.h"
 #include "impl/brute_force_kernels.cuh"
 #include "impl/cascade_feature_matcher.cuh"
@@ -167,6 +168,14 @@ std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOption
                                                         const MeanDescriptor& mean, int gpu_index) {
   if (cashash_options.matcher == MatcherType::kBruteForce) {
     return std::make_unique<GpuBruteForceMatcher>(sift_options, gpu_index);
+  }
+  if (cashash_options.matcher == MatcherType::kAuto) {
+    CasHashOptions cascade = cashash_options, brute_force = cashash_options;
+    cascade.matcher = MatcherType::kCascade;
+    brute_force.matcher = MatcherType::kBruteForce;
+    return std::make_unique<AutoFeatureMatcher>(CreateGpuFeatureMatcher(sift_options, cascade, mean, gpu_index),
+                                                CreateGpuFeatureMatcher(sift_options, brute_force, mean, gpu_index),
+                                                GpuAutoMatcherOptions(), nullptr);
   }
   // Tables still at 0 (chosen per run, table_shape.h): the shape of 8,192
   // features, as the CPU backend.

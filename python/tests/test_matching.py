@@ -56,7 +56,10 @@ def test_bad_input_raises():
 
 def test_match_exhaustive_writes_every_pair_and_resumes(scene_database):
     calls = []
-    summary = cashash.match_exhaustive(scene_database, progress=lambda done, total: calls.append((done, total)))
+    # Runs default to matcher="auto" (3 pairs: too few to decide); the name
+    # checked here is the cascade's.
+    summary = cashash.match_exhaustive(scene_database, matcher="cascade",
+                                       progress=lambda done, total: calls.append((done, total)))
     assert summary["pairs_requested"] == 3 and summary["pairs_done"] == 3
     assert summary["verified_pairs"] == 3
     assert summary["matcher"] == "cpu-cascade"

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "cashash/auto_feature_matcher.h"
 #include "cashash/brute_force_matcher.h"
 #include "cashash/cascade_hashing.h"
 #include "cashash/cascade_matcher.h"
@@ -128,6 +129,14 @@ class CpuFeatureMatcher : public FeatureMatcher {
 std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean) {
+  if (cashash_options.matcher == MatcherType::kAuto) {
+    CasHashOptions cascade = cashash_options, brute_force = cashash_options;
+    cascade.matcher = MatcherType::kCascade;
+    brute_force.matcher = MatcherType::kBruteForce;
+    return std::make_unique<AutoFeatureMatcher>(std::make_unique<CpuFeatureMatcher>(sift_options, cascade, mean),
+                                                std::make_unique<CpuFeatureMatcher>(sift_options, brute_force, mean),
+                                                CpuAutoMatcherOptions(sift_options), nullptr);
+  }
   return std::make_unique<CpuFeatureMatcher>(sift_options, cashash_options, mean);
 }
 

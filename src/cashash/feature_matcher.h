@@ -52,7 +52,8 @@ class FeatureMatcher {
   virtual std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance);
 };
 
-// CPU backends (multi-threaded over pairs).
+// CPU backends (multi-threaded over pairs). MatcherType::kAuto gives an
+// AutoFeatureMatcher over the CPU cascade and brute force.
 std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean);

@@ -45,6 +45,8 @@ std::string MatcherTypeToString(MatcherType type) {
       return "cascade";
     case MatcherType::kBruteForce:
       return "bruteforce";
+    case MatcherType::kAuto:
+      return "auto";
   }
   return "unknown";
 }
@@ -56,6 +58,10 @@ bool MatcherTypeFromString(const std::string& name, MatcherType* type) {
   }
   if (name == "bruteforce") {
     *type = MatcherType::kBruteForce;
+    return true;
+  }
+  if (name == "auto") {
+    *type = MatcherType::kAuto;
     return true;
   }
   return false;

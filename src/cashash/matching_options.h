@@ -26,10 +26,15 @@ struct SiftMatchingOptions {
   std::string Check() const;
 };
 
-enum class MatcherType { kCascade, kBruteForce };
+// kAuto measures both on the run's first pairs and keeps the faster
+// (auto_feature_matcher.h).
+enum class MatcherType { kCascade, kBruteForce, kAuto };
 
 struct CasHashOptions {
-  // cascade | bruteforce ("--CasHash.matcher").
+  // auto | cascade | bruteforce ("--CasHash.matcher"). Runs (the command
+  // line, MatchExhaustive, the Python module) default to auto
+  // (MatcherCommandOptions); a CasHashOptions of its own, as the library's
+  // matcher factories take it, to the cascade.
   MatcherType matcher = MatcherType::kCascade;
   // Number of first-level hash tables and bits per table (bucket count is
   // 2^bits_per_table per table). What users check is how many of the exact

@@ -21,10 +21,10 @@ python3 "$TOOL" make "$WORK/raw.db" --images 12 --features 400 --journal delete
 cp "$WORK/raw.db" "$WORK/reference.db"
 
 # Reference: matching and verification in one run.
-"$CASHASH" exhaustive_matcher --database_path "$WORK/reference.db" --FeatureMatching.use_gpu 0 \
+"$CASHASH" exhaustive_matcher --database_path "$WORK/reference.db" --FeatureMatching.use_gpu 0 --CasHash.matcher cascade \
   --random_seed 3 >"$WORK/reference.log" 2>&1
 # Raw matches only, then verification of the stored matches.
-"$CASHASH" exhaustive_matcher --database_path "$WORK/raw.db" --FeatureMatching.use_gpu 0 \
+"$CASHASH" exhaustive_matcher --database_path "$WORK/raw.db" --FeatureMatching.use_gpu 0 --CasHash.matcher cascade \
   --FeatureMatching.skip_geometric_verification 1 --random_seed 3 >"$WORK/raw.log" 2>&1
 rows=$(python3 -c "import sqlite3,sys; print(sqlite3.connect(sys.argv[1]).execute('SELECT COUNT(*) FROM two_view_geometries').fetchone()[0])" "$WORK/raw.db")
 [[ "$rows" == 0 ]] || { echo "FAIL: raw matching wrote $rows two_view_geometries rows"; exit 1; }

@@ -34,12 +34,12 @@ trap cleanup EXIT
 
 single() {  # single DB [extra args]
   local db="$1"; shift
-  "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 "$@"
+  "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 --CasHash.matcher cascade "$@"
 }
 ranks3() {  # ranks3 DB [extra args]: 3 processes, one thread each
   local db="$1"; shift
   mpirun -np 3 --oversubscribe --bind-to none "$CASHASH" exhaustive_matcher --database_path "$db" \
-    --SiftMatching.use_gpu 0 --FeatureMatching.num_threads 1 "$@"
+    --SiftMatching.use_gpu 0 --CasHash.matcher cascade --FeatureMatching.num_threads 1 "$@"
 }
 expect_mpi_run() {  # expect_mpi_run LOG: rank 0 reported all three ranks
   grep -q "^Matched by 3 MPI processes" "$1" || { echo "FAIL: not a 3-rank run"; cat "$1"; exit 1; }
@@ -105,7 +105,7 @@ for n in 1 3; do
   launch=()
   [[ $n == 3 ]] && launch=(mpirun -np 3 --oversubscribe --bind-to none)
   "${launch[@]}" "$CASHASH" matches_importer --database_path "$WORK/list$n.db" --match_list_path "$WORK/pairs.txt" \
-    --SiftMatching.use_gpu 0 --FeatureMatching.num_threads 1 --ExhaustiveMatching.block_size 5 \
+    --SiftMatching.use_gpu 0 --CasHash.matcher cascade --FeatureMatching.num_threads 1 --ExhaustiveMatching.block_size 5 \
     >"$WORK/list$n.log" 2>&1 || { cat "$WORK/list$n.log"; exit 1; }
 done
 expect_mpi_run "$WORK/list3.log"

@@ -40,7 +40,7 @@ expect_error() {
 }
 
 match() {  # match DB: exit status of a CPU run
-  "$CASHASH" exhaustive_matcher --database_path "$1" --SiftMatching.use_gpu 0 \
+  "$CASHASH" exhaustive_matcher --database_path "$1" --SiftMatching.use_gpu 0 --CasHash.matcher cascade \
     --ExhaustiveMatching.block_size 5
 }
 
@@ -127,7 +127,7 @@ echo "== two cashash processes on one database: the second is refused, the first
 python3 "$TOOL" make "$WORK/two.db" --images 40
 cp "$WORK/two.db" "$WORK/two_reference.db"
 match "$WORK/two_reference.db" >/dev/null 2>&1 || fail "reference run failed"
-(exec "$CASHASH" exhaustive_matcher --database_path "$WORK/two.db" --SiftMatching.use_gpu 0 \
+(exec "$CASHASH" exhaustive_matcher --database_path "$WORK/two.db" --SiftMatching.use_gpu 0 --CasHash.matcher cascade \
   --ExhaustiveMatching.block_size 5) >"$WORK/first.log" 2>&1 &
 FIRST=$!
 PIDS+=($FIRST)

@@ -25,7 +25,7 @@ trap cleanup EXIT
 
 match() {  # match DB [extra args]: the command every run uses
   local db="$1"; shift
-  "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 \
+  "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 --CasHash.matcher cascade \
     --ExhaustiveMatching.block_size 5 "$@"
 }
 
@@ -34,7 +34,7 @@ match() {  # match DB [extra args]: the command every run uses
 start_and_wait_for_rows() {
   local db="$1" log="$2" min_pairs="$3"
   # exec: the signals must reach cashash itself, not a subshell.
-  (exec "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 \
+  (exec "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 --CasHash.matcher cascade \
     --ExhaustiveMatching.block_size 5) >"$log" 2>&1 &
   PID=$!
   echo "$PID" >"$WORK/pid"
@@ -95,7 +95,7 @@ cp "$WORK/base.db" "$WORK/full.db"
 LIMIT_KB=$(( $(stat -c %s "$WORK/base.db") / 1024 + 1500 ))
 rc=0
 ( trap '' XFSZ; ulimit -f "$LIMIT_KB"; exec "$CASHASH" exhaustive_matcher --database_path "$WORK/full.db" \
-    --SiftMatching.use_gpu 0 --ExhaustiveMatching.block_size 5 ) >"$WORK/full.log" 2>&1 || rc=$?
+    --SiftMatching.use_gpu 0 --CasHash.matcher cascade --ExhaustiveMatching.block_size 5 ) >"$WORK/full.log" 2>&1 || rc=$?
 if [[ $rc -ne 1 ]]; then echo "FAIL: exit status $rc with a full disk, expected 1"; cat "$WORK/full.log"; exit 1; fi
 grep "^ERROR: " "$WORK/full.log"
 python3 "$TOOL" check "$WORK/full.db" --pairs $((PAIRS - 1))
