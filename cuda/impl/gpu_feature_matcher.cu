@@ -20,6 +20,7 @@
 #include "impl/cascade_match_kernels.cuh"
 #include "impl/device_memory.cuh"
 #include "utils/cuda_check.cuh"
+#include "utils/stream_priority.cuh"
 
 namespace cashash {
 namespace cuda {
@@ -37,7 +38,7 @@ class GpuBruteForceMatcher : public FeatureMatcher {
     std::string reason;
     if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
     CUDA_CHECK(cudaSetDevice(device_));
-    CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking));
+    stream_ = CreateStageStream(StreamRole::kMatching);
     kernels_ = std::make_unique<BruteForceKernels>(stream_);
   }
   ~GpuBruteForceMatcher() override {
