@@ -131,7 +131,7 @@ TEST(BucketTables, EmptyImage) {
 int ReferenceQuery(const CascadeImage& q_image, size_t q, const CascadeImage& t_image,
                    const SiftMatchingOptions& s, const CasHashOptions& o) {
   const int tables = q_image.hashed.num_tables;
-  std::vector<std::pair<int, uint32_t>> candidates;  // (hamming, index)
+  std::vector<std::pair<int, uint32_t>> candidates, beyond;  // (hamming, index)
   for (size_t f = 0; f < t_image.num_features(); ++f) {
     bool shares = false;
     for (int t = 0; t < tables; ++t) {
@@ -141,22 +141,32 @@ int ReferenceQuery(const CascadeImage& q_image, size_t q, const CascadeImage& t_
     const int hamming =
         __builtin_popcountll(q_image.hashed.remap_codes[2 * q] ^ t_image.hashed.remap_codes[2 * f]) +
         __builtin_popcountll(q_image.hashed.remap_codes[2 * q + 1] ^ t_image.hashed.remap_codes[2 * f + 1]);
-    if (hamming <= o.tau) candidates.push_back({hamming, uint32_t(f)});
+    (hamming <= o.tau ? candidates : beyond).push_back({hamming, uint32_t(f)});
   }
   std::sort(candidates.begin(), candidates.end());
   if (candidates.size() > size_t(o.top_k)) candidates.resize(o.top_k);
   std::vector<std::pair<int, uint32_t>> by_dot;  // (-dot, index): best first
-  for (const auto& c : candidates) {
+  auto add = [&](uint32_t f) {
     int dot = 0;
     for (int d = 0; d < kDescriptorDim; ++d) {
-      dot += int(q_image.descriptors.row(q)[d]) * int(t_image.descriptors.row(c.second)[d]);
+      dot += int(q_image.descriptors.row(q)[d]) * int(t_image.descriptors.row(f)[d]);
     }
-    by_dot.push_back({-dot, c.second});
+    by_dot.push_back({-dot, f});
+    std::sort(by_dot.begin(), by_dot.end());
+  };
+  auto accepted = [&]() {
+    if (by_dot.empty() || by_dot[0].first == 0) return false;
+    const int second = by_dot.size() > 1 ? -by_dot[1].first : 0;
+    return AcceptSiftMatch(-by_dot[0].first, second, float(s.max_ratio), float(s.max_distance));
+  };
+  for (const auto& c : candidates) add(c.second);
+  if (!accepted()) return -1;
+  // Step 5b: a thin list is decided again with the nearest beyond tau.
+  if (candidates.size() < size_t(kThinListSize)) {
+    std::sort(beyond.begin(), beyond.end());
+    for (size_t i = 0; i < beyond.size() && i < size_t(kBeyondTauCandidates); ++i) add(beyond[i].second);
+    if (!accepted()) return -1;
   }
-  std::sort(by_dot.begin(), by_dot.end());
-  if (by_dot.empty() || by_dot[0].first == 0) return -1;
-  const int second = by_dot.size() > 1 ? -by_dot[1].first : 0;
-  if (!AcceptSiftMatch(-by_dot[0].first, second, float(s.max_ratio), float(s.max_distance))) return -1;
   return int(by_dot[0].second);
 }
 

@@ -14,6 +14,7 @@
 // dots by (dot descending, index ascending).
 #include "impl/cascade_match_kernels.cuh"
 
+#include "cashash/cascade_hashing.h"
 #include "cashash/epipolar_band.h"
 #include "impl/cascade_tile_kernels.cuh"
 #include "utils/cuda_check.cuh"
@@ -176,12 +177,103 @@ __device__ __forceinline__ uint32_t EntryKey(uint4 c, uint4 s, bool valid, uint6
   return key;
 }
 
+// The query's buckets of all tables in `target` as one stream of `total`
+// entries: lane s holds where slot s (the s-th non-empty bucket) starts in
+// the stream and in the entry array (see ChunkEntryIndex).
+struct BucketStream {
+  uint32_t total;
+  uint32_t my_start;
+  uint32_t my_base;
+};
+
+__device__ __forceinline__ BucketStream OpenBucketStream(uint64_t signature, const DeviceImageView& target,
+                                                         const MatchParams& params, WarpScratch& scratch) {
+  const unsigned lane = LaneId();
+  const int num_tables = params.num_tables;
+  const int bits = params.bits_per_table;
+  const uint32_t buckets = 1u << bits;
+  const uint64_t bucket_mask = buckets - 1;
+  const uint32_t n = target.num_features;
+  // Lane t < num_tables reads the bucket of table t; a scan places them.
+  uint32_t size = 0, begin = 0;
+  if (static_cast<int>(lane) < num_tables) {
+    const uint32_t bucket = static_cast<uint32_t>((signature >> (lane * bits)) & bucket_mask);
+    const uint32_t* offsets = target.offsets + lane * (buckets + 1) + bucket;
+    begin = offsets[0];
+    size = offsets[1] - begin;
+  }
+  uint32_t inclusive = size;
+  for (int d = 1; d < num_tables; d <<= 1) {
+    const uint32_t o = __shfl_up_sync(kFullWarpMask, inclusive, d);
+    if (lane >= static_cast<unsigned>(d)) inclusive += o;
+  }
+  BucketStream stream;
+  stream.total = __shfl_sync(kFullWarpMask, inclusive, num_tables - 1);
+  const unsigned nonempty = __ballot_sync(kFullWarpMask, size != 0);
+  __syncwarp();  // the previous query's reads of the scratch are done
+  if (size != 0) {
+    const uint32_t slot = __popc(nonempty & LaneMaskLt());
+    scratch.base[slot] = lane * n + begin - (inclusive - size);
+    scratch.start[slot] = inclusive - size;
+  }
+  __syncwarp();
+  const bool has_slot = lane < static_cast<unsigned>(__popc(nonempty));
+  stream.my_start = has_slot ? scratch.start[lane] : 0xffffffffu;
+  stream.my_base = has_slot ? scratch.base[lane] : 0u;
+  return stream;
+}
+
+// Step 5b of cascade_hashing.h: the kBeyondTauCandidates (two) nearest
+// distinct candidates beyond tau, as keys (distance << 24 | feature) in
+// ascending order, kEmptyKey where there are fewer; same in every lane.
+// One more pass over the query's buckets, taken only for accepted matches
+// from thin lists.
+__device__ void NearestBeyondTau(const DeviceImageView& query, uint32_t q, const DeviceImageView& target,
+                                 const MatchParams& params, WarpScratch& scratch, uint32_t* first,
+                                 uint32_t* second) {
+  static_assert(kBeyondTauCandidates == 2, "two nearest candidates beyond tau are tracked");
+  const BucketStream stream = OpenBucketStream(query.signatures[q], target, params, scratch);
+  const ulonglong2 code = query.codes[q];
+  const uint32_t tau = static_cast<uint32_t>(min(params.tau, 128));
+  uint32_t min1 = WarpSortedList::kEmptyKey, min2 = WarpSortedList::kEmptyKey;
+  uint32_t slot_before = ~0u;
+  for (uint32_t chunk = 0; chunk < stream.total; chunk += 32) {
+    const uint4* entry = reinterpret_cast<const uint4*>(
+        target.entries + ChunkEntryIndex(stream.my_start, stream.my_base, chunk, stream.total, slot_before));
+    const uint4 c = __ldg(entry), meta = __ldg(entry + 1);
+    const uint32_t distance = __popc(uint32_t(code.x) ^ c.x) + __popc(uint32_t(code.x >> 32) ^ c.y) +
+                              __popc(uint32_t(code.y) ^ c.z) + __popc(uint32_t(code.y >> 32) ^ c.w);
+    const uint32_t key = distance << 24 | meta.z;
+    if (chunk + LaneId() < stream.total && distance > tau && key < min2 && key != min1) {
+      if (key < min1) {
+        min2 = min1;
+        min1 = key;
+      } else {
+        min2 = key;
+      }
+    }
+  }
+  // A feature sharing several tables' buckets can be the min of several
+  // lanes: those lanes offer their own second instead.
+  *first = __reduce_min_sync(kFullWarpMask, min1);
+  *second = __reduce_min_sync(kFullWarpMask, min1 == *first ? min2 : min1);
+}
+
+// Exact dot product of the query row with target feature f (every lane).
+__device__ __forceinline__ int WarpDot(const uint8_t* query_row, const uint8_t* target_row) {
+  const uint32_t a = reinterpret_cast<const uint32_t*>(query_row)[LaneId()];
+  const uint32_t b = reinterpret_cast<const uint32_t*>(target_row)[LaneId()];
+  return static_cast<int>(__reduce_add_sync(kFullWarpMask, __dp4a(a, b, 0u)));
+}
+
 // Exact dot products of the ranked candidates, then best / second best and
 // COLMAP's rule: the accepted match of feature q of `query`, or -1 (the same
-// value in every lane).
+// value in every lane). Unguided queries decide thin lists again with the
+// nearest candidates beyond tau (step 5b of cascade_hashing.h).
+template <bool kUnguided>
 __device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, uint32_t q,
                                                 const DeviceImageView& target, const WarpSortedList& ranked,
-                                                const MatchParams& params) {
+                                                const MatchParams& params, WarpScratch& scratch) {
   const unsigned lane = LaneId();
 
   // Exact dot products of the ranked candidates: 8 per pass, 4 lanes of 32
@@ -229,17 +321,40 @@ __device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, ui
   if (!Accept(static_cast<int>(best_dot), static_cast<int>(second_dot), params.max_ratio, params.max_distance)) {
     return -1;
   }
-  return static_cast<int>(best_index);
+  if (!kUnguided || count >= kThinListSize) return static_cast<int>(best_index);
+  // Step 5b: (dot descending, index ascending) over the ranked and the
+  // nearest candidates beyond tau.
+  uint32_t beyond[kBeyondTauCandidates];
+  NearestBeyondTau(query, q, target, params, scratch, &beyond[0], &beyond[1]);
+  int best = static_cast<int>(best_dot), second = static_cast<int>(second_dot);
+  uint32_t best_f = best_index;
+  const uint8_t* query_row = query.descriptors + size_t(q) * 128;
+  for (uint32_t key : beyond) {
+    if (key == WarpSortedList::kEmptyKey) continue;
+    const uint32_t f = key & kIndexMask;
+    const int d = WarpDot(query_row, target.descriptors + size_t(f) * 128);
+    if (d > best || (d == best && f < best_f)) {
+      second = max(second, best);
+      best = d;
+      best_f = f;
+    } else {
+      second = max(second, d);
+    }
+  }
+  if (!Accept(best, second, params.max_ratio, params.max_distance)) return -1;
+  return static_cast<int>(best_f);
 }
 
 // Candidate filters of MatchQuery / SelectQuery: every candidate
 // (exhaustive matching) or those within the query's epipolar band (guided
 // matching). Filter(key) gives key or kEmptyKey.
 struct NoBand {
+  static constexpr bool kUnguided = true;
   __device__ __forceinline__ uint32_t Filter(uint32_t key) const { return key; }
 };
 
 struct InBand {
+  static constexpr bool kUnguided = false;
   EpipolarLine line;
   const float2* target_points;
   double max_distance;
@@ -260,41 +375,12 @@ template <class Band>
 __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const DeviceImageView& target,
                           const MatchParams& params, WarpScratch& scratch, const Band& band) {
   const unsigned lane = LaneId();
-  const int num_tables = params.num_tables;
-  const int bits = params.bits_per_table;
-  const uint32_t buckets = 1u << bits;
-  const uint64_t bucket_mask = buckets - 1;
-  const uint32_t n = target.num_features;
   const uint32_t tau = static_cast<uint32_t>(params.tau);
   const uint64_t signature = query.signatures[q];
   const ulonglong2 code = query.codes[q];
   const BucketEntry* entries = target.entries;
-
-  // Lane t < num_tables reads the bucket of table t; a scan places them.
-  uint32_t size = 0, begin = 0;
-  if (static_cast<int>(lane) < num_tables) {
-    const uint32_t bucket = static_cast<uint32_t>((signature >> (lane * bits)) & bucket_mask);
-    const uint32_t* offsets = target.offsets + lane * (buckets + 1) + bucket;
-    begin = offsets[0];
-    size = offsets[1] - begin;
-  }
-  uint32_t inclusive = size;
-  for (int d = 1; d < num_tables; d <<= 1) {
-    const uint32_t o = __shfl_up_sync(kFullWarpMask, inclusive, d);
-    if (lane >= static_cast<unsigned>(d)) inclusive += o;
-  }
-  const uint32_t total = __shfl_sync(kFullWarpMask, inclusive, num_tables - 1);
-  const unsigned nonempty = __ballot_sync(kFullWarpMask, size != 0);
-  __syncwarp();  // the previous query's reads of the scratch are done
-  if (size != 0) {
-    const uint32_t slot = __popc(nonempty & LaneMaskLt());
-    scratch.base[slot] = lane * n + begin - (inclusive - size);
-    scratch.start[slot] = inclusive - size;
-  }
-  __syncwarp();
-  const bool has_slot = lane < static_cast<unsigned>(__popc(nonempty));
-  const uint32_t my_start = has_slot ? scratch.start[lane] : 0xffffffffu;
-  const uint32_t my_base = has_slot ? scratch.base[lane] : 0u;
+  const BucketStream stream = OpenBucketStream(signature, target, params, scratch);
+  const uint32_t total = stream.total, my_start = stream.my_start, my_base = stream.my_base;
 
   QueryRanking ranking(tau);
   uint32_t slot_before = ~0u;
@@ -317,7 +403,7 @@ __device__ int MatchQuery(const DeviceImageView& query, uint32_t q, const Device
                 scratch.pending, params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
-  return DecideFromRanked(query, q, target, ranking.ranked, params);
+  return DecideFromRanked<Band::kUnguided>(query, q, target, ranking.ranked, params, scratch);
 }
 
 // The same answer from the query's candidate list (list row `row`): every
@@ -343,7 +429,7 @@ __device__ int SelectQuery(const DeviceImageView& query, uint32_t q, size_t row,
     ranking.Add(band.Filter(key0), band.Filter(key1), scratch.pending, params.top_k);
   }
   if (ranking.num_pending > 0) ranking.Merge(scratch.pending, params.top_k);
-  return DecideFromRanked(query, q, target, ranking.ranked, params);
+  return DecideFromRanked<Band::kUnguided>(query, q, target, ranking.ranked, params, scratch);
 }
 
 // How the match kernel answers one query: straight from the bucket tables,

@@ -25,6 +25,17 @@
 //     best <= max_distance and angle(best) < max_ratio * angle(second), the
 //     second best defaulting to dot 0 (angle pi/2) when there is none. A best
 //     dot of 0 is never a match (COLMAP's brute force keeps no best then).
+//     5b. Thin lists (unguided matching only): a match accepted from fewer
+//     than kThinListSize ranked candidates is decided again with the
+//     kBeyondTauCandidates nearest candidates beyond tau added (smallest
+//     (Hamming distance, feature index) among the features of B sharing a
+//     bucket with q whose distance exceeds tau): best and second best of
+//     the enlarged set, same rule. Why: with one or two candidates within
+//     tau the second best defaults to a far one, so chance matches between
+//     images that do not overlap passed the ratio test (10x exact
+//     matching's on a generated street); the true second best lies just
+//     beyond tau. Only accepted matches are re-decided, so the nearest
+//     candidates beyond tau are looked up for few queries on the GPU.
 //  6. Cross check keeps i->j only if j->i is the result of B against A.
 //
 // Projection entries: clamp(round(64 * g), -255, 255) with g an approximate
@@ -41,6 +52,10 @@
 #include "cashash/types.h"
 
 namespace cashash {
+
+// Step 5b of the definition above.
+constexpr int kThinListSize = 4;
+constexpr int kBeyondTauCandidates = 2;
 
 struct CascadeProjections {
   int num_tables = 0;

@@ -158,6 +158,9 @@ class CascadeQuery {
     // candidate of this query) is unpredictable, so it is computed, not
     // branched on.
     size_t num_keys = 0;
+    // The two nearest distinct candidates beyond tau (step 5b), as keys.
+    constexpr uint64_t kNone = ~uint64_t{0};
+    uint64_t beyond_first = kNone, beyond_second = kNone;
     for (int t = 0; t < num_tables; ++t) {
       const size_t end = target_.buckets.end(t, query_buckets[t]);
       for (size_t p = target_.buckets.begin(t, query_buckets[t]); p < end; ++p) {
@@ -170,8 +173,17 @@ class CascadeQuery {
         if (kBand) keep = keep && line.Contains(target_points[2 * f], target_points[2 * f + 1], max_band_distance);
         seen[f / 64] = word | (keep ? bit : 0);
         // Key order = (Hamming distance, feature index) ascending.
-        keys[num_keys] = (static_cast<uint64_t>(hamming) << 32) | f;
+        const uint64_t key = (static_cast<uint64_t>(hamming) << 32) | f;
+        keys[num_keys] = key;
         num_keys += keep;
+        if (!kBand && hamming > tau && key < beyond_second && key != beyond_first) {
+          if (key < beyond_first) {
+            beyond_second = beyond_first;
+            beyond_first = key;
+          } else {
+            beyond_second = key;
+          }
+        }
         histogram[keep ? hamming : 0] += keep;
       }
     }
@@ -213,8 +225,7 @@ class CascadeQuery {
     int best_dot = -1;
     int64_t best_index = -1;
     int second_dot = 0;
-    for (size_t r = 0; r < num_ranked; ++r) {
-      const uint32_t f = static_cast<uint32_t>(keys[r]);
+    auto consider = [&](uint32_t f) {
       const int dot = DescriptorDot(query_desc, target_.descriptors.row(f));
       if (dot > best_dot || (dot == best_dot && f < best_index)) {
         second_dot = std::max(second_dot, best_dot);
@@ -223,9 +234,17 @@ class CascadeQuery {
       } else {
         second_dot = std::max(second_dot, dot);
       }
-    }
+    };
+    for (size_t r = 0; r < num_ranked; ++r) consider(static_cast<uint32_t>(keys[r]));
     if (best_index < 0 || best_dot <= 0) return -1;
     if (!AcceptSiftMatch(best_dot, second_dot, max_ratio_, max_distance_)) return -1;
+    if (!kBand && num_ranked < static_cast<size_t>(kThinListSize)) {
+      // Step 5b: a thin list's second best is decided again.
+      static_assert(kBeyondTauCandidates == 2, "two nearest candidates beyond tau are tracked");
+      if (beyond_first != kNone) consider(static_cast<uint32_t>(beyond_first));
+      if (beyond_second != kNone) consider(static_cast<uint32_t>(beyond_second));
+      if (!AcceptSiftMatch(best_dot, second_dot, max_ratio_, max_distance_)) return -1;
+    }
     return static_cast<int>(best_index);
   }
 
