@@ -344,5 +344,49 @@ TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {
   EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);
 }
 
+// The shape the table rule gives 16,384 features and more (table_shape.h):
+// 8 tables of 8 bits fill the 64-bit signature exactly. Same matches as the
+// CPU, as for every other shape.
+TEST(GpuCascadeTest, SixtyFourSignatureBitsOfTheTableRuleAgreeWithCpu) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(5);
+  std::vector<FeatureDescriptors> images{source.Image(16384)};
+  images.push_back(source.Related(images[0], 16384, 0.5));
+  images.push_back(source.Related(images[1], 16384, 0.5));
+  CasHashOptions cas;
+  cas.num_tables = 8;
+  cas.bits_per_table = 8;
+  const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), cas);
+  EXPECT_GT(a.cpu, 1000u);
+  EXPECT_EQ(a.common, a.cpu);
+  EXPECT_EQ(a.common, a.gpu);
+}
+
+// --CasHash.matcher auto on the GPU: a wrapper over the GPU cascade and
+// brute force; whichever answers a pair, its matches are that backend's.
+TEST(GpuCascadeTest, AutoGivesEachPairOneBackendsMatches) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(6);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  for (int i = 1; i < 12; ++i) images.push_back(source.Related(images[i - 1], 3000, 0.5));
+  const std::vector<ImagePair> pairs = AllPairs(images.size());
+  const MeanDescriptor mean = MeanOf(images);
+  CasHashOptions cas;
+  cas.matcher = MatcherType::kCascade;
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, mean, 0);
+  cas.matcher = MatcherType::kBruteForce;
+  auto brute_force = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, mean, 0);
+  cas.matcher = MatcherType::kAuto;
+  auto automatic = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, mean, 0);
+  EXPECT_EQ(automatic->Name(), "auto(gpu-cascade|gpu-bruteforce)");
+  const auto by_cascade = AddAndMatch(cascade.get(), images, pairs);
+  const auto by_brute_force = AddAndMatch(brute_force.get(), images, pairs);
+  const auto by_auto = AddAndMatch(automatic.get(), images, pairs);
+  ASSERT_EQ(by_auto.size(), pairs.size());
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    EXPECT_TRUE(by_auto[p] == by_cascade[p] || by_auto[p] == by_brute_force[p]) << "pair " << p;
+  }
+}
+
 }  // namespace
 }  // namespace cashash
