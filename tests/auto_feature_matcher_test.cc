@@ -283,3 +283,34 @@ TEST(AutoFeatureMatcher, CpuFactoryWrapsOnlyAuto) {
 
 }  // namespace
 }  // namespace cashash
+
+namespace cashash {
+namespace {
+
+// Runs give first_timed_call = 2: the first chunk (one block against
+// itself, mostly overlapping images) is shared untimed, whatever it shows,
+// and the decision comes from the next chunk.
+TEST(AutoFeatureMatcher, FirstChunkIsNotTimedWhenRunsSaySo) {
+  AutoMatcherOptions options;
+  options.first_timed_call = 2;
+  Harness h(0.004, 0.002, options);  // on the first chunk brute force looks 2x faster
+  FeatureDescriptors none;
+  for (int i = 0; i < 60; ++i) h.matcher->AddImage(image_t(i), none);
+  const std::vector<ImagePair> pairs = AllPairs(0, 60);
+  const std::vector<ImagePair> first(pairs.begin(), pairs.begin() + 400), rest(pairs.begin() + 400, pairs.end());
+  h.matcher->MatchPairs(first);
+  EXPECT_FALSE(h.matcher->decision().decided);
+  EXPECT_EQ(h.cascade.matched.size() + h.brute_force.matched.size(), 400u);
+  // A run whose later (far) pairs make the cascade 4x faster per pair.
+  Harness far(0.001, 0.004, options);
+  for (int i = 0; i < 60; ++i) far.matcher->AddImage(image_t(i), none);
+  far.matcher->MatchPairs(first);
+  EXPECT_FALSE(far.matcher->decision().decided);
+  far.matcher->MatchPairs(rest);
+  ASSERT_TRUE(far.matcher->decision().decided);
+  EXPECT_TRUE(far.matcher->decision().cascade_won);
+  EXPECT_EQ(far.cascade.matched.size() + far.brute_force.matched.size(), pairs.size());
+}
+
+}  // namespace
+}  // namespace cashash

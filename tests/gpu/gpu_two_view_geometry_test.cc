@@ -137,10 +137,9 @@ TEST(GpuTwoViewRansac, SyntheticPairsAgreeWithCpu) {
 }
 
 // Pairs of pure chance matches (two unrelated images): the chance test of
-// ransac_early_exit.h stops F and H on the device at the same trial as on the
-// CPU, long before the cap, with the full budget's decision; a pair with a
-// real model is untouched.
-TEST(GpuTwoViewRansac, ChanceMatchesStopEarlyAsOnTheCpu) {
+// ransac_early_exit.h stops F and H on the device long before the cap, with
+// the full budget's decision; a pair with a real model is untouched.
+TEST(GpuTwoViewRansac, ChanceMatchesStopEarlyWithTheFullBudgetsDecision) {
   SKIP_WITHOUT_CUDA_DEVICE();
   std::vector<SyntheticScene> scenes;
   for (unsigned seed = 1; seed <= 6; ++seed) {
@@ -149,7 +148,10 @@ TEST(GpuTwoViewRansac, ChanceMatchesStopEarlyAsOnTheCpu) {
     o.outlier_ratio = 0.0;
     SyntheticScene scene = MakeScene(o);
     std::srand(seed);
-    const int n = 20 + 5 * static_cast<int>(seed);
+    // 23 to 38 uniform matches: the chance model stops all of them (larger
+    // uniform pairs run on, on both backends: the tail reaching 15 inliers
+    // within the budget is then above max_risk).
+    const int n = 20 + 3 * static_cast<int>(seed);
     for (int i = 0; i < n; ++i) {
       auto u = [] { return static_cast<double>(std::rand()) / RAND_MAX; };
       scene.points1.emplace_back(u() * scene.width, u() * scene.height);
@@ -188,10 +190,11 @@ TEST(GpuTwoViewRansac, ChanceMatchesStopEarlyAsOnTheCpu) {
                 cpu_F.num_inliers, full_F.num_inliers, H[k].num_trials);
     if (chance) {
       EXPECT_TRUE(F[k].early_exit);
-      EXPECT_LE(F[k].num_trials, 2048);
+      EXPECT_LE(F[k].num_trials, 4096);
+      EXPECT_LT(F[k].num_trials, full_F.num_trials);
       EXPECT_LT(F[k].num_inliers, options.min_num_inliers);
       EXPECT_LT(full_F.num_inliers, options.min_num_inliers);
-      EXPECT_LE(H[k].num_trials, 2048);
+      EXPECT_TRUE(H[k].early_exit);
     } else {
       EXPECT_FALSE(F[k].early_exit);
       EXPECT_GE(F[k].num_inliers, 190);
