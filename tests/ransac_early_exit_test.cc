@@ -138,6 +138,50 @@ TEST(RansacEarlyExit, PairsWithAModelRunAsTheFullBudget) {
   }
 }
 
+// H only matters above 0.8 x 0.95 of F's inliers (or of min_num_inliers
+// when F fails): below, it stops once such a model would have been found.
+TEST(RansacEarlyExit, RelevantHomographyInliersFollowTheDecisionRule) {
+  TwoViewGeometryOptions options;
+  EXPECT_EQ(TwoViewRelevantHomographyInliers(1000, options), 760);
+  EXPECT_EQ(TwoViewRelevantHomographyInliers(0, options), 12);  // ceil(0.76 x 15)
+  EXPECT_EQ(TwoViewRelevantHomographyInliers(5, options), 12);
+  options.early_exit = false;
+  EXPECT_EQ(TwoViewRelevantHomographyInliers(1000, options), 0);
+}
+
+TEST(RansacEarlyExit, HomographyStopsWhenItCannotChangeTheDecision) {
+  for (const bool planar : {false, true}) {
+    SceneOptions o;
+    o.planar = planar;
+    o.num_inliers = 400;
+    o.outlier_ratio = 0.2;
+    const SyntheticScene scene = MakeScene(o);
+    const TwoViewPoints points = PrepareTwoViewPoints(scene.points1, scene.points2, scene.matches);
+    const TwoViewGeometryOptions options = Options(true);
+    const TwoViewModelEstimate F = EstimateFundamental(points, options);
+    const int relevant = TwoViewRelevantHomographyInliers(F.num_inliers, options);
+    const TwoViewModelEstimate full_H = EstimateHomography(points, options);
+    const TwoViewModelEstimate H = EstimateHomography(points, options, relevant);
+    if (planar) {
+      // A plane explains the matches: H runs as COLMAP's loop.
+      EXPECT_GE(full_H.num_inliers, relevant);
+      EXPECT_EQ(H.num_trials, full_H.num_trials);
+      EXPECT_EQ(H.num_inliers, full_H.num_inliers);
+    } else {
+      EXPECT_LT(full_H.num_inliers, relevant);
+      EXPECT_TRUE(H.early_exit);
+      EXPECT_LT(H.num_trials, full_H.num_trials);
+    }
+    const Camera camera = scene.MakeCamera(false);
+    const TwoViewGeometry a =
+        EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2, scene.matches, Options(false));
+    const TwoViewGeometry b =
+        EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2, scene.matches, Options(true));
+    EXPECT_EQ(b.config, a.config) << (planar ? "planar" : "general");
+    EXPECT_EQ(b.inlier_matches.size(), a.inlier_matches.size());
+  }
+}
+
 TEST(RansacEarlyExit, OptionIsChecked) {
   TwoViewGeometryOptions options;
   options.early_exit_max_risk = 0;

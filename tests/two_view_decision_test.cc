@@ -55,7 +55,8 @@ TEST(TwoViewDecision, StepsComposeToEstimateTwoViewGeometry) {
           EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2, scene.matches, options);
       const TwoViewPoints points = PrepareTwoViewPoints(scene.points1, scene.points2, scene.matches);
       const TwoViewModelEstimate F = EstimateFundamental(points, options);
-      const TwoViewModelEstimate H = EstimateHomography(points, options);
+      const TwoViewModelEstimate H =
+          EstimateHomography(points, options, TwoViewRelevantHomographyInliers(F.success ? F.num_inliers : 0, options));
       const bool calibrated = TwoViewIsCalibrated(camera, camera);
       EXPECT_EQ(calibrated, priors);
       const TwoViewModelEstimate E =

@@ -201,6 +201,13 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   H_launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
   H_launch.masks = d.masks.as<uint8_t>() + total;
   H_launch.max_trials = RansacMaxTrials(ransac, 4);
+  if (d.options.early_exit) {
+    // H only matters above a share of F's inliers: it runs after F and
+    // stops once no model that could change the decision exists.
+    H_launch.relevance = F_launch.outputs;
+    H_launch.relevance_ratio = TwoViewRelevantHomographyRatio(d.options);
+    H_launch.relevance_min_inliers = std::max(0, d.options.min_num_inliers);
+  }
   // E's masks sit at 2 total + (offset - total): the kernel indexes masks by
   // the pair's point offset, so its base is shifted back by `total`.
   E_launch.num_pairs = static_cast<int>(num_E);
@@ -216,7 +223,15 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     LaunchEssentialRansac(E_launch, d.stream_E);
     CUDA_CHECK(cudaEventRecord(d.done_E, d.stream_E));
   }
-  LaunchTwoViewRansac(F_launch, H_launch, d.stream);
+  if (H_launch.relevance != nullptr) {
+    RansacLaunch no_H = H_launch, no_F = F_launch;
+    no_H.num_pairs = 0;
+    no_F.num_pairs = 0;
+    LaunchTwoViewRansac(F_launch, no_H, d.stream);
+    LaunchTwoViewRansac(no_F, H_launch, d.stream);
+  } else {
+    LaunchTwoViewRansac(F_launch, H_launch, d.stream);
+  }
   if (num_E > 0) CUDA_CHECK(cudaStreamWaitEvent(d.stream, d.done_E, 0));
 
   const size_t num_outputs = inputs.size();
@@ -308,7 +323,8 @@ class GpuBatchVerifier : public BatchVerifier {
     char line[512];
     std::snprintf(line, sizeof(line),
                   "GPU verification: %zu pairs (%zu with E), device busy %.3f s of %.3f s; trials per pair F %.0f, "
-                  "H %.0f, E %.0f; stopped early as chance F %lld, H %lld, E %lld",
+                  "H %.0f, E %.0f; stopped early (chance, or H below what could change the decision) F %lld, "
+                  "H %lld, E %lld",
                   st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, per_pair(st.trials_F, st.pairs),
                   per_pair(st.trials_H, st.pairs), per_pair(st.trials_E, st.pairs_E), st.early_exits_F,
                   st.early_exits_H, st.early_exits_E);

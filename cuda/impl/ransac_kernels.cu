@@ -236,6 +236,17 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
   int dyn_max_trials = launch.max_trials;
   int trials_done = 0;
   const RansacEarlyExitOptions& early = launch.early_exit;
+  // Fewest inliers that can change the decision (H after F) and the trials
+  // after which such a model would have been found: the CPU's
+  // RansacOptions::relevant_inliers.
+  int relevant = 0, relevant_trials = launch.max_trials;
+  if (launch.relevance != nullptr) {
+    const RansacPairOutput& f = launch.relevance[pair];
+    const int num_f = f.success ? f.num_inliers : 0;
+    relevant = max(1, static_cast<int>(ceil(launch.relevance_ratio * max(num_f, launch.relevance_min_inliers))));
+    relevant_trials = max(launch.min_trials, RequiredTrials(relevant, n, launch.confidence, launch.trials_multiplier,
+                                                            Model::kSampleSize));
+  }
   for (int round = 0;; ++round) {
     const int trial = round * kRansacThreads + threadIdx.x;
     // Window trials are scored in full: their supports fit the chance model.
@@ -341,8 +352,10 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       __syncthreads();  // everyone has read the best before thread 0 may change it
     }
     trials_done = min((round + 1) * kRansacThreads, launch.max_trials);
-    const bool stop =
-        trials_done >= launch.max_trials || (trials_done >= dyn_max_trials && trials_done >= launch.min_trials);
+    const bool irrelevant = relevant > 0 && s.best_count < relevant && trials_done >= relevant_trials;
+    const bool stop = trials_done >= launch.max_trials ||
+                      (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant;
+    if (irrelevant && threadIdx.x == 0) s.exit_early = 1;
     if (!stop && threadIdx.x == 0 && RansacEarlyExitCheckpoint(early, trials_done) &&
         RansacShouldExitEarly(early, n, Model::kSampleSize, s.window_support_sum, s.window_hypotheses,
                               s.best_count, s.hypotheses, trials_done, launch.max_trials - trials_done)) {

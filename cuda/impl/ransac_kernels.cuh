@@ -43,6 +43,12 @@ struct RansacLaunch {
   double trials_multiplier = 3.0;
   int shared_points = 0;        // pairs with at most this many points are cached in shared memory
   RansacEarlyExitOptions early_exit;  // the CPU path's chance test; off when min_num_inliers is 0
+  // H after F (TwoViewRelevantHomographyInliers): F's outputs of the same
+  // pairs, read by the H blocks to stop once no H that could change the
+  // decision exists; nullptr keeps COLMAP's loop.
+  const RansacPairOutput* relevance = nullptr;
+  double relevance_ratio = 0;
+  int relevance_min_inliers = 0;
 };
 
 constexpr int kRansacThreads = 128;
@@ -51,7 +57,9 @@ constexpr int kRansacThreads = 128;
 constexpr int kRansacMaxSharedPoints = 3072;
 
 // F of F.num_pairs pairs and H of H.num_pairs pairs in one grid (F blocks
-// first; callers put the largest pairs first so the tail is short).
+// first; callers put the largest pairs first so the tail is short). With
+// H.relevance set, H needs F's outputs: call it twice on one stream, F
+// alone (H.num_pairs 0), then H alone (F.num_pairs 0).
 void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream);
 
 // E (5-point LO-RANSAC on normalised camera coordinates) of E.num_pairs

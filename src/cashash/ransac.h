@@ -46,6 +46,12 @@ struct RansacOptions {
   // Stop pairs whose supports look like chance (ransac_early_exit.h); off
   // while early_exit.min_num_inliers is 0.
   RansacEarlyExitOptions early_exit;
+  // When > 0: stop once the best model has fewer inliers than this and a
+  // model with this many would, with `confidence`, have been found by now
+  // (COLMAP's own trial rule for that inlier count). For H, whose count
+  // only matters to the decision above a fraction of F's (two-view
+  // geometry); 0 keeps COLMAP's loop.
+  int relevant_inliers = 0;
 };
 
 struct RansacSupport {
@@ -124,6 +130,12 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
   // Supports of the early-exit window, scored in full (no give-up).
   const RansacEarlyExitOptions& early = options.early_exit;
   double window_support_sum = 0, window_hypotheses = 0, hypotheses = 0;
+  const int relevant_trials =
+      options.relevant_inliers > 0
+          ? std::max(options.min_num_trials,
+                     RansacRequiredTrials(static_cast<size_t>(options.relevant_inliers), num_data, options.confidence,
+                                          options.num_trials_multiplier, kSampleSize))
+          : INT_MAX;
   for (; trials < max_trials && !done; ++trials) {
     SampleDistinct(rng, static_cast<uint32_t>(num_data), kSampleSize, sample.data());
     const int num_models = estimator.MinimalSolve(sample.data(), models.data());
@@ -163,6 +175,10 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
         done = true;
         break;
       }
+    }
+    if (!done && best.num_inliers < options.relevant_inliers && trials + 1 >= relevant_trials) {
+      done = true;
+      report.early_exit = true;
     }
     if (!done && RansacEarlyExitCheckpoint(early, trials + 1) &&
         RansacShouldExitEarly(early, static_cast<int>(num_data), kSampleSize, window_support_sum,

@@ -2,6 +2,7 @@
 // LO-RANSAC, the configuration decision, and the watermark check.
 #include "cashash/two_view_geometry.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -128,6 +129,16 @@ RansacEarlyExitOptions TwoViewEarlyExitOptions(const TwoViewGeometryOptions& opt
   return early;
 }
 
+double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options) {
+  return options.max_H_inlier_ratio * options.min_E_F_inlier_ratio;
+}
+
+int TwoViewRelevantHomographyInliers(int num_F_inliers, const TwoViewGeometryOptions& options) {
+  if (!options.early_exit) return 0;
+  const int reference = std::max(num_F_inliers, std::max(0, options.min_num_inliers));
+  return std::max(1, static_cast<int>(std::ceil(TwoViewRelevantHomographyRatio(options) * reference)));
+}
+
 TwoViewGeometry TwoViewGeometry::Inverted() const {
   TwoViewGeometry inv;
   inv.config = config;
@@ -193,7 +204,13 @@ TwoViewModelEstimate EstimateFundamental(const TwoViewPoints& points, const TwoV
 }
 
 TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options) {
+  return EstimateHomography(points, options, 0);
+}
+
+TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options,
+                                        int relevant_inliers) {
   RansacOptions h_options = MakeModelRansacOptions(options, kSeedH);
+  h_options.relevant_inliers = relevant_inliers;
   h_options.max_error = options.max_error * points.norm.scale;
   TwoViewModelEstimate H = ToEstimate(LoRansac(HomographyEstimator(points.normalized), h_options));
   H.model = H.success ? HomographyToPixels(H.model, points.norm) : Eigen::Matrix3d::Zero();
@@ -321,7 +338,8 @@ TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
   }
   const TwoViewPoints points = PrepareTwoViewPoints(points1, points2, matches);
   const TwoViewModelEstimate F = EstimateFundamental(points, options);
-  const TwoViewModelEstimate H = EstimateHomography(points, options);
+  const TwoViewModelEstimate H =
+      EstimateHomography(points, options, TwoViewRelevantHomographyInliers(F.success ? F.num_inliers : 0, options));
   const bool calibrated = TwoViewIsCalibrated(camera1, camera2);
   const TwoViewModelEstimate E =
       calibrated ? EstimateEssential(camera1, camera2, points.pixels, options) : TwoViewModelEstimate();

@@ -74,7 +74,8 @@ struct TwoViewGeometry {
 // Verifies `matches` between two images. points1/points2 are the keypoint
 // positions (pixels) of the two images, indexed by the match indices.
 // Equivalent to PrepareTwoViewPoints, EstimateFundamental,
-// EstimateHomography, EstimateEssential (calibrated pairs only) and
+// EstimateHomography (bounded by TwoViewRelevantHomographyInliers of F's
+// count), EstimateEssential (calibrated pairs only) and
 // DecideTwoViewGeometry in a row; a batch verifier (the GPU one) runs the
 // same steps with F and H estimated elsewhere.
 TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
@@ -112,6 +113,16 @@ bool TooFewMatchesForTwoView(size_t num_matches, const TwoViewGeometryOptions& o
 // The chance test of E, F and H RANSAC (both backends) for these options.
 RansacEarlyExitOptions TwoViewEarlyExitOptions(const TwoViewGeometryOptions& options);
 
+// With early_exit: the fewest H inliers that can change the decision, given
+// F's count (0: F failed). H matters only above max_H_inlier_ratio x the
+// count of the model it is compared with (F's, or E's, which is used only
+// above min_E_F_inlier_ratio x F's), or, when E and F fail, from
+// min_num_inliers on; below ratio x max(F's, min_num_inliers) it cannot.
+// 0 when early_exit is off.
+int TwoViewRelevantHomographyInliers(int num_F_inliers, const TwoViewGeometryOptions& options);
+// The constant ratio of TwoViewRelevantHomographyInliers (both backends).
+double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options);
+
 // One estimated model of a pair, as the decision reads it.
 struct TwoViewModelEstimate {
   bool success = false;
@@ -132,6 +143,10 @@ double NormalizedSquaredThreshold(const TwoViewPoints& points, const TwoViewGeom
 // F and H by LO-RANSAC on the CPU.
 TwoViewModelEstimate EstimateFundamental(const TwoViewPoints& points, const TwoViewGeometryOptions& options);
 TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options);
+// The same, stopped once a model of `relevant_inliers` would have been found
+// (RansacOptions::relevant_inliers; 0: COLMAP's loop).
+TwoViewModelEstimate EstimateHomography(const TwoViewPoints& points, const TwoViewGeometryOptions& options,
+                                        int relevant_inliers);
 
 // Models found in normalised coordinates, mapped back to pixels and scaled
 // to unit norm (as EstimateFundamental / EstimateHomography report them).
