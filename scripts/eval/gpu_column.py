@@ -37,8 +37,10 @@ for database in %(databases)s; do
   name=${database%%.db}
   echo "== $name"
   # --overwrite 1: a second run matches again instead of skipping the pairs.
+  # --CasHash.matcher cascade: this column is the GPU cascade against the CPU
+  # cascade's (the default, auto, may pick brute force for some pairs).
   "$binary" exhaustive_matcher --database_path "$database" --FeatureMatching.use_gpu 1 \\
-      --overwrite 1 > "$name.log" 2>&1 || { tail -20 "$name.log"; exit 1; }
+      --CasHash.matcher cascade --overwrite 1 > "$name.log" 2>&1 || { tail -20 "$name.log"; exit 1; }
   grep -E "^(Summary|Time|Warning|WARNING)" "$name.log" || true
 done
 echo "done: bring back $(pwd)"
