@@ -158,9 +158,6 @@ class CascadeQuery {
     // candidate of this query) is unpredictable, so it is computed, not
     // branched on.
     size_t num_keys = 0;
-    // The two nearest distinct candidates beyond tau (step 5b), as keys.
-    constexpr uint64_t kNone = ~uint64_t{0};
-    uint64_t beyond_first = kNone, beyond_second = kNone;
     for (int t = 0; t < num_tables; ++t) {
       const size_t end = target_.buckets.end(t, query_buckets[t]);
       for (size_t p = target_.buckets.begin(t, query_buckets[t]); p < end; ++p) {
@@ -173,17 +170,8 @@ class CascadeQuery {
         if (kBand) keep = keep && line.Contains(target_points[2 * f], target_points[2 * f + 1], max_band_distance);
         seen[f / 64] = word | (keep ? bit : 0);
         // Key order = (Hamming distance, feature index) ascending.
-        const uint64_t key = (static_cast<uint64_t>(hamming) << 32) | f;
-        keys[num_keys] = key;
+        keys[num_keys] = (static_cast<uint64_t>(hamming) << 32) | f;
         num_keys += keep;
-        if (!kBand && hamming > tau && key < beyond_second && key != beyond_first) {
-          if (key < beyond_first) {
-            beyond_second = beyond_first;
-            beyond_first = key;
-          } else {
-            beyond_second = key;
-          }
-        }
         histogram[keep ? hamming : 0] += keep;
       }
     }
@@ -239,13 +227,45 @@ class CascadeQuery {
     if (best_index < 0 || best_dot <= 0) return -1;
     if (!AcceptSiftMatch(best_dot, second_dot, max_ratio_, max_distance_)) return -1;
     if (!kBand && num_ranked < static_cast<size_t>(kThinListSize)) {
-      // Step 5b: a thin list's second best is decided again.
-      static_assert(kBeyondTauCandidates == 2, "two nearest candidates beyond tau are tracked");
-      if (beyond_first != kNone) consider(static_cast<uint32_t>(beyond_first));
-      if (beyond_second != kNone) consider(static_cast<uint32_t>(beyond_second));
+      // Step 5b: a thin list's accepted match is decided again. The lookup
+      // is a second pass over the buckets, for these few queries only, as
+      // on the GPU, so that the scan above stays branch-free.
+      uint64_t beyond[kBeyondTauCandidates];
+      const int num_beyond = NearestBeyondTau(query_buckets, code0, code1, beyond);
+      for (int b = 0; b < num_beyond; ++b) consider(static_cast<uint32_t>(beyond[b]));
       if (!AcceptSiftMatch(best_dot, second_dot, max_ratio_, max_distance_)) return -1;
     }
     return static_cast<int>(best_index);
+  }
+
+  // The kBeyondTauCandidates nearest distinct candidates beyond tau, as keys
+  // (Hamming distance << 32 | feature) in ascending order; returns how many
+  // there are.
+  int NearestBeyondTau(const uint32_t* query_buckets, uint64_t code0, uint64_t code1, uint64_t* out) const {
+    static_assert(kBeyondTauCandidates == 2, "two nearest candidates beyond tau are tracked");
+    constexpr uint64_t kNone = ~uint64_t{0};
+    uint64_t first = kNone, second = kNone;
+    const uint32_t* features = target_.buckets.features.data();
+    const uint64_t* codes = target_.buckets.codes.data();
+    for (int t = 0; t < query_.hashed.num_tables; ++t) {
+      const size_t end = target_.buckets.end(t, query_buckets[t]);
+      for (size_t p = target_.buckets.begin(t, query_buckets[t]); p < end; ++p) {
+        const int hamming = __builtin_popcountll(code0 ^ codes[2 * p]) +
+                            __builtin_popcountll(code1 ^ codes[2 * p + 1]);
+        const uint64_t key = (static_cast<uint64_t>(hamming) << 32) | features[p];
+        if (hamming <= tau_ || key >= second || key == first) continue;
+        if (key < first) {
+          second = first;
+          first = key;
+        } else {
+          second = key;
+        }
+      }
+    }
+    int count = 0;
+    if (first != kNone) out[count++] = first;
+    if (second != kNone) out[count++] = second;
+    return count;
   }
 
   const CascadeImage& query_;
