@@ -243,14 +243,14 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
   if (launch.relevance != nullptr) {
     const RansacPairOutput& f = launch.relevance[pair];
     const int num_f = f.success ? f.num_inliers : 0;
-    relevant = max(1, static_cast<int>(ceil(launch.relevance_ratio * max(num_f, launch.relevance_min_inliers))));
+    relevant = RelevantInliers(launch.relevance_ratio, num_f, launch.relevance_min_inliers);
     relevant_trials = max(launch.min_trials, RequiredTrials(relevant, n, launch.confidence, launch.trials_multiplier,
                                                             Model::kSampleSize));
   }
   for (int round = 0;; ++round) {
     const int trial = round * kRansacThreads + threadIdx.x;
     // Window trials are scored in full: their supports fit the chance model.
-    const bool in_window = early.min_num_inliers > 0 && round * kRansacThreads < early.window;
+    const bool in_window = early.min_num_inliers > 0 && trial < early.window;
     const int must_reach = in_window ? 0 : s.best_count;
     int my_hypotheses = 0, my_support_sum = 0;
     unsigned long long my_key = 0;
@@ -283,7 +283,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
           }
         }
         if (gave_up) continue;
-        if (in_window && trial < early.window) my_support_sum += count;
+        if (in_window) my_support_sum += count;
         const unsigned long long key = SupportKey(count, sum);
         if (key > my_key) {
           my_key = key;
@@ -299,7 +299,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     s.keys[threadIdx.x] = my_key;
     if (early.min_num_inliers > 0) {
       if (my_hypotheses > 0) atomicAdd(&s.hypotheses, my_hypotheses);
-      if (in_window && trial < early.window && my_hypotheses > 0) {
+      if (in_window && my_hypotheses > 0) {
         atomicAdd(&s.window_hypotheses, my_hypotheses);
         atomicAdd(&s.window_support_sum, static_cast<double>(my_support_sum));
       }

@@ -109,6 +109,15 @@ CASHASH_HOST_DEVICE inline bool RansacShouldExitEarly(const RansacEarlyExitOptio
   return risk <= options.max_risk;
 }
 
+// Fewest inliers a model needs to matter to the decision when only counts
+// above `ratio` x max(reference, min_inliers) do (H against F's count,
+// two_view_geometry.h); at least 1.
+CASHASH_HOST_DEVICE inline int RelevantInliers(double ratio, int reference, int min_inliers) {
+  const int base = reference > min_inliers ? reference : min_inliers;
+  const int relevant = static_cast<int>(ceil(ratio * (base > 0 ? base : 0)));
+  return relevant > 1 ? relevant : 1;
+}
+
 // Trial counts at which the test runs: the window, then each doubling.
 CASHASH_HOST_DEVICE inline bool RansacEarlyExitCheckpoint(const RansacEarlyExitOptions& options, int trials) {
   if (options.min_num_inliers <= 0 || options.window <= 0 || trials < options.window) return false;

@@ -135,8 +135,7 @@ double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options) {
 
 int TwoViewRelevantHomographyInliers(int num_F_inliers, const TwoViewGeometryOptions& options) {
   if (!options.early_exit) return 0;
-  const int reference = std::max(num_F_inliers, std::max(0, options.min_num_inliers));
-  return std::max(1, static_cast<int>(std::ceil(TwoViewRelevantHomographyRatio(options) * reference)));
+  return RelevantInliers(TwoViewRelevantHomographyRatio(options), num_F_inliers, options.min_num_inliers);
 }
 
 TwoViewGeometry TwoViewGeometry::Inverted() const {
