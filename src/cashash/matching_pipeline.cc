@@ -87,6 +87,12 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   BlockingQueue<VerifiedChunk> to_write(2);
   FirstError error;
   std::mutex stats_mutex;
+  // Adds the time since `start` to one of the stats' times (any thread).
+  auto add_seconds = [&](double PipelineStats::*field, Clock::time_point start) {
+    const double seconds = SecondsSince(start);
+    std::lock_guard<std::mutex> lock(stats_mutex);
+    stats.*field += seconds;
+  };
 
   // Stage 3: the single writer.
   std::thread writer([&]() {
@@ -94,10 +100,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
         std::optional<VerifiedChunk> item = to_write.Pop();
-        {
-          std::lock_guard<std::mutex> lock(stats_mutex);
-          stats.seconds_writing_wait_input += SecondsSince(t_wait);
-        }
+        add_seconds(&PipelineStats::seconds_writing_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
         sink_->WriteChunk(item->results);
@@ -140,10 +143,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
         std::optional<MatchedChunk> item = to_verify.Pop();
-        {
-          std::lock_guard<std::mutex> lock(stats_mutex);
-          stats.seconds_verification_wait_input += SecondsSince(t_wait);
-        }
+        add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
         VerifiedChunk out;
@@ -177,17 +177,11 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
           std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
           for (size_t k = 0; k < pairs.size(); ++k) out.results[k].geometry = std::move(geometries[k]);
         }
-        {
-          std::lock_guard<std::mutex> lock(stats_mutex);
-          stats.seconds_verification += SecondsSince(t0);
-        }
+        add_seconds(&PipelineStats::seconds_verification, t0);
         item->features.clear();
         const Clock::time_point t_push = Clock::now();
         const bool pushed = to_write.Push(std::move(out));
-        {
-          std::lock_guard<std::mutex> lock(stats_mutex);
-          stats.seconds_verification_wait_writer += SecondsSince(t_push);
-        }
+        add_seconds(&PipelineStats::seconds_verification_wait_writer, t_push);
         if (!pushed) break;
       }
     } catch (...) {
@@ -245,10 +239,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
       const Clock::time_point t_push = Clock::now();
       const bool pushed = to_verify.Push(std::move(item));
-      {
-        std::lock_guard<std::mutex> lock(stats_mutex);
-        stats.seconds_matching_wait_queue += SecondsSince(t_push);
-      }
+      add_seconds(&PipelineStats::seconds_matching_wait_queue, t_push);
       if (!pushed) break;
     }
   } catch (...) {
