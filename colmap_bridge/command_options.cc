@@ -117,6 +117,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
   table.Add({"CasHash.tau"}, &o.cashash.tau, "Largest 128-bit remap Hamming distance ranked");
   table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
+  table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
+            "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's)");
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,

@@ -17,10 +17,12 @@ namespace colmap {
 struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
-  // --CasHash.matcher defaults to auto here: a run measures both matchers.
+  // --CasHash.matcher defaults to auto here: a run measures both matchers;
+  // and the pairs that may verify are matched again exactly.
   CasHashOptions cashash = [] {
     CasHashOptions options;
     options.matcher = MatcherType::kAuto;
+    options.exact_rematch_min_matches = 12;
     return options;
   }();
   TwoViewGeometryOptions two_view;

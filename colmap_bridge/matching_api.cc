@@ -13,6 +13,7 @@
 #include <unordered_set>
 
 #include "cashash/auto_feature_matcher.h"
+#include "cashash/exact_rematch_feature_matcher.h"
 #include "cashash/fallback_feature_matcher.h"
 #include "cashash/feature_cache.h"
 #include "cashash/guided_matching.h"
@@ -288,12 +289,15 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     // A guided matcher also holds the top-scale subset and the positions.
     const double share = options.guided.enabled ? 1.0 + options.guided.top_scale_fraction : 1.0;
     const size_t position_bytes = options.guided.enabled ? 24 : 0;
+    // The exact backend behind the cascade holds the descriptors once more.
+    const size_t rematch_bytes =
+        !options.guided.enabled && options.cashash.exact_rematch_min_matches > 0 ? kDescriptorDim : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
         std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables, share,
-                                                 position_bytes](const FeatureDescriptors& d) {
+                                                 position_bytes, rematch_bytes](const FeatureDescriptors& d) {
           const size_t rows = std::min(d.rows(), max_rows);
           return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
-                 rows * position_bytes;
+                 rows * (position_bytes + rematch_bytes);
         });
     retaining = keeping.get();
     matcher = std::move(keeping);
@@ -567,19 +571,39 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 
 }  // namespace
 
+// The cascade backend of a run, and with --CasHash.exact_rematch_min_matches
+// > 0 an exact backend on the same devices behind it for the pairs that may
+// verify (exact_rematch_feature_matcher.h). Guided matching keeps the bare
+// cascade: its stage 2 screens by the epipolar band.
+std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        bool* on_gpu) {
+  MatcherCommandOptions cascade = options;
+  cascade.cashash.matcher = MatcherType::kCascade;
+  std::unique_ptr<FeatureMatcher> matcher = CreateBackendForOptions(cascade, mean, warning, on_gpu);
+  if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
+  MatcherCommandOptions exact = options;
+  exact.cashash.matcher = MatcherType::kBruteForce;
+  bool exact_on_gpu = false;
+  return std::make_unique<ExactRematchFeatureMatcher>(
+      std::move(matcher), CreateBackendForOptions(exact, mean, nullptr, &exact_on_gpu),
+      static_cast<size_t>(options.cashash.exact_rematch_min_matches));
+}
+
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
                                                         const std::function<void(const std::string&)>& info) {
   bool on_gpu = false;
+  if (options.cashash.matcher == MatcherType::kCascade) return CreateCascadeForOptions(options, mean, warning, &on_gpu);
   if (options.cashash.matcher != MatcherType::kAuto) return CreateBackendForOptions(options, mean, warning, &on_gpu);
   // Guided matching filters candidates inside the cascade.
-  MatcherCommandOptions cascade = options, brute_force = options;
-  cascade.cashash.matcher = MatcherType::kCascade;
-  if (options.guided.enabled) return CreateBackendForOptions(cascade, mean, warning, &on_gpu);
+  if (options.guided.enabled) return CreateCascadeForOptions(options, mean, warning, &on_gpu);
+  MatcherCommandOptions brute_force = options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;
   // Both on the same devices (or both on the CPU); the warnings once.
-  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateBackendForOptions(cascade, mean, warning, &on_gpu);
+  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForOptions(options, mean, warning, &on_gpu);
   bool brute_force_on_gpu = false;
   std::unique_ptr<FeatureMatcher> brute_force_matcher =
       CreateBackendForOptions(brute_force, mean, nullptr, &brute_force_on_gpu);

@@ -75,7 +75,10 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 //
 // --CasHash.matcher auto (the default) gives an AutoFeatureMatcher over one
 // cascade and one brute-force backend on the same device(s), which reports
-// its choice through `info`; with guided matching, the cascade alone.
+// its choice through `info`; with guided matching, the cascade alone. With
+// --CasHash.exact_rematch_min_matches > 0 (runs' default 12) the cascade
+// backend is an ExactRematchFeatureMatcher: pairs that may verify are
+// matched again by brute force on the same device(s).
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,

@@ -35,6 +35,8 @@ std::string CasHashOptions::Check() const {
     error << "CasHash.tau must be in [0, " << kRemapBits << "], got " << tau;
   } else if (top_k < 1) {
     error << "CasHash.top_k must be >= 1, got " << top_k;
+  } else if (exact_rematch_min_matches < 0) {
+    error << "CasHash.exact_rematch_min_matches must be >= 0 (0 = off), got " << exact_rematch_min_matches;
   }
   return error.str();
 }

@@ -74,6 +74,15 @@ struct CasHashOptions {
   int top_k = 16;
   // Seed of the random projections; the same seed gives the same matches.
   uint64_t random_seed = 0;
+  // Pairs whose cascade matches number at least this are matched again by
+  // exact brute force, whose matches replace the cascade's
+  // (exact_rematch_feature_matcher.h): the cascade screens, exact matching
+  // decides the pairs that may verify. 0 = off (the cascade's matches are
+  // kept). Runs default to 12 (MatcherCommandOptions): with the cascade
+  // keeping 94 % of the exact matches (its worst real set), a pair with
+  // min_num_inliers = 15 exact matches falls below 12 cascade matches with
+  // probability about 1 %. Unused by brute force and guided matching.
+  int exact_rematch_min_matches = 0;
 
   std::string Check() const;
 };
