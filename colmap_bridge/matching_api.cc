@@ -266,9 +266,10 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
 #endif
   GpuMemorySampler gpu_memory(GpuIndexForRun(run_options));
   const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
+  const auto rematch_counts = std::make_shared<ExactRematchCounts>();
   std::unique_ptr<FeatureMatcher> matcher =
       CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); },
-                              [&](const std::string& text) { Info(callbacks, text); });
+                              [&](const std::string& text) { Info(callbacks, text); }, rematch_counts);
   // Guided matching (Ga-CasHash, cashash/guided_matching.h): a second
   // matcher for the top-scale subsets, the stage-1 F estimator, and the
   // pipeline's features read through a source that keeps the keypoints.
@@ -383,6 +384,14 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
       text << "; stage 1 " << g.seconds_stage1 << " s, F " << g.seconds_fundamental << " s, stage 2 "
            << g.seconds_stage2 << " s";
       if (options.guided.unguided_fallback) text << ", without the band " << g.seconds_fallback << " s";
+      Info(callbacks, text.str());
+    }
+    if (rematch_counts->rematched > 0) {
+      std::ostringstream text;
+      text << "Exact rematch: " << rematch_counts->rematched << " of " << rematch_counts->pairs
+           << " pairs had at least " << options.cashash.exact_rematch_min_matches
+           << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
+           << rematch_counts->exact_us * 1e-6 << " s";
       Info(callbacks, text.str());
     }
     if (!cache) return;
@@ -578,6 +587,7 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
+                                                        const std::shared_ptr<ExactRematchCounts>& counts,
                                                         bool* on_gpu) {
   MatcherCommandOptions cascade = options;
   cascade.cashash.matcher = MatcherType::kCascade;
@@ -588,22 +598,25 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOpti
   bool exact_on_gpu = false;
   return std::make_unique<ExactRematchFeatureMatcher>(
       std::move(matcher), CreateBackendForOptions(exact, mean, nullptr, &exact_on_gpu),
-      static_cast<size_t>(options.cashash.exact_rematch_min_matches));
+      static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts);
 }
 
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
-                                                        const std::function<void(const std::string&)>& info) {
+                                                        const std::function<void(const std::string&)>& info,
+                                                        const std::shared_ptr<ExactRematchCounts>& counts) {
   bool on_gpu = false;
-  if (options.cashash.matcher == MatcherType::kCascade) return CreateCascadeForOptions(options, mean, warning, &on_gpu);
+  if (options.cashash.matcher == MatcherType::kCascade) {
+    return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
+  }
   if (options.cashash.matcher != MatcherType::kAuto) return CreateBackendForOptions(options, mean, warning, &on_gpu);
   // Guided matching filters candidates inside the cascade.
-  if (options.guided.enabled) return CreateCascadeForOptions(options, mean, warning, &on_gpu);
+  if (options.guided.enabled) return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
   MatcherCommandOptions brute_force = options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;
   // Both on the same devices (or both on the CPU); the warnings once.
-  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForOptions(options, mean, warning, &on_gpu);
+  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
   bool brute_force_on_gpu = false;
   std::unique_ptr<FeatureMatcher> brute_force_matcher =
       CreateBackendForOptions(brute_force, mean, nullptr, &brute_force_on_gpu);

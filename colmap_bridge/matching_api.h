@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "cashash/exact_rematch_feature_matcher.h"
 #include "cashash/feature_matcher.h"
 #include "cashash/matching_pipeline.h"
 #include "colmap_bridge/command_options.h"
@@ -82,7 +83,8 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
-                                                        const std::function<void(const std::string&)>& info = nullptr);
+                                                        const std::function<void(const std::string&)>& info = nullptr,
+                                                        const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
 
 // The options a run matches with, decided once from the feature rows of its
 // images: the hash tables chosen for their median size where

@@ -11,7 +11,9 @@
 #   CONFIGS ["default bruteforce cascade guided"]: default = no option
 #       (--CasHash.matcher auto), bruteforce / cascade = --CasHash.matcher X,
 #       guided = `cashash guided_matcher`, full_budget = default with
-#       --TwoViewGeometry.early_exit 0
+#       --TwoViewGeometry.early_exit 0, no_rematch = default with
+#       --CasHash.exact_rematch_min_matches 0 (the cascade's matches kept),
+#       cascade_no_rematch = the same with --CasHash.matcher cascade
 #   TIME_LIMIT [0]: stop each cashash run with SIGINT after this many seconds
 #       (0: run to the end); the run commits what is in flight and prints its
 #       summary, so rates are over the pairs reached
@@ -53,6 +55,8 @@ for config in $CONFIGS; do
     bruteforce | cascade) options=(--CasHash.matcher "$config") ;;
     guided) command=(guided_matcher) ;;
     full_budget) options=(--TwoViewGeometry.early_exit 0) ;;
+    no_rematch) options=(--CasHash.exact_rematch_min_matches 0) ;;
+    cascade_no_rematch) options=(--CasHash.matcher cascade --CasHash.exact_rematch_min_matches 0) ;;
     *) echo "unknown config $config" >&2; continue ;;
   esac
   copy="$WORK/$config.db"
@@ -97,7 +101,7 @@ print(f"| {name} | {wall:.2f} | {f(pairs)} | {f(rate)} | {f(stage['loading'], 2)
       f"{f(stage['matching'], 2)} | {f(stage['verification'], 2)} | {f(stage['writing'], 2)} | {f(wait_m, 2)} / {f(wait_v, 2)} | "
       f"{f(raw)} | {f(verified)} | {f(inliers)} |")
 EOF
-  { echo "$config:"; grep -E "GPU verification|Matcher|auto|Hash tables" "$log" | head -5 | sed 's/^/    /'; } >> "$OUT/notes.txt"
+  { echo "$config:"; grep -E "GPU verification|Matcher|auto|Hash tables|Exact rematch" "$log" | head -6 | sed 's/^/    /'; } >> "$OUT/notes.txt"
   [ "$COPY" = 1 ] && rm -f "$copy" "$copy-wal" "$copy-shm"
 done
 

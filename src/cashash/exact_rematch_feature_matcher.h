@@ -17,6 +17,7 @@
 // fewer than min_num_inliers (15) of them RANSAC is not run at all.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <memory>
 #include <string>
@@ -26,11 +27,20 @@
 
 namespace cashash {
 
+// What a run's rematching did, for its log; shared with the run because the
+// matcher sits inside other wrappers (and several, one per device).
+struct ExactRematchCounts {
+  std::atomic<size_t> pairs{0};        // matched by the cascade
+  std::atomic<size_t> rematched{0};    // of those, matched again exactly
+  std::atomic<int64_t> exact_us{0};    // wall time of the exact matching
+};
+
 class ExactRematchFeatureMatcher : public FeatureMatcher {
  public:
-  // `min_matches` > 0. Both backends receive every image.
+  // `min_matches` > 0. Both backends receive every image. `counts` may be
+  // null (the matcher then keeps its own).
   ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, std::unique_ptr<FeatureMatcher> exact,
-                             size_t min_matches);
+                             size_t min_matches, std::shared_ptr<ExactRematchCounts> counts = nullptr);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
   void RemoveImage(image_t image_id) override;
@@ -43,13 +53,13 @@ class ExactRematchFeatureMatcher : public FeatureMatcher {
   std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override;
 
   // Pairs matched so far, and of those matched again exactly.
-  size_t pairs_matched() const { return pairs_matched_; }
-  size_t pairs_rematched() const { return pairs_rematched_; }
+  size_t pairs_matched() const { return counts_->pairs; }
+  size_t pairs_rematched() const { return counts_->rematched; }
 
  private:
   std::unique_ptr<FeatureMatcher> cascade_, exact_;
   size_t min_matches_;
-  size_t pairs_matched_ = 0, pairs_rematched_ = 0;
+  std::shared_ptr<ExactRematchCounts> counts_;
 };
 
 }  // namespace cashash
