@@ -290,15 +290,12 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     // A guided matcher also holds the top-scale subset and the positions.
     const double share = options.guided.enabled ? 1.0 + options.guided.top_scale_fraction : 1.0;
     const size_t position_bytes = options.guided.enabled ? 24 : 0;
-    // The exact backend behind the cascade holds the descriptors once more.
-    const size_t rematch_bytes =
-        !options.guided.enabled && options.cashash.exact_rematch_min_matches > 0 ? kDescriptorDim : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
         std::move(matcher), matcher_keep_bytes, [max_rows, tables = options.cashash.num_tables, share,
-                                                 position_bytes, rematch_bytes](const FeatureDescriptors& d) {
+                                                 position_bytes](const FeatureDescriptors& d) {
           const size_t rows = std::min(d.rows(), max_rows);
           return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
-                 rows * (position_bytes + rematch_bytes);
+                 rows * position_bytes;
         });
     retaining = keeping.get();
     matcher = std::move(keeping);
@@ -580,10 +577,10 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 
 }  // namespace
 
-// The cascade backend of a run, and with --CasHash.exact_rematch_min_matches
-// > 0 an exact backend on the same devices behind it for the pairs that may
-// verify (exact_rematch_feature_matcher.h). Guided matching keeps the bare
-// cascade: its stage 2 screens by the epipolar band.
+// The cascade backend of a run; with --CasHash.exact_rematch_min_matches > 0
+// it also matches the pairs that may verify again exactly, from the
+// descriptors it holds (exact_rematch_feature_matcher.h). Guided matching
+// keeps the bare cascade: its stage 2 screens by the epipolar band.
 std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
@@ -593,12 +590,8 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOpti
   cascade.cashash.matcher = MatcherType::kCascade;
   std::unique_ptr<FeatureMatcher> matcher = CreateBackendForOptions(cascade, mean, warning, on_gpu);
   if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
-  MatcherCommandOptions exact = options;
-  exact.cashash.matcher = MatcherType::kBruteForce;
-  bool exact_on_gpu = false;
   return std::make_unique<ExactRematchFeatureMatcher>(
-      std::move(matcher), CreateBackendForOptions(exact, mean, nullptr, &exact_on_gpu),
-      static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts);
+      std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts);
 }
 
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,

@@ -79,7 +79,7 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 // its choice through `info`; with guided matching, the cascade alone. With
 // --CasHash.exact_rematch_min_matches > 0 (runs' default 12) the cascade
 // backend is an ExactRematchFeatureMatcher: pairs that may verify are
-// matched again by brute force on the same device(s).
+// matched again by brute force, from the descriptors the cascade holds.
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,

@@ -1,6 +1,7 @@
 // The cascade screens, exact matching decides: pairs with at least
-// min_matches cascade matches get the exact backend's matches, the others
-// keep the cascade's, in the callers' order; both backends see every image.
+// min_matches cascade matches get the backend's exact matches, the others
+// keep the cascade's, in the callers' order. On the CPU the exact matches
+// are brute force's, match for match.
 #include "cashash/exact_rematch_feature_matcher.h"
 
 #include <random>
@@ -14,22 +15,17 @@
 namespace cashash {
 namespace {
 
-// Answers pair (a, b) with `a + b + offset` matches whose idx2 is `tag`, and
-// records what it is asked.
+// Answers pair (a, b) with a + b cascade matches whose idx2 is 1, or
+// exactly with a + b + 1 matches whose idx2 is 2, and records what it is
+// asked.
 class CannedMatcher : public FeatureMatcher {
  public:
-  CannedMatcher(point2D_t tag, size_t offset) : tag_(tag), offset_(offset) {}
+  explicit CannedMatcher(bool exact = true) : exact_(exact) {}
   void AddImage(image_t id, const FeatureDescriptors&) override { images.insert(id); }
   void RemoveImage(image_t id) override { images.erase(id); }
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
     asked.insert(asked.end(), pairs.begin(), pairs.end());
-    std::vector<FeatureMatches> out;
-    for (const ImagePair& p : pairs) {
-      FeatureMatches m;
-      for (size_t k = 0; k < p.first + p.second + offset_; ++k) m.push_back({static_cast<point2D_t>(k), tag_});
-      out.push_back(std::move(m));
-    }
-    return out;
+    return Answer(pairs, 0, 1);
   }
   std::string Name() const override { return "canned"; }
   bool SupportsEpipolarGuidance() const override { return true; }
@@ -37,32 +33,42 @@ class CannedMatcher : public FeatureMatcher {
     guided_calls += pairs.size();
     return std::vector<FeatureMatches>(pairs.size());
   }
+  bool SupportsExactMatching() const override { return exact_; }
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    asked_exact.insert(asked_exact.end(), pairs.begin(), pairs.end());
+    return Answer(pairs, 1, 2);
+  }
   std::set<image_t> images;
-  std::vector<ImagePair> asked;
+  std::vector<ImagePair> asked, asked_exact;
   size_t guided_calls = 0;
 
  private:
-  point2D_t tag_;
-  size_t offset_;
+  static std::vector<FeatureMatches> Answer(const std::vector<ImagePair>& pairs, size_t extra, point2D_t tag) {
+    std::vector<FeatureMatches> out;
+    for (const ImagePair& p : pairs) {
+      FeatureMatches m;
+      for (size_t k = 0; k < p.first + p.second + extra; ++k) m.push_back({static_cast<point2D_t>(k), tag});
+      out.push_back(std::move(m));
+    }
+    return out;
+  }
+  bool exact_;
 };
 
 TEST(ExactRematchFeatureMatcher, PairsThatMayVerifyGetTheExactMatches) {
-  auto cascade = std::make_unique<CannedMatcher>(1, 0);
-  auto exact = std::make_unique<CannedMatcher>(2, 1);
+  auto cascade = std::make_unique<CannedMatcher>();
   CannedMatcher* c = cascade.get();
-  CannedMatcher* e = exact.get();
-  ExactRematchFeatureMatcher matcher(std::move(cascade), std::move(exact), 5);
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 5);
   for (image_t id = 0; id < 6; ++id) matcher.AddImage(id, FeatureDescriptors{});
   matcher.RemoveImage(5);
   EXPECT_EQ(c->images, (std::set<image_t>{0, 1, 2, 3, 4}));
-  EXPECT_EQ(e->images, c->images);
 
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 4}, {0, 2}, {2, 3}, {0, 4}, {1, 2}};
   const std::vector<FeatureMatches> results = matcher.MatchPairs(pairs);
   ASSERT_EQ(results.size(), pairs.size());
   EXPECT_EQ(c->asked, pairs);
   // Cascade counts: 1, 5, 2, 5, 4, 3 -> (1,4) and (2,3) are matched again.
-  EXPECT_EQ(e->asked, (std::vector<ImagePair>{{1, 4}, {2, 3}}));
+  EXPECT_EQ(c->asked_exact, (std::vector<ImagePair>{{1, 4}, {2, 3}}));
   for (size_t i = 0; i < pairs.size(); ++i) {
     const size_t cascade_count = pairs[i].first + pairs[i].second;
     const bool again = cascade_count >= 5;
@@ -75,25 +81,23 @@ TEST(ExactRematchFeatureMatcher, PairsThatMayVerifyGetTheExactMatches) {
 }
 
 TEST(ExactRematchFeatureMatcher, GuidedMatchingStaysWithTheCascade) {
-  auto cascade = std::make_unique<CannedMatcher>(1, 0);
-  auto exact = std::make_unique<CannedMatcher>(2, 0);
+  auto cascade = std::make_unique<CannedMatcher>();
   CannedMatcher* c = cascade.get();
-  CannedMatcher* e = exact.get();
-  ExactRematchFeatureMatcher matcher(std::move(cascade), std::move(exact), 1);
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 1);
   EXPECT_TRUE(matcher.SupportsEpipolarGuidance());
   matcher.MatchPairsGuided(std::vector<GuidedPair>(3), 4.0);
   EXPECT_EQ(c->guided_calls, 3u);
-  EXPECT_EQ(e->guided_calls, 0u);
+  EXPECT_TRUE(c->asked_exact.empty());
 }
 
-TEST(ExactRematchFeatureMatcher, RejectsAMissingBackendOrAZeroThreshold) {
-  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(1, 0), nullptr, 5), std::invalid_argument);
-  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(1, 0), std::make_unique<CannedMatcher>(2, 0), 0),
-               std::invalid_argument);
+TEST(ExactRematchFeatureMatcher, RejectsABackendWithoutExactMatchingOrAZeroThreshold) {
+  EXPECT_THROW(ExactRematchFeatureMatcher(nullptr, 5), std::invalid_argument);
+  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(false), 5), std::invalid_argument);
+  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(), 0), std::invalid_argument);
 }
 
-// With the real CPU backends the rematched pairs' matches are brute force's,
-// match for match, and the others the cascade's.
+// With the CPU cascade the rematched pairs' matches are brute force's, match
+// for match, and the others the cascade's.
 TEST(ExactRematchFeatureMatcher, RematchedPairsEqualBruteForceOnTheCpu) {
   std::mt19937 rng(11);
   std::vector<std::vector<uint8_t>> base;
@@ -114,11 +118,9 @@ TEST(ExactRematchFeatureMatcher, RematchedPairsEqualBruteForceOnTheCpu) {
   sift.num_threads = 1;
   CasHashOptions cascade_options, brute_options;
   brute_options.matcher = MatcherType::kBruteForce;
-  auto cascade = CreateCpuFeatureMatcher(sift, cascade_options, mean);
-  auto brute = CreateCpuFeatureMatcher(sift, brute_options, mean);
   auto cascade_ref = CreateCpuFeatureMatcher(sift, cascade_options, mean);
   auto brute_ref = CreateCpuFeatureMatcher(sift, brute_options, mean);
-  ExactRematchFeatureMatcher matcher(std::move(cascade), std::move(brute), 15);
+  ExactRematchFeatureMatcher matcher(CreateCpuFeatureMatcher(sift, cascade_options, mean), 15);
   for (image_t id = 0; id < 4; ++id) {
     matcher.AddImage(id, images[id]);
     cascade_ref->AddImage(id, images[id]);

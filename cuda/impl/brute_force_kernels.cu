@@ -420,5 +420,36 @@ std::vector<FeatureMatches> BruteForceKernels::MatchPairs(
   return result;
 }
 
+std::vector<FeatureMatches> MatchPairsInBatches(BruteForceKernels* kernels,
+                                                const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
+                                                const MatchThresholds& thresholds) {
+  // Scratch of the brute-force kernels allowed for one batch of pairs.
+  constexpr size_t kBatchScratchBytes = size_t{1} << 30;
+  std::vector<FeatureMatches> results(pairs.size());
+  std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> batch;
+  std::vector<size_t> batch_pairs;
+  size_t scratch = 0;
+  const auto flush = [&]() {
+    if (batch.empty()) return;
+    std::vector<FeatureMatches> matches = kernels->MatchPairs(batch, thresholds);
+    for (size_t k = 0; k < batch.size(); ++k) results[batch_pairs[k]] = std::move(matches[k]);
+    batch.clear();
+    batch_pairs.clear();
+    scratch = 0;
+  };
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const DeviceDescriptors& a = pairs[i].first;
+    const DeviceDescriptors& b = pairs[i].second;
+    if (a.rows == 0 || b.rows == 0) continue;
+    const size_t bytes = BruteForceKernels::MatchPairsScratchBytes(a.rows, b.rows);
+    if (!batch.empty() && scratch + bytes > kBatchScratchBytes) flush();
+    batch.push_back(pairs[i]);
+    batch_pairs.push_back(i);
+    scratch += bytes;
+  }
+  flush();
+  return results;
+}
+
 }  // namespace cuda
 }  // namespace cashash

@@ -100,6 +100,14 @@ class BruteForceKernels {
   Scratch* scratch_ = nullptr;
 };
 
+// Matches any number of pairs of device images in batches whose scratch
+// stays within kBatchScratchBytes (1 GiB); a pair with an empty image gets
+// no matches. Result i belongs to pair i. Blocks until done. Shared by the
+// brute-force backend and the cascade's exact rematch.
+std::vector<FeatureMatches> MatchPairsInBatches(BruteForceKernels* kernels,
+                                                const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
+                                                const MatchThresholds& thresholds);
+
 // COLMAP's thresholds from the matching options (float, as the CPU test).
 inline MatchThresholds ToMatchThresholds(const SiftMatchingOptions& options) {
   MatchThresholds t;

@@ -22,6 +22,7 @@
 
 #include "cashash/cascade_hashing.h"
 #include "cashash_cuda/gpu_feature_matcher.h"
+#include "impl/brute_force_kernels.cuh"
 #include "impl/cascade_hash_kernels.cuh"
 #include "impl/cascade_match_kernels.cuh"
 #include "impl/cascade_tile_kernels.cuh"
@@ -117,6 +118,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
 
   ~GpuCascadeMatcher() override {
     cudaSetDevice(device_);
+    exact_kernels_.reset();  // its scratch is used on slot 0's stream
     for (BatchSlot& slot : slots_) {
       if (slot.stream != nullptr) {
         cudaStreamSynchronize(slot.stream);
@@ -166,6 +168,24 @@ class GpuCascadeMatcher : public FeatureMatcher {
 
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
     return MatchPairsImpl(pairs, nullptr, 0.0);
+  }
+
+  // Exact matches from the descriptors each image keeps on the device (the
+  // rows AddImage uploaded, in the brute-force backend's layout): no second
+  // upload, on the first batch slot's stream, which is idle between calls.
+  bool SupportsExactMatching() const override { return true; }
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    CUDA_CHECK(cudaSetDevice(device_));
+    if (!exact_kernels_) exact_kernels_ = std::make_unique<BruteForceKernels>(slots_[0].stream);
+    std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> device_pairs;
+    device_pairs.reserve(pairs.size());
+    for (const ImagePair& pair : pairs) {
+      const Image& a = Find(pair.first);
+      const Image& b = Find(pair.second);
+      device_pairs.emplace_back(DeviceDescriptors{a.parts.descriptors, static_cast<int>(a.num_features)},
+                                DeviceDescriptors{b.parts.descriptors, static_cast<int>(b.num_features)});
+    }
+    return MatchPairsInBatches(exact_kernels_.get(), device_pairs, ToMatchThresholds(sift_options_));
   }
 
   bool SupportsEpipolarGuidance() const override { return true; }
@@ -548,6 +568,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
   std::unordered_map<image_t, Image> images_;
   std::vector<image_t> pending_;
   BatchSlot slots_[2];
+  // MatchPairsExact's kernels and scratch, made on first use.
+  std::unique_ptr<BruteForceKernels> exact_kernels_;
   // Guided matching (MatchPairsGuided): guides of the current call's tasks,
   // the keypoint pixels they point into, the band half-width.
   std::vector<EpipolarGuideDevice> guides_;

@@ -26,9 +26,6 @@ namespace cashash {
 namespace cuda {
 namespace {
 
-// Scratch of the brute-force kernels allowed for one batch of pairs.
-constexpr size_t kBruteForceBatchScratch = size_t{1} << 30;
-
 class GpuBruteForceMatcher : public FeatureMatcher {
  public:
   GpuBruteForceMatcher(const SiftMatchingOptions& sift_options, int gpu_index)
@@ -76,31 +73,20 @@ class GpuBruteForceMatcher : public FeatureMatcher {
 
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
     CUDA_CHECK(cudaSetDevice(device_));
-    std::vector<FeatureMatches> results(pairs.size());
-    std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> batch;
-    std::vector<size_t> batch_pairs;
-    size_t scratch = 0;
-    const auto flush = [&]() {
-      if (batch.empty()) return;
-      std::vector<FeatureMatches> matches = kernels_->MatchPairs(batch, ToMatchThresholds(sift_options_));
-      for (size_t k = 0; k < batch.size(); ++k) results[batch_pairs[k]] = std::move(matches[k]);
-      batch.clear();
-      batch_pairs.clear();
-      scratch = 0;
-    };
-    for (size_t i = 0; i < pairs.size(); ++i) {
-      const Image& a = Find(pairs[i].first);
-      const Image& b = Find(pairs[i].second);
-      if (a.rows == 0 || b.rows == 0) continue;
-      const size_t bytes = BruteForceKernels::MatchPairsScratchBytes(a.rows, b.rows);
-      if (!batch.empty() && scratch + bytes > kBruteForceBatchScratch) flush();
-      batch.emplace_back(DeviceDescriptors{a.memory.as<uint8_t>(), a.rows},
-                         DeviceDescriptors{b.memory.as<uint8_t>(), b.rows});
-      batch_pairs.push_back(i);
-      scratch += bytes;
+    std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> device_pairs;
+    device_pairs.reserve(pairs.size());
+    for (const ImagePair& pair : pairs) {
+      const Image& a = Find(pair.first);
+      const Image& b = Find(pair.second);
+      device_pairs.emplace_back(DeviceDescriptors{a.memory.as<uint8_t>(), a.rows},
+                                DeviceDescriptors{b.memory.as<uint8_t>(), b.rows});
     }
-    flush();
-    return results;
+    return MatchPairsInBatches(kernels_.get(), device_pairs, ToMatchThresholds(sift_options_));
+  }
+
+  bool SupportsExactMatching() const override { return true; }
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    return MatchPairs(pairs);
   }
 
   std::string Name() const override { return "gpu-bruteforce"; }

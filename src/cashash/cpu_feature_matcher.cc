@@ -107,6 +107,30 @@ class CpuFeatureMatcher : public FeatureMatcher {
     return results;
   }
 
+  // Brute force needs the widened descriptors, which the cascade does not
+  // keep: each pair widens its two images (linear, next to the quadratic
+  // matching).
+  bool SupportsExactMatching() const override { return true; }
+
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    std::vector<const CpuImage*> firsts(pairs.size()), seconds(pairs.size());
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      firsts[i] = Find(pairs[i].first);
+      seconds[i] = Find(pairs[i].second);
+    }
+    std::vector<FeatureMatches> results(pairs.size());
+    ParallelForWorkers(pairs.size(), sift_options_.num_threads, [&](size_t i, size_t) {
+      if (options_.matcher != MatcherType::kCascade) {
+        results[i] = BruteForceMatchPair(firsts[i]->wide, seconds[i]->wide, sift_options_);
+        return;
+      }
+      const FeatureDescriptors& a = firsts[i]->cascade.descriptors;
+      const FeatureDescriptors& b = seconds[i]->cascade.descriptors;
+      results[i] = BruteForceMatchPair(WidenDescriptors(a, a.rows()), WidenDescriptors(b, b.rows()), sift_options_);
+    });
+    return results;
+  }
+
  private:
   const CpuImage* Find(image_t image_id) const {
     const auto it = images_.find(image_id);

@@ -6,26 +6,28 @@
 
 namespace cashash {
 
-ExactRematchFeatureMatcher::ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade,
-                                                       std::unique_ptr<FeatureMatcher> exact, size_t min_matches,
+std::vector<FeatureMatches> FeatureMatcher::MatchPairsExact(const std::vector<ImagePair>&) {
+  throw std::logic_error("the " + Name() + " matcher does not match from its own descriptors exactly");
+}
+
+ExactRematchFeatureMatcher::ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
                                                        std::shared_ptr<ExactRematchCounts> counts)
     : cascade_(std::move(cascade)),
-      exact_(std::move(exact)),
       min_matches_(min_matches),
       counts_(counts ? std::move(counts) : std::make_shared<ExactRematchCounts>()) {
-  if (!cascade_ || !exact_) throw std::invalid_argument("ExactRematchFeatureMatcher needs two matchers");
+  if (!cascade_) throw std::invalid_argument("ExactRematchFeatureMatcher needs a matcher");
+  if (!cascade_->SupportsExactMatching()) {
+    throw std::invalid_argument("ExactRematchFeatureMatcher: the " + cascade_->Name() +
+                                " matcher cannot match exactly from its own descriptors");
+  }
   if (min_matches_ == 0) throw std::invalid_argument("ExactRematchFeatureMatcher needs min_matches > 0");
 }
 
 void ExactRematchFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
   cascade_->AddImage(image_id, descriptors);
-  exact_->AddImage(image_id, descriptors);
 }
 
-void ExactRematchFeatureMatcher::RemoveImage(image_t image_id) {
-  cascade_->RemoveImage(image_id);
-  exact_->RemoveImage(image_id);
-}
+void ExactRematchFeatureMatcher::RemoveImage(image_t image_id) { cascade_->RemoveImage(image_id); }
 
 std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
   std::vector<FeatureMatches> results = cascade_->MatchPairs(pairs);
@@ -39,7 +41,7 @@ std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairs(const std::ve
   std::vector<ImagePair> subset;
   subset.reserve(again.size());
   for (const size_t i : again) subset.push_back(pairs[i]);
-  std::vector<FeatureMatches> exact = exact_->MatchPairs(subset);
+  std::vector<FeatureMatches> exact = cascade_->MatchPairsExact(subset);
   for (size_t k = 0; k < again.size(); ++k) results[again[k]] = std::move(exact[k]);
   counts_->rematched += again.size();
   counts_->exact_us += std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - start)
@@ -54,6 +56,10 @@ bool ExactRematchFeatureMatcher::SupportsEpipolarGuidance() const { return casca
 std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairsGuided(const std::vector<GuidedPair>& pairs,
                                                                          double max_distance) {
   return cascade_->MatchPairsGuided(pairs, max_distance);
+}
+
+std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairsExact(const std::vector<ImagePair>& pairs) {
+  return cascade_->MatchPairsExact(pairs);
 }
 
 }  // namespace cashash

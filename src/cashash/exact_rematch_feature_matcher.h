@@ -1,8 +1,8 @@
-// The cascade screens, exact matching decides: a cascade backend and a
-// brute-force backend behind one FeatureMatcher. Every pair is matched by
-// the cascade; a pair that keeps at least `min_matches` of its matches (one
-// that may verify) is matched again exactly and the exact matches replace
-// the cascade's.
+// The cascade screens, exact matching decides: every pair is matched by the
+// cascade; a pair that keeps at least `min_matches` matches (one that may
+// verify) is matched again exactly, by the same backend from the
+// descriptors it already holds (FeatureMatcher::MatchPairsExact), and the
+// exact matches replace the cascade's.
 //
 // Why: the cascade's first level misses true matches whose hash bits differ
 // in every table. On photographs with changing light and viewpoint that is
@@ -19,6 +19,7 @@
 
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -28,19 +29,19 @@
 namespace cashash {
 
 // What a run's rematching did, for its log; shared with the run because the
-// matcher sits inside other wrappers (and several, one per device).
+// matcher sits inside other wrappers.
 struct ExactRematchCounts {
-  std::atomic<size_t> pairs{0};        // matched by the cascade
-  std::atomic<size_t> rematched{0};    // of those, matched again exactly
-  std::atomic<int64_t> exact_us{0};    // wall time of the exact matching
+  std::atomic<size_t> pairs{0};      // matched by the cascade
+  std::atomic<size_t> rematched{0};  // of those, matched again exactly
+  std::atomic<int64_t> exact_us{0};  // wall time of the exact matching
 };
 
 class ExactRematchFeatureMatcher : public FeatureMatcher {
  public:
-  // `min_matches` > 0. Both backends receive every image. `counts` may be
-  // null (the matcher then keeps its own).
-  ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, std::unique_ptr<FeatureMatcher> exact,
-                             size_t min_matches, std::shared_ptr<ExactRematchCounts> counts = nullptr);
+  // `cascade` must support MatchPairsExact; `min_matches` > 0. `counts` may
+  // be null (the matcher then keeps its own).
+  ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
+                             std::shared_ptr<ExactRematchCounts> counts = nullptr);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
   void RemoveImage(image_t image_id) override;
@@ -51,13 +52,15 @@ class ExactRematchFeatureMatcher : public FeatureMatcher {
   // is its own screening.
   bool SupportsEpipolarGuidance() const override;
   std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override;
+  bool SupportsExactMatching() const override { return true; }
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override;
 
   // Pairs matched so far, and of those matched again exactly.
   size_t pairs_matched() const { return counts_->pairs; }
   size_t pairs_rematched() const { return counts_->rematched; }
 
  private:
-  std::unique_ptr<FeatureMatcher> cascade_, exact_;
+  std::unique_ptr<FeatureMatcher> cascade_;
   size_t min_matches_;
   std::shared_ptr<ExactRematchCounts> counts_;
 };

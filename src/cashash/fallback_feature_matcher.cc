@@ -44,6 +44,14 @@ class FallbackFeatureMatcher : public FeatureMatcher {
     return result;
   }
 
+  bool SupportsExactMatching() const override { return active_->SupportsExactMatching(); }
+
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    std::vector<FeatureMatches> result;
+    Run([&] { result = active_->MatchPairsExact(pairs); });
+    return result;
+  }
+
  private:
   template <typename Step>
   void Run(Step step) {

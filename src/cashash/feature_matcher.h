@@ -50,6 +50,15 @@ class FeatureMatcher {
   // max_distance pixels around its epipolar line (cascade_matcher.h,
   // EpipolarGuidance). Throws std::logic_error where not supported.
   virtual std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance);
+
+  // Whether MatchPairsExact is implemented (the cascade backends, which keep
+  // each image's descriptors anyway).
+  virtual bool SupportsExactMatching() const { return false; }
+  // Exact (brute-force) matches of each pair from the images already added:
+  // the same matches a brute-force backend returns, without adding the
+  // images to one (exact_rematch_feature_matcher.h). Throws
+  // std::logic_error where not supported.
+  virtual std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs);
 };
 
 // CPU backends (multi-threaded over pairs). MatcherType::kAuto gives an

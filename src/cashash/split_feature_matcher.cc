@@ -75,6 +75,18 @@ std::vector<FeatureMatches> SplitFeatureMatcher::MatchPairsGuided(const std::vec
   });
 }
 
+bool SplitFeatureMatcher::SupportsExactMatching() const {
+  for (const auto& part : parts_) {
+    if (!part->SupportsExactMatching()) return false;
+  }
+  return true;
+}
+
+std::vector<FeatureMatches> SplitFeatureMatcher::MatchPairsExact(const std::vector<ImagePair>& pairs) {
+  return MatchSlices(parts_, pairs,
+                     [](FeatureMatcher& m, const std::vector<ImagePair>& slice) { return m.MatchPairsExact(slice); });
+}
+
 std::string SplitFeatureMatcher::Name() const {
   return parts_.size() == 1 ? parts_[0]->Name() : parts_[0]->Name() + " x" + std::to_string(parts_.size());
 }

@@ -25,6 +25,8 @@ class SplitFeatureMatcher : public FeatureMatcher {
   std::string Name() const override;
   bool SupportsEpipolarGuidance() const override;
   std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override;
+  bool SupportsExactMatching() const override;
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override;
 
   size_t num_parts() const { return parts_.size(); }
 

@@ -333,6 +333,40 @@ TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {
   EXPECT_GE(a.value(), 0.999);
 }
 
+// The cascade's exact rematch (MatchPairsExact, from the descriptors it
+// uploaded) returns the GPU brute-force backend's matches, and those of the
+// CPU brute force, on pairs whose images differ in size and on an empty one.
+TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(7);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  images.push_back(source.Related(images[0], 2500, 0.5));
+  images.push_back(source.Related(images[1], 4100, 0.3));
+  images.push_back(FeatureDescriptors());
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 0}, {1, 2}, {0, 2}, {0, 3}};
+  const MeanDescriptor mean = MeanOf(images);
+  CasHashOptions brute_force;
+  brute_force.matcher = MatcherType::kBruteForce;
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+  auto gpu_brute_force = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean, 0);
+  auto cpu_brute_force = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean);
+  ASSERT_TRUE(cascade->SupportsExactMatching());
+  AddAndMatch(cascade.get(), images, {});
+  const std::vector<FeatureMatches> exact = cascade->MatchPairsExact(pairs);
+  const std::vector<FeatureMatches> gpu = AddAndMatch(gpu_brute_force.get(), images, pairs);
+  const std::vector<FeatureMatches> cpu = AddAndMatch(cpu_brute_force.get(), images, pairs);
+  ASSERT_EQ(exact.size(), pairs.size());
+  size_t total = 0;
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    EXPECT_EQ(exact[p], gpu[p]) << "pair " << p;
+    total += exact[p].size();
+  }
+  const Agreement a = Compare(cpu, exact);
+  EXPECT_GT(total, 500u);
+  EXPECT_TRUE(exact[4].empty());
+  EXPECT_GE(a.value(), 0.999);
+}
+
 TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {
   SKIP_WITHOUT_CUDA_DEVICE();
   CasHashOptions cas;
