@@ -2,7 +2,9 @@
 # scripts/compare_with_colmap.py end to end on sceaux_castle (11 images) with
 # pycolmap's CPU matcher and mapper: the database is left as it was, the JSON
 # report has every field, agreements lie in [0, 1], both times are positive
-# and both databases register the same number of images.
+# and both databases register the same number of images. A second run with
+# --colmap_time_limit stops COLMAP's matcher early and must still report,
+# over the pairs COLMAP committed.
 # Features are extracted at 1024 px (about 3k per image) so that COLMAP's
 # CPU matcher and two reconstructions fit in a few minutes on 2 cores.
 # Usage: compare_with_colmap.sh CASHASH_BINARY SHARED_DATA_DIR   (exit 77: skipped)
@@ -91,4 +93,37 @@ if failures:
     print("FAIL:\n  " + "\n  ".join(failures))
     sys.exit(1)
 print("OK: registered %d = %d of %d images" % (registered[0], registered[1], num_images))
+EOF
+
+# COLMAP stopped after 1 s (its import alone takes about that): still a
+# report, COLMAP marked stopped, its rate over the pairs it committed, no
+# mapper, exit code 0.
+rc=0
+python3 "$REPO/scripts/compare_with_colmap.py" --database_path "$DB" --output_dir "$WORK/compare_stopped" \
+  --use_gpu 0 --colmap pycolmap --cashash "$CASHASH" --num_threads 2 --colmap_time_limit 1 || rc=$?
+[[ $rc == 0 ]] || { echo "FAIL: the time-limited comparison exited with $rc"; exit 1; }
+python3 - "$WORK/compare_stopped" "$NUM_IMAGES" <<'EOF'
+import json, os, sys
+
+report = json.load(open(os.path.join(sys.argv[1], "comparison.json")))
+num_pairs = int(sys.argv[2]) * (int(sys.argv[2]) - 1) // 2
+t = report["time"]
+failures = []
+if not t["colmap"]["stopped"] or t["cashash"]["stopped"]:
+    failures.append("COLMAP should be marked stopped and cashash not: %r" % t)
+if not 0 <= t["colmap"]["pairs_done"] < num_pairs or t["cashash"]["pairs_done"] != num_pairs:
+    failures.append("pairs done: COLMAP %r, cashash %r of %d" % (t["colmap"]["pairs_done"], t["cashash"]["pairs_done"],
+                                                                num_pairs))
+if report["dataset"].get("pairs_compared", -1) < t["colmap"]["pairs_done"]:
+    failures.append("pairs_compared %r" % report["dataset"].get("pairs_compared"))
+if report["counts"]["cashash"]["pairs_written"] > report["dataset"]["pairs_compared"]:
+    failures.append("cashash's counts are not restricted to the pairs COLMAP reached")
+if "skipped" not in report["reconstruction"]:
+    failures.append("the mapper should be skipped")
+if "stopped" not in open(os.path.join(sys.argv[1], "comparison.md")).read():
+    failures.append("comparison.md does not say COLMAP was stopped")
+if failures:
+    print("FAIL:\n  " + "\n  ".join(failures))
+    sys.exit(1)
+print("OK: COLMAP stopped with %d of %d pairs committed" % (t["colmap"]["pairs_done"], num_pairs))
 EOF
