@@ -239,7 +239,8 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   const colmap::MatchingSummary first = colmap::MatchExhaustive(path_, options_, callbacks);
   EXPECT_EQ(first.pairs_requested, 3u);
   EXPECT_EQ(first.pairs_skipped, 0u);
-  EXPECT_EQ(first.matcher_name, "cpu-cascade");
+  // Runs match the pairs that may verify again exactly (all three here).
+  EXPECT_EQ(first.matcher_name, "cpu-cascade+exact-rematch");
   EXPECT_EQ(first.pipeline.pairs_done, 3u);
   EXPECT_EQ(first.pipeline.verified_pairs, 3u);
   EXPECT_GT(first.pipeline.inlier_matches, 3u * 300u);
@@ -247,7 +248,11 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   EXPECT_EQ(last_done, 3u);
   EXPECT_TRUE(warnings.empty());
   ASSERT_FALSE(notes.empty());
-  EXPECT_NE(std::find(notes.begin(), notes.end(), "Matcher: cpu-cascade"), notes.end());
+  EXPECT_NE(std::find(notes.begin(), notes.end(), "Matcher: cpu-cascade+exact-rematch"), notes.end());
+  EXPECT_NE(std::find_if(notes.begin(), notes.end(),
+                         [](const std::string& n) { return n.rfind("Exact rematch: 3 of 3 pairs", 0) == 0; }),
+            notes.end())
+      << testing::PrintToString(notes);
   EXPECT_EQ(notes.back().rfind("Features: 3 image reads for 3 images", 0), 0u) << notes.back();
 
   notes.clear();
@@ -271,10 +276,10 @@ TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
   };
   // Hundreds of features per image: the defaults' 8 x 7.
   EXPECT_TRUE(starts("Hash tables: 8 x 7 bits (chosen for ")) << testing::PrintToString(notes);
-  EXPECT_TRUE(starts("Matcher: auto(cpu-cascade|cpu-bruteforce)")) << testing::PrintToString(notes);
+  EXPECT_TRUE(starts("Matcher: auto(cpu-cascade+exact-rematch|cpu-bruteforce)")) << testing::PrintToString(notes);
   // Three pairs are too few to decide: the summary names whoever finished.
-  EXPECT_TRUE(summary.matcher_name == "auto(cpu-cascade|cpu-bruteforce)" || summary.matcher_name == "cpu-cascade" ||
-              summary.matcher_name == "cpu-bruteforce")
+  EXPECT_TRUE(summary.matcher_name == "auto(cpu-cascade+exact-rematch|cpu-bruteforce)" ||
+              summary.matcher_name == "cpu-cascade+exact-rematch" || summary.matcher_name == "cpu-bruteforce")
       << summary.matcher_name;
 }
 

@@ -62,7 +62,7 @@ def test_match_exhaustive_writes_every_pair_and_resumes(scene_database):
                                        progress=lambda done, total: calls.append((done, total)))
     assert summary["pairs_requested"] == 3 and summary["pairs_done"] == 3
     assert summary["verified_pairs"] == 3
-    assert summary["matcher"] == "cpu-cascade"
+    assert summary["matcher"] == "cpu-cascade+exact-rematch"
     assert calls and calls[-1] == (3, 3)
     db = sqlite3.connect(str(scene_database))
     assert db.execute("SELECT COUNT(*) FROM two_view_geometries WHERE rows > 100").fetchone()[0] == 3

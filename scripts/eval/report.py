@@ -140,7 +140,7 @@ def _fmt(value, digits=3):
 def gpu_paragraph(results, gpu_info, cascade_setting):
     """What the GPU rows are (device, options, where they ran) and how they agree with the CPU cascade."""
     ran_on = gpu_info["ran_on"]
-    on_gpu = all(m == "gpu-cascade" for m in ran_on.values())
+    on_gpu = all(m.startswith("gpu-cascade") for m in ran_on.values())
     lines = ["The GPU cascade rows come from `--gpu-results`: `--export-gpu-inputs DIR` wrote the feature databases "
              "of the sequences and `run.sh`, which matched each with `cashash exhaustive_matcher "
              "--FeatureMatching.use_gpu 1` at the binary's defaults on the GPU machine (%s). Matcher that finished "
@@ -517,7 +517,7 @@ def summary_section(results, losses, by_angle, cams, tables, bits, sweeps=None, 
         cpu = sum(r["cpu"] for p in gpu_info["agreement"].values() for r in p.values())
         same = sum(r["identical"] for p in gpu_info["agreement"].values() for r in p.values())
         gpu = sum(r["gpu"] for p in gpu_info["agreement"].values() for r in p.values())
-        on_gpu = all(m == "gpu-cascade" for m in gpu_info["ran_on"].values())
+        on_gpu = all(m.startswith("gpu-cascade") for m in gpu_info["ran_on"].values())
         lines.append("- GPU cascade%s: %d raw matches against the CPU cascade's %d, %d rows identical (%.2f %%)." % (
             "" if on_gpu else " (**CPU fallback stand-in, not a GPU measurement**)", gpu, cpu, same,
             100.0 * same / max(cpu, 1)))
