@@ -121,18 +121,22 @@ ImageFeatures GroupFeatureCache::LoadDirectly(image_t image_id) {
 }
 
 ImageFeatures GroupFeatureCache::LoadFeatures(image_t image_id) {
+  return *LoadSharedFeatures(image_id);  // the copy is made outside the lock
+}
+
+std::shared_ptr<const ImageFeatures> GroupFeatureCache::LoadSharedFeatures(image_t image_id) {
   FeaturesPtr features;
   {
     std::unique_lock<std::mutex> lock(mutex_);
     if (steps_.empty()) {
       lock.unlock();
-      return LoadDirectly(image_id);
+      return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
     }
     if (!step_sets_[current_step_].count(image_id)) {
       const int step = StepHolding(image_id, current_step_ + 1);
       if (step < 0) {
         lock.unlock();
-        return LoadDirectly(image_id);
+        return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
       }
       current_step_ = step;
       changed_.notify_all();
@@ -153,8 +157,8 @@ ImageFeatures GroupFeatureCache::LoadFeatures(image_t image_id) {
       ++stats_.served;
     }
   }
-  if (!features) return LoadDirectly(image_id);
-  return *features;  // the copy is made outside the lock
+  if (!features) return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
+  return features;
 }
 
 const Camera& GroupFeatureCache::CameraOfImage(image_t image_id) const { return source_->CameraOfImage(image_id); }

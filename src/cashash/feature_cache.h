@@ -52,6 +52,8 @@ class GroupFeatureCache : public FeatureSource {
 
   // Errors of the loading thread are rethrown here, for the image asked for.
   ImageFeatures LoadFeatures(image_t image_id) override;
+  // What the cache holds, without a copy.
+  std::shared_ptr<const ImageFeatures> LoadSharedFeatures(image_t image_id) override;
   const Camera& CameraOfImage(image_t image_id) const override;
 
   FeatureCacheStats stats() const;

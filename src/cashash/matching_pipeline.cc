@@ -64,6 +64,10 @@ TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, c
                                  KeypointPositions(image2.keypoints), matches, options);
 }
 
+std::shared_ptr<const ImageFeatures> FeatureSource::LoadSharedFeatures(image_t image_id) {
+  return std::make_shared<const ImageFeatures>(LoadFeatures(image_id));
+}
+
 MatchingPipeline::MatchingPipeline(const PipelineOptions& options, FeatureSource* source,
                                    FeatureMatcher* matcher, ResultSink* sink)
     : options_(options), source_(source), matcher_(matcher), sink_(sink) {}
@@ -217,7 +221,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       for (image_t image_id : chunk.images) {
         if (loaded.count(image_id)) continue;
         const Clock::time_point t_load = Clock::now();
-        auto features = std::make_shared<ImageFeatures>(source_->LoadFeatures(image_id));
+        FeaturesPtr features = source_->LoadSharedFeatures(image_id);
         const Clock::time_point t_hash = Clock::now();
         load_seconds += std::chrono::duration<double>(t_hash - t_load).count();
         matcher_->AddImage(image_id, features->descriptors);

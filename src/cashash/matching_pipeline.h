@@ -26,6 +26,12 @@ class FeatureSource {
   // Keypoints and descriptors of one image; throws with a message naming the
   // image when its data is unusable.
   virtual ImageFeatures LoadFeatures(image_t image_id) = 0;
+  // The same features for a caller that only reads them. A source that keeps
+  // them in memory (GroupFeatureCache) hands out what it holds instead of a
+  // copy: on a 5,000-image run the copies (1.2 MB per image at 8,192
+  // features, one per image per block pair) were a third of the matching
+  // thread's time. The default wraps LoadFeatures.
+  virtual std::shared_ptr<const ImageFeatures> LoadSharedFeatures(image_t image_id);
   virtual const Camera& CameraOfImage(image_t image_id) const = 0;
 };
 
