@@ -54,11 +54,8 @@ class CpuFeatureMatcher : public FeatureMatcher {
   void RemoveImage(image_t image_id) override { images_.erase(image_id); }
 
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
-    std::vector<const CpuImage*> firsts(pairs.size()), seconds(pairs.size());
-    for (size_t i = 0; i < pairs.size(); ++i) {
-      firsts[i] = Find(pairs[i].first);
-      seconds[i] = Find(pairs[i].second);
-    }
+    std::vector<const CpuImage*> firsts, seconds;
+    FindImages(pairs, &firsts, &seconds);
     std::vector<FeatureMatches> results(pairs.size());
     const size_t num_workers = NumParallelWorkers(pairs.size(), sift_options_.num_threads);
     std::vector<CascadeScratch> scratch(num_workers);
@@ -113,11 +110,8 @@ class CpuFeatureMatcher : public FeatureMatcher {
   bool SupportsExactMatching() const override { return true; }
 
   std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
-    std::vector<const CpuImage*> firsts(pairs.size()), seconds(pairs.size());
-    for (size_t i = 0; i < pairs.size(); ++i) {
-      firsts[i] = Find(pairs[i].first);
-      seconds[i] = Find(pairs[i].second);
-    }
+    std::vector<const CpuImage*> firsts, seconds;
+    FindImages(pairs, &firsts, &seconds);
     std::vector<FeatureMatches> results(pairs.size());
     ParallelForWorkers(pairs.size(), sift_options_.num_threads, [&](size_t i, size_t) {
       if (options_.matcher != MatcherType::kCascade) {
@@ -132,6 +126,18 @@ class CpuFeatureMatcher : public FeatureMatcher {
   }
 
  private:
+  // Each pair's two images, looked up before the parallel loop (the map is
+  // not touched by the workers).
+  void FindImages(const std::vector<ImagePair>& pairs, std::vector<const CpuImage*>* firsts,
+                  std::vector<const CpuImage*>* seconds) const {
+    firsts->resize(pairs.size());
+    seconds->resize(pairs.size());
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      (*firsts)[i] = Find(pairs[i].first);
+      (*seconds)[i] = Find(pairs[i].second);
+    }
+  }
+
   const CpuImage* Find(image_t image_id) const {
     const auto it = images_.find(image_id);
     if (it == images_.end()) {
