@@ -208,6 +208,7 @@ void BindOptions(py::module_& m) {
       .def_readwrite("bits_per_table", &CasHashOptions::bits_per_table)
       .def_readwrite("tau", &CasHashOptions::tau)
       .def_readwrite("top_k", &CasHashOptions::top_k)
+      .def_readwrite("exact_rematch_min_matches", &CasHashOptions::exact_rematch_min_matches)
       .def_readwrite("random_seed", &CasHashOptions::random_seed);
   py::class_<TwoViewGeometryOptions>(m, "TwoViewGeometryOptions")
       .def(py::init<>())

@@ -54,6 +54,13 @@ def test_bad_input_raises():
         cashash.make_options(no_such_option=1)
 
 
+def test_exact_rematch_is_the_runs_default_and_can_be_turned_off(scene_database):
+    # Runs match the pairs that may verify again exactly (12 cascade matches).
+    assert cashash.make_options().cashash.exact_rematch_min_matches == 12
+    summary = cashash.match_exhaustive(scene_database, matcher="cascade", exact_rematch_min_matches=0)
+    assert summary["matcher"] == "cpu-cascade" and summary["pairs_done"] == 3
+
+
 def test_match_exhaustive_writes_every_pair_and_resumes(scene_database):
     calls = []
     # Runs default to matcher="auto" (3 pairs: too few to decide); the name
