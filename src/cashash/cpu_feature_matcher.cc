@@ -110,14 +110,11 @@ class CpuFeatureMatcher : public FeatureMatcher {
   bool SupportsExactMatching() const override { return true; }
 
   std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    if (options_.matcher != MatcherType::kCascade) return MatchPairs(pairs);  // already exact
     std::vector<const CpuImage*> firsts, seconds;
     FindImages(pairs, &firsts, &seconds);
     std::vector<FeatureMatches> results(pairs.size());
-    ParallelForWorkers(pairs.size(), sift_options_.num_threads, [&](size_t i, size_t) {
-      if (options_.matcher != MatcherType::kCascade) {
-        results[i] = BruteForceMatchPair(firsts[i]->wide, seconds[i]->wide, sift_options_);
-        return;
-      }
+    ParallelFor(pairs.size(), sift_options_.num_threads, [&](size_t i) {
       const FeatureDescriptors& a = firsts[i]->cascade.descriptors;
       const FeatureDescriptors& b = seconds[i]->cascade.descriptors;
       results[i] = BruteForceMatchPair(WidenDescriptors(a, a.rows()), WidenDescriptors(b, b.rows()), sift_options_);
