@@ -130,10 +130,16 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"GuidedMatching.min_inlier_ratio"}, &o.guided.min_inlier_ratio,
             "Smallest share of stage-1 matches that are F inliers for a pair to be matched in stage 2");
   table.Add({"GuidedMatching.max_epipolar_distance"}, &o.guided.max_epipolar_distance,
-            "Half-width in pixels of the band around the epipolar line where stage 2 looks for candidates");
+            "Half-width in pixels of the band around the stage-1 epipolar lines that stage-2 matches must lie in "
+            "(0: 16 for the filter of exact matches, 4 for the paper's search within the band)");
   table.Add({"GuidedMatching.unguided_fallback"}, &o.guided.unguided_fallback,
-            "Match pairs with enough stage-1 matches but too few F inliers without the band (not in the paper; "
-            "for unordered collections)");
+            "Match pairs that stage 1 cannot guide but that have at least fallback_min_num_matches stage-1 "
+            "matches exactly, without the band (not in the paper)");
+  table.Add({"GuidedMatching.fallback_min_num_matches"}, &o.guided.fallback_min_num_matches,
+            "Fewest stage-1 matches for which a pair that is not guided is matched without the band");
+  table.Add({"GuidedMatching.restrict_search_to_band"}, &o.guided.restrict_search_to_band,
+            "The paper's stage 2: search candidates within the band only (accepts matches that are ambiguous in "
+            "the whole image); 0 filters exact matches by the band");
 
   po::variables_map vm;
   try {

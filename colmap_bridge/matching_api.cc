@@ -367,21 +367,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
                           FormatMemorySize(matcher_keep_bytes));
     }
     if (guided != nullptr) {
-      const GuidedMatchingStats& g = guided->stats();
-      std::ostringstream text;
-      text << std::fixed << std::setprecision(3) << "Guided matching: " << g.pairs << " pairs, "
-           << g.pairs_enough_matches << " with >= " << options.guided.min_num_matches << " top-scale matches ("
-           << g.stage1_matches << " in all), " << g.pairs_guided << " matched within the epipolar band ("
-           << g.stage2_matches << " matches)";
-      if (options.guided.unguided_fallback) {
-        text << ", " << g.pairs_fallback << " without it (" << g.fallback_matches << " matches)";
-      } else {
-        text << ", " << g.pairs_enough_matches - g.pairs_guided << " failed the inlier test";
-      }
-      text << "; stage 1 " << g.seconds_stage1 << " s, F " << g.seconds_fundamental << " s, stage 2 "
-           << g.seconds_stage2 << " s";
-      if (options.guided.unguided_fallback) text << ", without the band " << g.seconds_fallback << " s";
-      Info(callbacks, text.str());
+      Info(callbacks, DescribeGuidedMatching(guided->stats(), options.guided));
     }
     if (rematch_counts->rematched > 0) {
       std::ostringstream text;

@@ -18,6 +18,7 @@ namespace {
 
 using testing_support::GuidedScene;
 using testing_support::MakeGuidedScene;
+using testing_support::MakeRepeatedStructureScene;
 using testing_support::MakeUnrelatedImage;
 
 // Camera 2 translated along x: F = [e]x with e = (1, 0, 0); the epipolar
@@ -89,7 +90,8 @@ TEST(TopScaleFeatures, ScaleIsTheAffineShapeDeterminant) {
 }
 
 TEST(GuidedStage1, ThresholdsOfThePaper) {
-  const GuidedMatchingOptions options;  // 16 matches, 2/3 inliers
+  GuidedMatchingOptions options;  // 16 matches, 2/3 inliers
+  options.unguided_fallback = false;
   TwoViewModelEstimate F;
   F.success = true;
   F.num_inliers = 15;
@@ -103,6 +105,16 @@ TEST(GuidedStage1, ThresholdsOfThePaper) {
   F.success = false;
   EXPECT_EQ(DecideGuidedStage1(100, &F, options), GuidedStage1Outcome::kFewInliers);
   EXPECT_EQ(DecideGuidedStage1(100, nullptr, options), GuidedStage1Outcome::kFewInliers);
+}
+
+TEST(GuidedStage1, WeakPairsGoToTheFallback) {
+  const GuidedMatchingOptions options;  // fallback on, from 8 stage-1 matches
+  EXPECT_TRUE(options.unguided_fallback);
+  EXPECT_EQ(options.fallback_min_num_matches, 8);
+  EXPECT_EQ(DecideGuidedStage1(7, nullptr, options), GuidedStage1Outcome::kTooFewMatches);
+  EXPECT_EQ(DecideGuidedStage1(8, nullptr, options), GuidedStage1Outcome::kNoModel);
+  EXPECT_EQ(DecideGuidedStage1(15, nullptr, options), GuidedStage1Outcome::kNoModel);
+  EXPECT_EQ(DecideGuidedStage1(16, nullptr, options), GuidedStage1Outcome::kFewInliers);
 }
 
 TEST(GuidedMatchingOptions, CheckNamesTheOption) {
@@ -120,8 +132,20 @@ TEST(GuidedMatchingOptions, CheckNamesTheOption) {
   o.min_inlier_ratio = 1.5;
   EXPECT_NE(o.Check().find("min_inlier_ratio"), std::string::npos);
   o = GuidedMatchingOptions();
+  o.fallback_min_num_matches = 0;
+  EXPECT_NE(o.Check().find("fallback_min_num_matches"), std::string::npos);
+  o.fallback_min_num_matches = 17;  // above min_num_matches
+  EXPECT_NE(o.Check().find("fallback_min_num_matches"), std::string::npos);
+  o = GuidedMatchingOptions();
   o.max_epipolar_distance = -1;
   EXPECT_NE(o.Check().find("max_epipolar_distance"), std::string::npos);
+  // 0: the default of the stage-2 method.
+  o = GuidedMatchingOptions();
+  EXPECT_DOUBLE_EQ(o.EpipolarDistance(), 16.0);
+  o.restrict_search_to_band = true;
+  EXPECT_DOUBLE_EQ(o.EpipolarDistance(), 4.0);
+  o.max_epipolar_distance = 6;
+  EXPECT_DOUBLE_EQ(o.EpipolarDistance(), 6.0);
 }
 
 struct HashedScene {
@@ -266,9 +290,10 @@ struct GuidedRig {
   std::unique_ptr<GuidedFeatureMatcher> matcher;
 };
 
-std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options) {
+// Images 1 and 2 from the scene, 3 unrelated to both; CPU cascade for both
+// stages.
+std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options, const GuidedScene& scene) {
   auto rig = std::make_unique<GuidedRig>();
-  const GuidedScene scene = MakeGuidedScene(1500, 21);
   rig->memory.Put(1, scene.image1);
   rig->memory.Put(2, scene.image2);
   rig->memory.Put(3, MakeUnrelatedImage(1500, 22));
@@ -286,6 +311,32 @@ std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options) {
   return rig;
 }
 
+std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options) {
+  return MakeRig(options, MakeGuidedScene(1500, 21));
+}
+
+// The exact (brute-force) matches of the scene's pair.
+FeatureMatches ExactMatches(const GuidedScene& scene) {
+  CasHashOptions brute;
+  brute.matcher = MatcherType::kBruteForce;
+  const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
+  auto exact = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean);
+  exact->AddImage(1, scene.image1.descriptors);
+  exact->AddImage(2, scene.image2.descriptors);
+  return exact->MatchPairs({{1, 2}})[0];
+}
+
+TEST(GuidedBandFilter, KeepsMatchesNearBothLinesInOrder) {
+  // Rows F: a match must keep its row (|y2 - y1| <= d), seen from either image.
+  const std::vector<float> xy1 = {10, 100, 20, 200, 30, 300};
+  const std::vector<float> xy2 = {500, 100.5f, 600, 207, 700, 296.5f};
+  const FeatureMatches matches = {{0, 0}, {1, 1}, {2, 2}};
+  EXPECT_EQ(KeepMatchesInEpipolarBand(matches, kRowsF, xy1, xy2, 4.0), (FeatureMatches{{0, 0}, {2, 2}}));
+  EXPECT_EQ(KeepMatchesInEpipolarBand(matches, kRowsF, xy1, xy2, 8.0), matches);
+  EXPECT_TRUE(KeepMatchesInEpipolarBand(matches, kRowsF, xy1, xy2, 0.4).empty());
+  EXPECT_THROW(KeepMatchesInEpipolarBand({{3, 0}}, kRowsF, xy1, xy2, 4.0), std::out_of_range);
+}
+
 TEST(GuidedFeatureMatcher, OverlappingPairsAreGuidedOthersGetNothing) {
   std::unique_ptr<GuidedRig> rig = MakeRig(GuidedMatchingOptions());
   const GuidedScene scene = MakeGuidedScene(1500, 21);
@@ -298,28 +349,101 @@ TEST(GuidedFeatureMatcher, OverlappingPairsAreGuidedOthersGetNothing) {
   EXPECT_EQ(outcomes[2], GuidedStage1Outcome::kTooFewMatches);
   EXPECT_TRUE(result[1].empty());
   EXPECT_TRUE(result[2].empty());
-  // Stage 2 matched all features, not only the top-scale fifth, and
-  // correctly (indices are rows of the whole images).
+  // Stage 2 gives the pair's exact matches (all features, not only the
+  // top-scale fifth, indices are rows of the whole images) that lie in the
+  // band: here all of them, as they are right.
+  const FeatureMatches exact = ExactMatches(scene);
+  EXPECT_EQ(result[0], KeepMatchesInEpipolarBand(exact, scene.F.data(), scene.xy1, scene.xy2, 16.0));
   size_t right = 0;
   for (const FeatureMatch& m : result[0]) right += scene.truth[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
-  EXPECT_GT(result[0].size(), 1100u);  // of 1500, 500 of them with a decoy
+  EXPECT_GT(result[0].size(), 900u);  // of 1500, 500 of them with a decoy that the ratio test rejects
   EXPECT_GE(right, result[0].size() * 99 / 100);
   const GuidedMatchingStats& stats = rig->matcher->stats();
   EXPECT_EQ(stats.pairs, 3u);
   EXPECT_EQ(stats.pairs_enough_matches, 1u);
   EXPECT_EQ(stats.pairs_guided, 1u);
+  EXPECT_EQ(stats.pairs_fallback, 0u);
   EXPECT_EQ(stats.stage2_matches, result[0].size());
+  EXPECT_EQ(stats.stage2_exact_matches, exact.size());
   EXPECT_GT(stats.stage1_matches, 16u);
   EXPECT_LE(stats.stage1_matches, 300u + 20u);  // the top-scale fifth of 1500 features, plus chance matches
+  EXPECT_FALSE(stats.searched_in_band);
+}
+
+TEST(GuidedFeatureMatcher, ThePapersSearchInTheBandRecoversDecoyedFeatures) {
+  GuidedMatchingOptions options;
+  options.restrict_search_to_band = true;
+  std::unique_ptr<GuidedRig> rig = MakeRig(options);
+  const GuidedScene scene = MakeGuidedScene(1500, 21);
+  const std::vector<FeatureMatches> result = rig->matcher->MatchPairs({{1, 2}});
+  EXPECT_EQ(rig->matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
+  size_t right = 0;
+  for (const FeatureMatch& m : result[0]) right += scene.truth[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
+  // The decoys lie off the line, so the band search only sees the true match.
+  EXPECT_GT(result[0].size(), 1100u);
+  EXPECT_GE(right, result[0].size() * 99 / 100);
+  EXPECT_TRUE(rig->matcher->stats().searched_in_band);
+}
+
+TEST(GuidedFeatureMatcher, RejectsRepeatedStructureOnTheEpipolarLine) {
+  // A third of the features have lost their true match and have two equally
+  // good copies in image 2, one of them on their epipolar line.
+  const GuidedScene scene = MakeRepeatedStructureScene(1500, 23);
+  auto count = [&](const FeatureMatches& matches, size_t* right, size_t* on_line) {
+    *right = *on_line = 0;
+    for (const FeatureMatch& m : matches) {
+      *right += scene.truth[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
+      *on_line += scene.decoy[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
+    }
+  };
+  // The paper's stage 2 accepts the copy on the line: the band leaves it
+  // without a rival, and F cannot reject it.
+  GuidedMatchingOptions paper;
+  paper.restrict_search_to_band = true;
+  std::unique_ptr<GuidedRig> searched = MakeRig(paper, scene);
+  const FeatureMatches band_search = searched->matcher->MatchPairs({{1, 2}})[0];
+  ASSERT_EQ(searched->matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
+  size_t right = 0, on_line = 0;
+  count(band_search, &right, &on_line);
+  EXPECT_GT(on_line, 300u);  // of 500
+  // The default keeps only exact matches, where the copy off the line is as
+  // good a rival: not one wrong match, and the unambiguous features stay.
+  std::unique_ptr<GuidedRig> filtered = MakeRig(GuidedMatchingOptions(), scene);
+  const FeatureMatches guided = filtered->matcher->MatchPairs({{1, 2}})[0];
+  ASSERT_EQ(filtered->matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
+  count(guided, &right, &on_line);
+  EXPECT_EQ(on_line, 0u);
+  EXPECT_EQ(right, guided.size());
+  EXPECT_GT(right, 750u);  // of the 1000 features with a unique match (810 here)
 }
 
 TEST(GuidedFeatureMatcher, StrictThresholdsSkipThePair) {
   GuidedMatchingOptions options;
   options.min_num_matches = 100000;
+  options.fallback_min_num_matches = 100000;
   std::unique_ptr<GuidedRig> rig = MakeRig(options);
   const std::vector<FeatureMatches> result = rig->matcher->MatchPairs({{1, 2}});
   EXPECT_EQ(rig->matcher->last_outcomes()[0], GuidedStage1Outcome::kTooFewMatches);
   EXPECT_TRUE(result[0].empty());
+}
+
+TEST(GuidedFeatureMatcher, PairsWithoutAModelGetTheirExactMatches) {
+  // Too few stage-1 matches for F (min_num_matches above them), enough for
+  // the fallback: the pair's exact matches, without the band.
+  GuidedMatchingOptions options;
+  options.min_num_matches = 100000;
+  std::unique_ptr<GuidedRig> rig = MakeRig(options);
+  const std::vector<FeatureMatches> result = rig->matcher->MatchPairs({{1, 2}, {1, 3}});
+  EXPECT_EQ(rig->matcher->last_outcomes()[0], GuidedStage1Outcome::kNoModel);
+  EXPECT_EQ(rig->matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
+  EXPECT_EQ(result[0], ExactMatches(MakeGuidedScene(1500, 21)));
+  EXPECT_TRUE(result[1].empty());
+  EXPECT_EQ(rig->matcher->stats().pairs_weak, 1u);
+  EXPECT_EQ(rig->matcher->stats().pairs_fallback, 1u);
+  options.unguided_fallback = false;
+  std::unique_ptr<GuidedRig> without = MakeRig(options);
+  EXPECT_TRUE(without->matcher->MatchPairs({{1, 2}})[0].empty());
+  EXPECT_EQ(without->matcher->last_outcomes()[0], GuidedStage1Outcome::kTooFewMatches);
 }
 
 TEST(GuidedFeatureMatcher, UnguidedFallbackMatchesPairsThatFailTheInlierTest) {
@@ -327,6 +451,7 @@ TEST(GuidedFeatureMatcher, UnguidedFallbackMatchesPairsThatFailTheInlierTest) {
   // stage-1 matches hold a few chance ones that no F explains.
   GuidedMatchingOptions options;
   options.min_inlier_ratio = 1.0;
+  options.unguided_fallback = false;
   std::unique_ptr<GuidedRig> without = MakeRig(options);
   const std::vector<ImagePair> pairs = {{1, 2}, {1, 3}};
   const std::vector<FeatureMatches> none = without->matcher->MatchPairs(pairs);
@@ -340,27 +465,19 @@ TEST(GuidedFeatureMatcher, UnguidedFallbackMatchesPairsThatFailTheInlierTest) {
   EXPECT_EQ(with->matcher->last_outcomes()[0], GuidedStage1Outcome::kFewInliers);
   EXPECT_EQ(with->matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
   EXPECT_TRUE(result[1].empty());  // too few stage-1 matches: still nothing
-  // The failed pair gets exactly what unguided matching of all features gives.
-  const GuidedScene scene = MakeGuidedScene(1500, 21);
-  const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
-  auto plain = CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean);
-  plain->AddImage(1, scene.image1.descriptors);
-  plain->AddImage(2, scene.image2.descriptors);
-  const std::vector<FeatureMatches> expected = plain->MatchPairs({{1, 2}});
-  ASSERT_GT(expected[0].size(), 500u);
-  ASSERT_EQ(result[0].size(), expected[0].size());
-  for (size_t i = 0; i < result[0].size(); ++i) {
-    EXPECT_EQ(result[0][i].point2D_idx1, expected[0][i].point2D_idx1);
-    EXPECT_EQ(result[0][i].point2D_idx2, expected[0][i].point2D_idx2);
-  }
+  // The failed pair gets exactly the exact matches of all features.
+  const FeatureMatches expected = ExactMatches(MakeGuidedScene(1500, 21));
+  ASSERT_GT(expected.size(), 500u);
+  EXPECT_EQ(result[0], expected);
   const GuidedMatchingStats& stats = with->matcher->stats();
   EXPECT_EQ(stats.pairs_guided, 0u);
   EXPECT_EQ(stats.pairs_fallback, 1u);
+  EXPECT_EQ(stats.pairs_weak, 0u);
   EXPECT_EQ(stats.fallback_matches, result[0].size());
   EXPECT_EQ(stats.stage2_matches, 0u);
 }
 
-TEST(GuidedFeatureMatcher, NeedsKeypointsAndACascade) {
+TEST(GuidedFeatureMatcher, NeedsKeypointsAndTheRightBackend) {
   std::unique_ptr<GuidedRig> rig = MakeRig(GuidedMatchingOptions());
   // An image not read through the recording source has no keypoints.
   EXPECT_THROW(rig->matcher->AddImage(4, MakeUnrelatedImage(10, 1).descriptors), std::logic_error);
@@ -370,11 +487,18 @@ TEST(GuidedFeatureMatcher, NeedsKeypointsAndACascade) {
   CasHashOptions brute;
   brute.matcher = MatcherType::kBruteForce;
   const MeanDescriptor mean{};
+  // Brute force matches exactly, but cannot search within the band.
+  GuidedMatchingOptions paper;
+  paper.restrict_search_to_band = true;
   EXPECT_THROW(GuidedFeatureMatcher(CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean),
                                     CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean),
-                                    CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), &recording,
-                                    GuidedMatchingOptions(), 32768, 0, 1),
+                                    CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), &recording, paper,
+                                    32768, 0, 1),
                std::invalid_argument);
+  EXPECT_NO_THROW(GuidedFeatureMatcher(CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean),
+                                       CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean),
+                                       CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), &recording,
+                                       GuidedMatchingOptions(), 32768, 0, 1));
 }
 
 TEST(KeypointRecordingSource, KeepsKeypointsUntilTaken) {

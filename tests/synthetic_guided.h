@@ -103,6 +103,83 @@ inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
   return g;
 }
 
+// Repeated structure along the epipolar line: as MakeGuidedScene, but for
+// every third feature of image 1 the true match is missing from image 2
+// (occluded), and two copies of it stand elsewhere, with one descriptor
+// (the same element repeated): one on the feature's epipolar line (within 0.5 px of
+// it, 40 to 200 px from where the true match would be), the other at least
+// 40 px off the line. Within the band only the copy on the line competes,
+// so a ratio test among band candidates accepts it; in the whole image the
+// two copies are equally good rivals. truth is -1 for those features,
+// decoy the row of the copy on the line.
+inline GuidedScene MakeRepeatedStructureScene(int num_features, unsigned seed) {
+  SceneOptions options;
+  options.num_inliers = num_features;
+  options.outlier_ratio = 0;
+  options.noise_px = 0.3;
+  options.seed = seed;
+  const SyntheticScene scene = MakeScene(options);
+  GuidedScene g;
+  const Eigen::Matrix3d F = scene.TrueF();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F(r, c);
+  std::mt19937 rng(seed * 7919u + 3);
+  std::uniform_int_distribution<int> noise(-6, 6);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::uniform_real_distribution<float> scale(1.0f, 8.0f);
+  auto perturb = [&](std::vector<uint8_t> d) {
+    for (uint8_t& x : d) x = static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255));
+    return d;
+  };
+  struct Row {
+    std::vector<uint8_t> desc;
+    Keypoint kp;
+    int source;
+    bool decoy;
+  };
+  std::vector<Row> rows2;
+  const int n = static_cast<int>(scene.points1.size());
+  for (int i = 0; i < n; ++i) {
+    const std::vector<uint8_t> d = RandomSift(&rng);
+    const float s = scale(rng);
+    const Eigen::Vector2d& p1 = scene.points1[i];
+    g.image1.keypoints.push_back(MakeKeypoint(p1, s));
+    g.image1.descriptors.data.insert(g.image1.descriptors.data.end(), d.begin(), d.end());
+    if (i % 3 != 0) {
+      rows2.push_back(Row{perturb(d), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
+      continue;
+    }
+    const EpipolarLine line = LineInSecondImage(g.F.data(), static_cast<float>(p1.x()), static_cast<float>(p1.y()));
+    // Along the line: direction (-b, a) from the true position.
+    const double t = (40.0 + 160.0 * unit(rng)) * (unit(rng) < 0.5 ? -1.0 : 1.0);
+    const Eigen::Vector2d on_line = scene.points2[i] + t * Eigen::Vector2d(-line.b, line.a);
+    const std::vector<uint8_t> copy = perturb(d);
+    rows2.push_back(Row{copy, MakeKeypoint(on_line, 1.1f * s), i, true});
+    Eigen::Vector2d off_line;
+    do {
+      off_line = Eigen::Vector2d(unit(rng) * scene.width, unit(rng) * scene.height);
+    } while (line.Contains(static_cast<float>(off_line.x()), static_cast<float>(off_line.y()), 40.0));
+    rows2.push_back(Row{copy, MakeKeypoint(off_line, 1.1f * s), -1, false});
+  }
+  std::shuffle(rows2.begin(), rows2.end(), rng);
+  g.truth.assign(n, -1);
+  g.decoy.assign(n, -1);
+  for (size_t r = 0; r < rows2.size(); ++r) {
+    g.image2.keypoints.push_back(rows2[r].kp);
+    g.image2.descriptors.data.insert(g.image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
+    if (rows2[r].source >= 0) (rows2[r].decoy ? g.decoy : g.truth)[rows2[r].source] = static_cast<int>(r);
+  }
+  for (const Keypoint& k : g.image1.keypoints) {
+    g.xy1.push_back(k.x);
+    g.xy1.push_back(k.y);
+  }
+  for (const Keypoint& k : g.image2.keypoints) {
+    g.xy2.push_back(k.x);
+    g.xy2.push_back(k.y);
+  }
+  return g;
+}
+
 // An image that shares nothing with the others.
 inline ImageFeatures MakeUnrelatedImage(int num_features, unsigned seed) {
   std::mt19937 rng(seed);

@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iomanip>
+#include <sstream>
 #include <stdexcept>
 
 #include "cashash/batch_verifier.h"
+#include "cashash/epipolar_band.h"
 #include "cashash/thread_pool.h"
 
 namespace cashash {
@@ -24,8 +27,11 @@ std::string GuidedMatchingOptions::Check() const {
   if (!(min_inlier_ratio >= 0 && min_inlier_ratio <= 1)) {
     return "--GuidedMatching.min_inlier_ratio must be in [0, 1]";
   }
-  if (!(max_epipolar_distance > 0) || !std::isfinite(max_epipolar_distance)) {
-    return "--GuidedMatching.max_epipolar_distance must be a positive number of pixels";
+  if (fallback_min_num_matches < 1 || fallback_min_num_matches > min_num_matches) {
+    return "--GuidedMatching.fallback_min_num_matches must be in [1, --GuidedMatching.min_num_matches]";
+  }
+  if (!(max_epipolar_distance >= 0) || !std::isfinite(max_epipolar_distance)) {
+    return "--GuidedMatching.max_epipolar_distance must be a number of pixels >= 0 (0: the default of the method)";
   }
   return "";
 }
@@ -96,12 +102,33 @@ std::unique_ptr<BatchFundamentalEstimator> CreateCpuFundamentalEstimator(const T
 
 GuidedStage1Outcome DecideGuidedStage1(size_t num_matches, const TwoViewModelEstimate* F,
                                        const GuidedMatchingOptions& options) {
-  if (num_matches < static_cast<size_t>(options.min_num_matches)) return GuidedStage1Outcome::kTooFewMatches;
+  if (num_matches < static_cast<size_t>(options.min_num_matches)) {
+    return options.unguided_fallback && num_matches >= static_cast<size_t>(options.fallback_min_num_matches)
+               ? GuidedStage1Outcome::kNoModel
+               : GuidedStage1Outcome::kTooFewMatches;
+  }
   if (F == nullptr || !F->success) return GuidedStage1Outcome::kFewInliers;
   // A tolerance so that 2/3 of 24 matches (15.999...) asks for 16.
   const double needed = options.min_inlier_ratio * static_cast<double>(num_matches) - 1e-9;
   return static_cast<double>(F->num_inliers) >= needed ? GuidedStage1Outcome::kGuided
                                                         : GuidedStage1Outcome::kFewInliers;
+}
+
+FeatureMatches KeepMatchesInEpipolarBand(const FeatureMatches& matches, const double* F, const std::vector<float>& xy1,
+                                         const std::vector<float>& xy2, double max_distance) {
+  FeatureMatches kept;
+  kept.reserve(matches.size());
+  for (const FeatureMatch& m : matches) {
+    const size_t i = 2 * static_cast<size_t>(m.point2D_idx1), j = 2 * static_cast<size_t>(m.point2D_idx2);
+    if (i + 1 >= xy1.size() || j + 1 >= xy2.size()) {
+      throw std::out_of_range("KeepMatchesInEpipolarBand: a match indexes a feature without a position");
+    }
+    if (LineInSecondImage(F, xy1[i], xy1[i + 1]).Contains(xy2[j], xy2[j + 1], max_distance) &&
+        LineInFirstImage(F, xy2[j], xy2[j + 1]).Contains(xy1[i], xy1[i + 1], max_distance)) {
+      kept.push_back(m);
+    }
+  }
+  return kept;
 }
 
 ImageFeatures KeypointRecordingSource::LoadFeatures(image_t image_id) {
@@ -143,10 +170,11 @@ GuidedFeatureMatcher::GuidedFeatureMatcher(std::unique_ptr<FeatureMatcher> full,
   if (!full_ || !top_scale_ || !fundamental_ || keypoints_ == nullptr) {
     throw std::invalid_argument("GuidedFeatureMatcher: a matcher, the F estimator or the keypoint source is missing");
   }
-  if (!full_->SupportsEpipolarGuidance()) {
+  if (options_.restrict_search_to_band ? !full_->SupportsEpipolarGuidance() : !full_->SupportsExactMatching()) {
     throw std::invalid_argument("guided matching needs the cascade matcher (--CasHash.matcher cascade), not " +
                                 full_->Name());
   }
+  stats_.searched_in_band = options_.restrict_search_to_band;
 }
 
 void GuidedFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
@@ -239,10 +267,14 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   std::vector<size_t> guided_index;
   std::vector<ImagePair> fallback;
   std::vector<size_t> fallback_index;
-  for (size_t c = 0; c < candidates.size(); ++c) {
-    const size_t k = candidates[c];
-    last_outcomes_[k] = DecideGuidedStage1(stage1[k].size(), &fundamentals[c], options_);
-    if (last_outcomes_[k] == GuidedStage1Outcome::kFewInliers && options_.unguided_fallback) {
+  size_t next_candidate = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    const TwoViewModelEstimate* F = nullptr;
+    if (next_candidate < candidates.size() && candidates[next_candidate] == k) F = &fundamentals[next_candidate++];
+    last_outcomes_[k] = DecideGuidedStage1(stage1[k].size(), F, options_);
+    if (last_outcomes_[k] == GuidedStage1Outcome::kNoModel) ++stats_.pairs_weak;
+    if ((last_outcomes_[k] == GuidedStage1Outcome::kFewInliers && options_.unguided_fallback) ||
+        last_outcomes_[k] == GuidedStage1Outcome::kNoModel) {
       fallback.push_back(pairs[k]);
       fallback_index.push_back(k);
     }
@@ -250,7 +282,7 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
     GuidedPair g;
     g.pair = pairs[k];
     for (int r = 0; r < 3; ++r)
-      for (int col = 0; col < 3; ++col) g.F[3 * r + col] = fundamentals[c].model(r, col);
+      for (int col = 0; col < 3; ++col) g.F[3 * r + col] = F->model(r, col);
     g.points1 = &Find(pairs[k].first).interleaved;
     g.points2 = &Find(pairs[k].second).interleaved;
     guided.push_back(g);
@@ -259,10 +291,23 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   stats_.seconds_fundamental += SecondsSince(t0);
   stats_.pairs_guided += guided.size();
 
-  // Stage 2: all features, candidates within the epipolar band.
+  // Stage 2: all features; the band searched (the paper) or applied to the
+  // exact matches.
   t0 = Clock::now();
   if (!guided.empty()) {
-    std::vector<FeatureMatches> stage2 = full_->MatchPairsGuided(guided, options_.max_epipolar_distance);
+    std::vector<FeatureMatches> stage2;
+    if (options_.restrict_search_to_band) {
+      stage2 = full_->MatchPairsGuided(guided, options_.EpipolarDistance());
+    } else {
+      std::vector<ImagePair> guided_pairs(guided.size());
+      for (size_t g = 0; g < guided.size(); ++g) guided_pairs[g] = guided[g].pair;
+      stage2 = full_->MatchPairsExact(guided_pairs);
+      for (size_t g = 0; g < guided.size(); ++g) stats_.stage2_exact_matches += stage2[g].size();
+      ParallelFor(guided.size(), num_threads_, [&](size_t g) {
+        stage2[g] = KeepMatchesInEpipolarBand(stage2[g], guided[g].F.data(), *guided[g].points1, *guided[g].points2,
+                                              options_.EpipolarDistance());
+      });
+    }
     for (size_t g = 0; g < guided.size(); ++g) {
       stats_.stage2_matches += stage2[g].size();
       results[guided_index[g]] = std::move(stage2[g]);
@@ -270,10 +315,13 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   }
   stats_.seconds_stage2 += SecondsSince(t0);
 
-  // Pairs that failed the inlier test, without the band (unguided_fallback).
+  // Pairs stage 1 could not guide, exactly and without the band
+  // (unguided_fallback; the cascade with restrict_search_to_band, as the
+  // paper's method has no exact matching).
   t0 = Clock::now();
   if (!fallback.empty()) {
-    std::vector<FeatureMatches> unguided = full_->MatchPairs(fallback);
+    std::vector<FeatureMatches> unguided =
+        options_.restrict_search_to_band ? full_->MatchPairs(fallback) : full_->MatchPairsExact(fallback);
     for (size_t f = 0; f < fallback.size(); ++f) {
       stats_.fallback_matches += unguided[f].size();
       results[fallback_index[f]] = std::move(unguided[f]);
@@ -282,6 +330,30 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   stats_.pairs_fallback += fallback.size();
   stats_.seconds_fallback += SecondsSince(t0);
   return results;
+}
+
+std::string DescribeGuidedMatching(const GuidedMatchingStats& g, const GuidedMatchingOptions& options) {
+  std::ostringstream text;
+  text << std::fixed << std::setprecision(3) << "Guided matching: " << g.pairs << " pairs, " << g.pairs_enough_matches
+       << " with >= " << options.min_num_matches << " top-scale matches (" << g.stage1_matches << " in all), "
+       << g.pairs_guided;
+  if (g.searched_in_band) {
+    text << " matched within the epipolar band (" << g.stage2_matches << " matches)";
+  } else {
+    text << " guided (" << g.stage2_matches << " of their " << g.stage2_exact_matches
+         << " exact matches within the epipolar band)";
+  }
+  if (options.unguided_fallback) {
+    text << ", " << g.pairs_fallback << " without the band (" << g.pairs_weak << " of them with "
+         << options.fallback_min_num_matches << " to " << options.min_num_matches - 1 << " top-scale matches; "
+         << g.fallback_matches << " matches)";
+  } else {
+    text << ", " << g.pairs_enough_matches - g.pairs_guided << " failed the inlier test";
+  }
+  text << "; stage 1 " << g.seconds_stage1 << " s, F " << g.seconds_fundamental << " s, stage 2 " << g.seconds_stage2
+       << " s";
+  if (options.unguided_fallback) text << ", without the band " << g.seconds_fallback << " s";
+  return text.str();
 }
 
 std::string GuidedFeatureMatcher::Name() const {

@@ -1,21 +1,37 @@
 // Ga-CasHash: two-stage, epipolar-guided Cascade Hashing matching (Xu, Sun
 // and Tao, "GPU Accelerated Cascade Hashing Image Matching for Large Scale 3D
 // Reconstruction", section "Image Matching with Geometry-aware Cascade
-// Hashing on GPU").
+// Hashing on GPU"), with a stage 2 that cannot accept what exhaustive
+// matching rejects.
 //
 // Stage 1 matches only the top_scale_fraction (20 %) largest-scale features
 // of each image, for every pair. A pair with at least min_num_matches (16)
 // stage-1 matches gets a fundamental matrix by RANSAC (the GPU's batched
 // LO-RANSAC when matching on the GPU); if at least min_inlier_ratio (2/3) of
-// its stage-1 matches are F inliers, stage 2 matches all features of the pair
-// with each query's candidates restricted to the band of
-// max_epipolar_distance pixels around its epipolar line (cascade_matcher.h,
-// EpipolarGuidance). Every other pair gets no matches: the pipeline then
-// verifies and writes it exactly as a pair for which exhaustive matching
-// found none. Stage-2 matches are verified as usual. With unguided_fallback,
-// a pair that has enough stage-1 matches but fails the inlier test is matched
-// without the band instead (an addition to the paper, for unordered
-// collections; see the option).
+// its stage-1 matches are F inliers, stage 2 matches all features of the
+// pair and keeps the matches that lie within max_epipolar_distance pixels of
+// F's lines, both ways.
+//
+// Stage 2 by default takes the pair's exact matches (global nearest
+// neighbour, ratio test and cross-check over the whole image: the matches
+// exhaustive matching gives, FeatureMatcher::MatchPairsExact) and the band
+// only filters them. The paper instead restricts each query's candidates to
+// the band (restrict_search_to_band): then the ratio test only compares the
+// few features that lie near the line, and a match on repeated structure
+// along the right epipolar line passes where the whole image holds an
+// equally good rival. Measured on fountain-P11, 62 % of the inliers that
+// search adds are not their query's nearest neighbour in the image
+// (docs/guided_matching.md); F cannot reject them, since they satisfy it.
+// With the filter a band-only match cannot pass by construction.
+//
+// Pairs that stage 1 cannot guide but that show evidence of overlap are
+// matched exactly without the band (unguided_fallback, on by default): those
+// with fallback_min_num_matches (8) to min_num_matches stage-1 matches, and
+// those whose F explains too few of them (wide baselines, the pairs that
+// join the view clusters of unordered collections). Pairs with fewer
+// stage-1 matches get no matches; the pipeline then verifies and writes them
+// as pairs for which exhaustive matching found none. Far pairs of a large
+// collection thus cost one stage-1 match of a fifth of the features.
 //
 // GuidedFeatureMatcher does all of this behind the FeatureMatcher interface,
 // so the pipeline, the scheduling, resuming and the database writer are the
@@ -51,33 +67,53 @@ struct GuidedMatchingOptions {
   // Smallest share of the stage-1 matches that must be F inliers for the
   // pair to be matched in stage 2.
   double min_inlier_ratio = 2.0 / 3.0;
-  // Half-width d (pixels) of the band around the epipolar line. The paper
-  // gives no value. We take the verification threshold
-  // (TwoViewGeometry.max_error, 4 px by default): stage-2 matches are
-  // verified against an F fitted at that threshold, so a candidate farther
-  // than that from the stage-1 F's line is, for an F that explains 2/3 of the
-  // stage-1 matches, mostly one verification would reject anyway; and every
-  // candidate dropped is one less rival in the ratio test. Measured with the
-  // CPU cascade (docs/guided_matching.md): verified inlier matches on
-  // fountain-P11 d = 2: 171,417, 4: 183,853, 8: 173,149, 16: 153,196;
-  // sceaux_castle 2: 117,797, 4: 130,092, 8: 117,693 (the same pairs
-  // verified at every d). Wider bands let more distractors into the ratio
-  // test, narrower ones cut true matches where F is extrapolated.
-  double max_epipolar_distance = 4.0;
-  // Not in the paper. A pair with at least min_num_matches stage-1 matches
-  // whose F explains fewer than min_inlier_ratio of them gets no matches in
-  // the paper's method; with this set it is matched like exhaustive matching
-  // does (all features, no band) and verified as usual. On an unordered
-  // internet collection (sacre_coeur, docs/guided_matching.md) the pairs that
-  // fail the test include the wide-baseline ones that join the view clusters:
-  // without them colmap mapper found no initial pair there, with them every
-  // image registered. Pairs with too few stage-1 matches still get none, so
-  // far pairs of a large collection stay cheap. Off by default: the paper's
-  // method.
-  bool unguided_fallback = false;
+  // Half-width d (pixels) of the band around the stage-1 epipolar lines; 0
+  // takes the default of the stage-2 method (EpipolarDistance()):
+  // - 16 px for the filter of exact matches. The stage-1 F is fitted to the
+  //   top-scale features at 4 px, and away from them its lines can be off by
+  //   more: at 4 px the filter dropped 46 of the 179 verified inliers of one
+  //   sacre_coeur pair and changed another pair's configuration, and the
+  //   mapper's mean reprojection error rose 17 %; at 16 px guided keeps 97.9
+  //   to 99.8 % of exhaustive matching's inliers on fountain-P11,
+  //   herzjesu-P25, sceaux_castle and sacre_coeur (docs/guided_matching.md).
+  //   The filter only removes outliers before verification; no match it
+  //   keeps can be one exhaustive matching rejects.
+  // - 4 px for the paper's search (restrict_search_to_band), whose value
+  //   the paper does not give: the verification threshold. Measured with
+  //   the CPU cascade, verified inlier matches on fountain-P11 d = 2:
+  //   171,417, 4: 183,853, 8: 173,149, 16: 153,196: wider bands let more
+  //   distractors into the ratio test among band candidates, narrower ones
+  //   cut true matches where F is extrapolated.
+  double max_epipolar_distance = 0;
+  // Not in the paper. With this set, a pair that stage 1 cannot guide but
+  // that shows evidence of overlap is matched exactly, without the band, and
+  // verified as usual: pairs with at least fallback_min_num_matches stage-1
+  // matches whose F cannot be estimated (fewer than min_num_matches) or
+  // explains fewer than min_inlier_ratio of them. On an unordered internet
+  // collection (sacre_coeur) the pairs that fail the inlier test include the
+  // wide-baseline ones that join the view clusters: without them colmap
+  // mapper found no initial pair. On fountain-P11, 9 of the 40 pairs
+  // exhaustive matching verifies have fewer than 16 top-scale matches, 1
+  // fewer than 8 (docs/guided_matching.md). Off: the paper's method, where
+  // such pairs get no matches.
+  bool unguided_fallback = true;
+  // Fewest stage-1 matches for which a pair that is not guided is matched
+  // without the band (unguided_fallback). Far pairs of a generated street
+  // have a median of 0 and a 90th percentile of 4 chance stage-1 matches.
+  int fallback_min_num_matches = 8;
+  // The paper's stage 2: each query's candidates restricted to the band, the
+  // ratio test among those. Off: exact matches filtered by the band (see the
+  // top of this file); needs a backend with SupportsEpipolarGuidance() when
+  // on, SupportsExactMatching() when off.
+  bool restrict_search_to_band = false;
 
   // "" when valid, else a message naming the option.
   std::string Check() const;
+  // max_epipolar_distance, or its default for the stage-2 method when 0.
+  double EpipolarDistance() const {
+    if (max_epipolar_distance > 0) return max_epipolar_distance;
+    return restrict_search_to_band ? 4.0 : 16.0;
+  }
 };
 
 // A keypoint's scale from its affine shape: sqrt(|det A|), A = [a11 a12; a21
@@ -110,13 +146,22 @@ std::unique_ptr<BatchFundamentalEstimator> CreateCpuFundamentalEstimator(const T
 
 // What stage 1 decided for a pair.
 enum class GuidedStage1Outcome {
-  kTooFewMatches,  // fewer than min_num_matches stage-1 matches
+  kTooFewMatches,  // fewer than fallback_min_num_matches stage-1 matches (or min_num_matches
+                   // without unguided_fallback): no matches
+  kNoModel,        // enough for the fallback, too few to estimate F
   kFewInliers,     // F failed or explains less than min_inlier_ratio of them
   kGuided,         // stage 2 matches the pair within the epipolar band
 };
 
 GuidedStage1Outcome DecideGuidedStage1(size_t num_matches, const TwoViewModelEstimate* F,
                                        const GuidedMatchingOptions& options);
+
+// The matches of one pair whose second point lies within max_distance
+// pixels of the line F x1 and whose first point lies within max_distance of
+// F^T x2 (epipolar_band.h; F row-major, x2^T F x1 = 0); xy1, xy2 are the
+// images' interleaved keypoint pixels. Order is kept.
+FeatureMatches KeepMatchesInEpipolarBand(const FeatureMatches& matches, const double* F, const std::vector<float>& xy1,
+                                         const std::vector<float>& xy2, double max_distance);
 
 // A FeatureSource that passes everything through and keeps the keypoints of
 // each loaded image until Take (or Clear) for GuidedFeatureMatcher.
@@ -144,19 +189,28 @@ struct GuidedMatchingStats {
   size_t pairs = 0;                 // pairs matched (stage 1)
   size_t pairs_enough_matches = 0;  // with >= min_num_matches stage-1 matches (F estimated)
   size_t pairs_guided = 0;          // passed the inlier test: matched in stage 2
-  size_t pairs_fallback = 0;        // failed it, matched without the band (unguided_fallback)
+  size_t pairs_weak = 0;            // fallback_min_num_matches to min_num_matches stage-1 matches
+  size_t pairs_fallback = 0;        // weak or failed the inlier test, matched without the band
   size_t stage1_matches = 0;
+  size_t stage2_exact_matches = 0;  // exact matches of the guided pairs before the band filter
   size_t stage2_matches = 0;
   size_t fallback_matches = 0;
   double seconds_stage1 = 0;  // top-scale matching (and the images' subsets)
   double seconds_fundamental = 0;
   double seconds_stage2 = 0;  // guided matching
   double seconds_fallback = 0;  // matching without the band (unguided_fallback)
+  // Whether stage 2 searched within the band (restrict_search_to_band) or
+  // filtered exact matches by it.
+  bool searched_in_band = false;
 };
+
+// The run's report line: "Guided matching: N pairs, ...".
+std::string DescribeGuidedMatching(const GuidedMatchingStats& stats, const GuidedMatchingOptions& options);
 
 class GuidedFeatureMatcher : public FeatureMatcher {
  public:
-  // full: matches all features in stage 2 (SupportsEpipolarGuidance());
+  // full: matches all features in stage 2 (SupportsExactMatching(), or
+  // SupportsEpipolarGuidance() with restrict_search_to_band);
   // top_scale: matches the stage-1 subsets (any backend, a separate
   // instance); keypoints: the source the pipeline loads through. The seed
   // is the run's RANSAC seed (pair seeds as in verification).
