@@ -516,6 +516,13 @@ TEST(KeypointRecordingSource, KeepsKeypointsUntilTaken) {
   recording.LoadFeatures(5);
   recording.Clear();
   EXPECT_FALSE(recording.Take(5, &kps));
+  // Shared loads are kept as they are, and give the same keypoints.
+  const std::shared_ptr<const ImageFeatures> shared = recording.LoadSharedFeatures(5);
+  EXPECT_EQ(memory.loads, 3);
+  ASSERT_TRUE(recording.Take(5, &kps));
+  ASSERT_EQ(kps.size(), 20u);
+  EXPECT_EQ(kps[7].y, shared->keypoints[7].y);
+  EXPECT_FALSE(recording.Take(5, &kps));
 }
 
 }  // namespace

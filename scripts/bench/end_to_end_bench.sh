@@ -13,7 +13,9 @@
 #       guided = `cashash guided_matcher`, full_budget = default with
 #       --TwoViewGeometry.early_exit 0, no_rematch = default with
 #       --CasHash.exact_rematch_min_matches 0 (the cascade's matches kept),
-#       cascade_no_rematch = the same with --CasHash.matcher cascade
+#       cascade_no_rematch = the same with --CasHash.matcher cascade,
+#       guided_paper = guided_matcher with the paper's stage 2 (search within
+#       the band, no fallback)
 #   TIME_LIMIT [0]: stop each cashash run with SIGINT after this many seconds
 #       (0: run to the end); the run commits what is in flight and prints its
 #       summary, so rates are over the pairs reached
@@ -54,6 +56,8 @@ for config in $CONFIGS; do
     default) ;;
     bruteforce | cascade) options=(--CasHash.matcher "$config") ;;
     guided) command=(guided_matcher) ;;
+    guided_paper) command=(guided_matcher)
+                  options=(--GuidedMatching.restrict_search_to_band 1 --GuidedMatching.unguided_fallback 0) ;;
     full_budget) options=(--TwoViewGeometry.early_exit 0) ;;
     no_rematch) options=(--CasHash.exact_rematch_min_matches 0) ;;
     cascade_no_rematch) options=(--CasHash.matcher cascade --CasHash.exact_rematch_min_matches 0) ;;

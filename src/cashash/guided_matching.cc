@@ -133,23 +133,32 @@ FeatureMatches KeepMatchesInEpipolarBand(const FeatureMatches& matches, const do
 
 ImageFeatures KeypointRecordingSource::LoadFeatures(image_t image_id) {
   ImageFeatures features = inner_->LoadFeatures(image_id);
+  auto kept = std::make_shared<ImageFeatures>();
+  kept->keypoints = features.keypoints;
   std::lock_guard<std::mutex> lock(mutex_);
-  keypoints_[image_id] = features.keypoints;
+  loaded_[image_id] = std::move(kept);
+  return features;
+}
+
+std::shared_ptr<const ImageFeatures> KeypointRecordingSource::LoadSharedFeatures(image_t image_id) {
+  std::shared_ptr<const ImageFeatures> features = inner_->LoadSharedFeatures(image_id);
+  std::lock_guard<std::mutex> lock(mutex_);
+  loaded_[image_id] = features;
   return features;
 }
 
 bool KeypointRecordingSource::Take(image_t image_id, Keypoints* keypoints) {
   std::lock_guard<std::mutex> lock(mutex_);
-  const auto it = keypoints_.find(image_id);
-  if (it == keypoints_.end()) return false;
-  *keypoints = std::move(it->second);
-  keypoints_.erase(it);
+  const auto it = loaded_.find(image_id);
+  if (it == loaded_.end()) return false;
+  *keypoints = it->second->keypoints;
+  loaded_.erase(it);
   return true;
 }
 
 void KeypointRecordingSource::Clear() {
   std::lock_guard<std::mutex> lock(mutex_);
-  keypoints_.clear();
+  loaded_.clear();
 }
 
 GuidedFeatureMatcher::GuidedFeatureMatcher(std::unique_ptr<FeatureMatcher> full,
