@@ -15,7 +15,8 @@
 #       --CasHash.exact_rematch_min_matches 0 (the cascade's matches kept),
 #       cascade_no_rematch = the same with --CasHash.matcher cascade,
 #       guided_paper = guided_matcher with the paper's stage 2 (search within
-#       the band, no fallback)
+#       the band, no fallback), matching_only = default with
+#       --FeatureMatching.skip_geometric_verification 1
 #   TIME_LIMIT [0]: stop each cashash run with SIGINT after this many seconds
 #       (0: run to the end); the run commits what is in flight and prints its
 #       summary, so rates are over the pairs reached
@@ -56,6 +57,7 @@ for config in $CONFIGS; do
     default) ;;
     bruteforce | cascade) options=(--CasHash.matcher "$config") ;;
     guided) command=(guided_matcher) ;;
+    matching_only) options=(--FeatureMatching.skip_geometric_verification 1) ;;
     guided_paper) command=(guided_matcher)
                   options=(--GuidedMatching.restrict_search_to_band 1 --GuidedMatching.unguided_fallback 0) ;;
     full_budget) options=(--TwoViewGeometry.early_exit 0) ;;
