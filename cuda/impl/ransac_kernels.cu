@@ -433,8 +433,8 @@ void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
   CUDA_CHECK_LAUNCH();
 }
 
-void EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {
-  if (num_samples <= 0) return;
+float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {
+  if (num_samples <= 0) return 0.f;
   float4* d_samples = nullptr;
   double* d_models = nullptr;
   int* d_counts = nullptr;
@@ -444,13 +444,24 @@ void EssentialFivePointOnDevice(const float* samples, int num_samples, double* m
   CUDA_CHECK(cudaMalloc(&d_counts, sizeof(int) * num_samples));
   CUDA_CHECK(cudaMemcpy(d_samples, samples, sizeof(float4) * 5 * num_samples, cudaMemcpyHostToDevice));
   CUDA_CHECK(cudaMemset(d_models, 0, sizeof(double) * model_doubles));
+  cudaEvent_t start = nullptr, stop = nullptr;
+  CUDA_CHECK(cudaEventCreate(&start));
+  CUDA_CHECK(cudaEventCreate(&stop));
+  CUDA_CHECK(cudaEventRecord(start));
   EssentialFivePointKernel<<<(num_samples + 127) / 128, 128>>>(d_samples, num_samples, d_models, d_counts);
   CUDA_CHECK_LAUNCH();
+  CUDA_CHECK(cudaEventRecord(stop));
+  CUDA_CHECK(cudaEventSynchronize(stop));
+  float kernel_ms = 0.f;
+  CUDA_CHECK(cudaEventElapsedTime(&kernel_ms, start, stop));
+  cudaEventDestroy(start);
+  cudaEventDestroy(stop);
   CUDA_CHECK(cudaMemcpy(models, d_models, sizeof(double) * model_doubles, cudaMemcpyDeviceToHost));
   CUDA_CHECK(cudaMemcpy(counts, d_counts, sizeof(int) * num_samples, cudaMemcpyDeviceToHost));
   cudaFree(d_samples);
   cudaFree(d_models);
   cudaFree(d_counts);
+  return kernel_ms;
 }
 
 void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream) {

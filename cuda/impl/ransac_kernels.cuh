@@ -67,10 +67,12 @@ void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStrea
 // and stack than F and H).
 void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream);
 
-// Tests: the device 5-point solver on num_samples samples of 5 correspondences
-// (x1, y1, x2, y2 floats, 20 per sample); up to 10 row-major models (90
-// doubles) and their count per sample. Synchronous.
-void EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts);
+// Tests and benchmarks: the device 5-point solver on num_samples samples of 5
+// correspondences (x1, y1, x2, y2 floats, 20 per sample); up to 10 row-major
+// models (90 doubles) and their count per sample. Synchronous; returns the
+// kernel's milliseconds (transfers excluded), one thread per sample, 128 per
+// block as in the RANSAC kernel.
+float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts);
 
 }  // namespace cuda
 }  // namespace cashash
