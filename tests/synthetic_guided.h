@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -40,39 +41,70 @@ inline Keypoint MakeKeypoint(const Eigen::Vector2d& p, float scale) {
   return k;
 }
 
-inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
+// One row of image 2 before shuffling: a perturbed copy of an image-1
+// feature (source, -1 for none), a decoy or the true match.
+struct GuidedRow {
+  std::vector<uint8_t> desc;
+  Keypoint kp;
+  int source;
+  bool decoy;
+};
+
+// The scene of both generators (F into g) and their descriptor noise.
+inline SyntheticScene GuidedSceneGeometry(int num_features, unsigned seed, GuidedScene* g) {
   SceneOptions options;
   options.num_inliers = num_features;
   options.outlier_ratio = 0;
   options.noise_px = 0.3;
   options.seed = seed;
-  const SyntheticScene scene = MakeScene(options);
-  GuidedScene g;
+  SyntheticScene scene = MakeScene(options);
   const Eigen::Matrix3d F = scene.TrueF();
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F(r, c);
-  std::mt19937 rng(seed * 7919u + 1);
+    for (int c = 0; c < 3; ++c) g->F[3 * r + c] = F(r, c);
+  return scene;
+}
+
+inline std::vector<uint8_t> PerturbedDescriptor(std::vector<uint8_t> d, std::mt19937* rng) {
   std::uniform_int_distribution<int> noise(-6, 6);
+  for (uint8_t& x : d) x = static_cast<uint8_t>(std::clamp(int(x) + noise(*rng), 0, 255));
+  return d;
+}
+
+// Shuffles image 2's rows into g (truth and decoy by source) and fills the
+// interleaved positions of both images.
+inline void FinishGuidedScene(std::vector<GuidedRow> rows2, int n, std::mt19937* rng, GuidedScene* g) {
+  std::shuffle(rows2.begin(), rows2.end(), *rng);
+  g->truth.assign(n, -1);
+  g->decoy.assign(n, -1);
+  for (size_t r = 0; r < rows2.size(); ++r) {
+    g->image2.keypoints.push_back(rows2[r].kp);
+    g->image2.descriptors.data.insert(g->image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
+    if (rows2[r].source >= 0) (rows2[r].decoy ? g->decoy : g->truth)[rows2[r].source] = static_cast<int>(r);
+  }
+  for (const Keypoint& k : g->image1.keypoints) {
+    g->xy1.push_back(k.x);
+    g->xy1.push_back(k.y);
+  }
+  for (const Keypoint& k : g->image2.keypoints) {
+    g->xy2.push_back(k.x);
+    g->xy2.push_back(k.y);
+  }
+}
+
+inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
+  GuidedScene g;
+  const SyntheticScene scene = GuidedSceneGeometry(num_features, seed, &g);
+  std::mt19937 rng(seed * 7919u + 1);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::uniform_real_distribution<float> scale(1.0f, 8.0f);
-  auto perturb = [&](std::vector<uint8_t> d) {
-    for (uint8_t& x : d) x = static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255));
-    return d;
-  };
   const int n = static_cast<int>(scene.points1.size());
-  struct Row {
-    std::vector<uint8_t> desc;
-    Keypoint kp;
-    int source;  // image-1 feature, -1 for none
-    bool decoy;
-  };
-  std::vector<Row> rows2;
+  std::vector<GuidedRow> rows2;
   for (int i = 0; i < n; ++i) {
     const std::vector<uint8_t> d = RandomSift(&rng);
     const float s = scale(rng);
     g.image1.keypoints.push_back(MakeKeypoint(scene.points1[i], s));
     g.image1.descriptors.data.insert(g.image1.descriptors.data.end(), d.begin(), d.end());
-    rows2.push_back(Row{perturb(d), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
+    rows2.push_back(GuidedRow{PerturbedDescriptor(d, &rng), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
     if (i % 3 == 0) {
       // A decoy at a point at least 40 px off the feature's epipolar line.
       const EpipolarLine line =
@@ -81,64 +113,30 @@ inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
       do {
         p = Eigen::Vector2d(unit(rng) * scene.width, unit(rng) * scene.height);
       } while (line.Contains(static_cast<float>(p.x()), static_cast<float>(p.y()), 40.0));
-      rows2.push_back(Row{perturb(d), MakeKeypoint(p, 1.1f * s), i, true});
+      rows2.push_back(GuidedRow{PerturbedDescriptor(d, &rng), MakeKeypoint(p, 1.1f * s), i, true});
     }
   }
-  std::shuffle(rows2.begin(), rows2.end(), rng);
-  g.truth.assign(n, -1);
-  g.decoy.assign(n, -1);
-  for (size_t r = 0; r < rows2.size(); ++r) {
-    g.image2.keypoints.push_back(rows2[r].kp);
-    g.image2.descriptors.data.insert(g.image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
-    (rows2[r].decoy ? g.decoy : g.truth)[rows2[r].source] = static_cast<int>(r);
-  }
-  for (const Keypoint& k : g.image1.keypoints) {
-    g.xy1.push_back(k.x);
-    g.xy1.push_back(k.y);
-  }
-  for (const Keypoint& k : g.image2.keypoints) {
-    g.xy2.push_back(k.x);
-    g.xy2.push_back(k.y);
-  }
+  FinishGuidedScene(std::move(rows2), n, &rng, &g);
   return g;
 }
 
 // Repeated structure along the epipolar line: as MakeGuidedScene, but for
 // every third feature of image 1 the true match is missing from image 2
 // (occluded), and two copies of it stand elsewhere, with one descriptor
-// (the same element repeated): one on the feature's epipolar line (within 0.5 px of
-// it, 40 to 200 px from where the true match would be), the other at least
-// 40 px off the line. Within the band only the copy on the line competes,
-// so a ratio test among band candidates accepts it; in the whole image the
-// two copies are equally good rivals. truth is -1 for those features,
-// decoy the row of the copy on the line.
+// (the same element repeated): one on the feature's epipolar line (within
+// 0.5 px of it, 40 to 200 px from where the true match would be), the other
+// at least 40 px off the line. Within the band only the copy on the line
+// competes, so a ratio test among band candidates accepts it; in the whole
+// image the two copies are equally good rivals. truth is -1 for those
+// features, decoy the row of the copy on the line.
 inline GuidedScene MakeRepeatedStructureScene(int num_features, unsigned seed) {
-  SceneOptions options;
-  options.num_inliers = num_features;
-  options.outlier_ratio = 0;
-  options.noise_px = 0.3;
-  options.seed = seed;
-  const SyntheticScene scene = MakeScene(options);
   GuidedScene g;
-  const Eigen::Matrix3d F = scene.TrueF();
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F(r, c);
+  const SyntheticScene scene = GuidedSceneGeometry(num_features, seed, &g);
   std::mt19937 rng(seed * 7919u + 3);
-  std::uniform_int_distribution<int> noise(-6, 6);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::uniform_real_distribution<float> scale(1.0f, 8.0f);
-  auto perturb = [&](std::vector<uint8_t> d) {
-    for (uint8_t& x : d) x = static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255));
-    return d;
-  };
-  struct Row {
-    std::vector<uint8_t> desc;
-    Keypoint kp;
-    int source;
-    bool decoy;
-  };
-  std::vector<Row> rows2;
   const int n = static_cast<int>(scene.points1.size());
+  std::vector<GuidedRow> rows2;
   for (int i = 0; i < n; ++i) {
     const std::vector<uint8_t> d = RandomSift(&rng);
     const float s = scale(rng);
@@ -146,37 +144,22 @@ inline GuidedScene MakeRepeatedStructureScene(int num_features, unsigned seed) {
     g.image1.keypoints.push_back(MakeKeypoint(p1, s));
     g.image1.descriptors.data.insert(g.image1.descriptors.data.end(), d.begin(), d.end());
     if (i % 3 != 0) {
-      rows2.push_back(Row{perturb(d), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
+      rows2.push_back(GuidedRow{PerturbedDescriptor(d, &rng), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
       continue;
     }
     const EpipolarLine line = LineInSecondImage(g.F.data(), static_cast<float>(p1.x()), static_cast<float>(p1.y()));
     // Along the line: direction (-b, a) from the true position.
     const double t = (40.0 + 160.0 * unit(rng)) * (unit(rng) < 0.5 ? -1.0 : 1.0);
     const Eigen::Vector2d on_line = scene.points2[i] + t * Eigen::Vector2d(-line.b, line.a);
-    const std::vector<uint8_t> copy = perturb(d);
-    rows2.push_back(Row{copy, MakeKeypoint(on_line, 1.1f * s), i, true});
+    const std::vector<uint8_t> copy = PerturbedDescriptor(d, &rng);
+    rows2.push_back(GuidedRow{copy, MakeKeypoint(on_line, 1.1f * s), i, true});
     Eigen::Vector2d off_line;
     do {
       off_line = Eigen::Vector2d(unit(rng) * scene.width, unit(rng) * scene.height);
     } while (line.Contains(static_cast<float>(off_line.x()), static_cast<float>(off_line.y()), 40.0));
-    rows2.push_back(Row{copy, MakeKeypoint(off_line, 1.1f * s), -1, false});
+    rows2.push_back(GuidedRow{copy, MakeKeypoint(off_line, 1.1f * s), -1, false});
   }
-  std::shuffle(rows2.begin(), rows2.end(), rng);
-  g.truth.assign(n, -1);
-  g.decoy.assign(n, -1);
-  for (size_t r = 0; r < rows2.size(); ++r) {
-    g.image2.keypoints.push_back(rows2[r].kp);
-    g.image2.descriptors.data.insert(g.image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
-    if (rows2[r].source >= 0) (rows2[r].decoy ? g.decoy : g.truth)[rows2[r].source] = static_cast<int>(r);
-  }
-  for (const Keypoint& k : g.image1.keypoints) {
-    g.xy1.push_back(k.x);
-    g.xy1.push_back(k.y);
-  }
-  for (const Keypoint& k : g.image2.keypoints) {
-    g.xy2.push_back(k.x);
-    g.xy2.push_back(k.y);
-  }
+  FinishGuidedScene(std::move(rows2), n, &rng, &g);
   return g;
 }
 
