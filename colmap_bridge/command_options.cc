@@ -122,7 +122,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
-            "Ga-CasHash: match the top-scale features first, then only pairs with a good F, within epipolar bands");
+            "Ga-CasHash: match the top-scale features first, then exactly only the pairs that show overlap (within "
+            "the epipolar bands where F explains them)");
   table.Add({"GuidedMatching.top_scale_fraction"}, &o.guided.top_scale_fraction,
             "Share of each image's features (largest scales) matched in stage 1");
   table.Add({"GuidedMatching.min_num_matches"}, &o.guided.min_num_matches,
