@@ -9,7 +9,6 @@
 #include <algorithm>
 #include <array>
 #include <random>
-#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -50,74 +49,86 @@ struct GuidedRow {
   bool decoy;
 };
 
-// The scene of both generators (F into g) and their descriptor noise.
-inline SyntheticScene GuidedSceneGeometry(int num_features, unsigned seed, GuidedScene* g) {
-  SceneOptions options;
-  options.num_inliers = num_features;
-  options.outlier_ratio = 0;
-  options.noise_px = 0.3;
-  options.seed = seed;
-  SyntheticScene scene = MakeScene(options);
-  const Eigen::Matrix3d F = scene.TrueF();
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) g->F[3 * r + c] = F(r, c);
-  return scene;
-}
-
 inline std::vector<uint8_t> PerturbedDescriptor(std::vector<uint8_t> d, std::mt19937* rng) {
   std::uniform_int_distribution<int> noise(-6, 6);
   for (uint8_t& x : d) x = static_cast<uint8_t>(std::clamp(int(x) + noise(*rng), 0, 255));
   return d;
 }
 
-// Shuffles image 2's rows into g (truth and decoy by source) and fills the
-// interleaved positions of both images.
-inline void FinishGuidedScene(std::vector<GuidedRow> rows2, int n, std::mt19937* rng, GuidedScene* g) {
-  std::shuffle(rows2.begin(), rows2.end(), *rng);
-  g->truth.assign(n, -1);
-  g->decoy.assign(n, -1);
-  for (size_t r = 0; r < rows2.size(); ++r) {
-    g->image2.keypoints.push_back(rows2[r].kp);
-    g->image2.descriptors.data.insert(g->image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
-    if (rows2[r].source >= 0) (rows2[r].decoy ? g->decoy : g->truth)[rows2[r].source] = static_cast<int>(r);
-  }
-  for (const Keypoint& k : g->image1.keypoints) {
-    g->xy1.push_back(k.x);
-    g->xy1.push_back(k.y);
-  }
-  for (const Keypoint& k : g->image2.keypoints) {
-    g->xy2.push_back(k.x);
-    g->xy2.push_back(k.y);
-  }
+inline double UnitDraw(std::mt19937* rng) { return std::uniform_real_distribution<double>(0.0, 1.0)(*rng); }
+
+// A point of the image at least 40 px off `line`.
+inline Eigen::Vector2d PointOffLine(const EpipolarLine& line, const SyntheticScene& scene, std::mt19937* rng) {
+  Eigen::Vector2d p;
+  do {
+    // y is drawn first, as the first version drew it (it left the order to
+    // the compiler), so that the tests' scenes stay the same.
+    const double y = UnitDraw(rng) * scene.height;
+    p = Eigen::Vector2d(UnitDraw(rng) * scene.width, y);
+  } while (line.Contains(static_cast<float>(p.x()), static_cast<float>(p.y()), 40.0));
+  return p;
 }
 
-inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
+// Both generators: image 1 gets a random SIFT descriptor and scale per
+// point of a synthetic two-view scene; add_rows(i, descriptor, scale,
+// epipolar line of point i in image 2, rng, &rows) puts image 2's rows for
+// feature i; then the rows are shuffled, truth and decoy filled by source,
+// and the positions interleaved.
+template <typename AddRows>
+GuidedScene GenerateGuidedScene(int num_features, unsigned seed, unsigned stream, AddRows add_rows) {
+  SceneOptions options;
+  options.num_inliers = num_features;
+  options.outlier_ratio = 0;
+  options.noise_px = 0.3;
+  options.seed = seed;
+  const SyntheticScene scene = MakeScene(options);
   GuidedScene g;
-  const SyntheticScene scene = GuidedSceneGeometry(num_features, seed, &g);
-  std::mt19937 rng(seed * 7919u + 1);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const Eigen::Matrix3d F = scene.TrueF();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F(r, c);
+  std::mt19937 rng(seed * 7919u + stream);
   std::uniform_real_distribution<float> scale(1.0f, 8.0f);
   const int n = static_cast<int>(scene.points1.size());
   std::vector<GuidedRow> rows2;
   for (int i = 0; i < n; ++i) {
     const std::vector<uint8_t> d = RandomSift(&rng);
     const float s = scale(rng);
-    g.image1.keypoints.push_back(MakeKeypoint(scene.points1[i], s));
+    const Eigen::Vector2d& p1 = scene.points1[i];
+    g.image1.keypoints.push_back(MakeKeypoint(p1, s));
     g.image1.descriptors.data.insert(g.image1.descriptors.data.end(), d.begin(), d.end());
-    rows2.push_back(GuidedRow{PerturbedDescriptor(d, &rng), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
-    if (i % 3 == 0) {
-      // A decoy at a point at least 40 px off the feature's epipolar line.
-      const EpipolarLine line =
-          LineInSecondImage(g.F.data(), static_cast<float>(scene.points1[i].x()), static_cast<float>(scene.points1[i].y()));
-      Eigen::Vector2d p;
-      do {
-        p = Eigen::Vector2d(unit(rng) * scene.width, unit(rng) * scene.height);
-      } while (line.Contains(static_cast<float>(p.x()), static_cast<float>(p.y()), 40.0));
-      rows2.push_back(GuidedRow{PerturbedDescriptor(d, &rng), MakeKeypoint(p, 1.1f * s), i, true});
-    }
+    const EpipolarLine line = LineInSecondImage(g.F.data(), static_cast<float>(p1.x()), static_cast<float>(p1.y()));
+    add_rows(scene, i, d, s, line, &rng, &rows2);
   }
-  FinishGuidedScene(std::move(rows2), n, &rng, &g);
+  std::shuffle(rows2.begin(), rows2.end(), rng);
+  g.truth.assign(n, -1);
+  g.decoy.assign(n, -1);
+  for (size_t r = 0; r < rows2.size(); ++r) {
+    g.image2.keypoints.push_back(rows2[r].kp);
+    g.image2.descriptors.data.insert(g.image2.descriptors.data.end(), rows2[r].desc.begin(), rows2[r].desc.end());
+    if (rows2[r].source >= 0) (rows2[r].decoy ? g.decoy : g.truth)[rows2[r].source] = static_cast<int>(r);
+  }
+  for (const Keypoint& k : g.image1.keypoints) {
+    g.xy1.push_back(k.x);
+    g.xy1.push_back(k.y);
+  }
+  for (const Keypoint& k : g.image2.keypoints) {
+    g.xy2.push_back(k.x);
+    g.xy2.push_back(k.y);
+  }
   return g;
+}
+
+inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
+  return GenerateGuidedScene(num_features, seed, 1,
+                             [](const SyntheticScene& scene, int i, const std::vector<uint8_t>& d, float s,
+                                const EpipolarLine& line, std::mt19937* rng, std::vector<GuidedRow>* rows) {
+                               rows->push_back(GuidedRow{PerturbedDescriptor(d, rng),
+                                                         MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
+                               if (i % 3 != 0) return;
+                               // A decoy at least 40 px off the feature's epipolar line.
+                               const Eigen::Vector2d p = PointOffLine(line, scene, rng);
+                               rows->push_back(GuidedRow{PerturbedDescriptor(d, rng), MakeKeypoint(p, 1.1f * s), i, true});
+                             });
 }
 
 // Repeated structure along the epipolar line: as MakeGuidedScene, but for
@@ -130,37 +141,22 @@ inline GuidedScene MakeGuidedScene(int num_features, unsigned seed) {
 // image the two copies are equally good rivals. truth is -1 for those
 // features, decoy the row of the copy on the line.
 inline GuidedScene MakeRepeatedStructureScene(int num_features, unsigned seed) {
-  GuidedScene g;
-  const SyntheticScene scene = GuidedSceneGeometry(num_features, seed, &g);
-  std::mt19937 rng(seed * 7919u + 3);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
-  std::uniform_real_distribution<float> scale(1.0f, 8.0f);
-  const int n = static_cast<int>(scene.points1.size());
-  std::vector<GuidedRow> rows2;
-  for (int i = 0; i < n; ++i) {
-    const std::vector<uint8_t> d = RandomSift(&rng);
-    const float s = scale(rng);
-    const Eigen::Vector2d& p1 = scene.points1[i];
-    g.image1.keypoints.push_back(MakeKeypoint(p1, s));
-    g.image1.descriptors.data.insert(g.image1.descriptors.data.end(), d.begin(), d.end());
-    if (i % 3 != 0) {
-      rows2.push_back(GuidedRow{PerturbedDescriptor(d, &rng), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
-      continue;
-    }
-    const EpipolarLine line = LineInSecondImage(g.F.data(), static_cast<float>(p1.x()), static_cast<float>(p1.y()));
-    // Along the line: direction (-b, a) from the true position.
-    const double t = (40.0 + 160.0 * unit(rng)) * (unit(rng) < 0.5 ? -1.0 : 1.0);
-    const Eigen::Vector2d on_line = scene.points2[i] + t * Eigen::Vector2d(-line.b, line.a);
-    const std::vector<uint8_t> copy = PerturbedDescriptor(d, &rng);
-    rows2.push_back(GuidedRow{copy, MakeKeypoint(on_line, 1.1f * s), i, true});
-    Eigen::Vector2d off_line;
-    do {
-      off_line = Eigen::Vector2d(unit(rng) * scene.width, unit(rng) * scene.height);
-    } while (line.Contains(static_cast<float>(off_line.x()), static_cast<float>(off_line.y()), 40.0));
-    rows2.push_back(GuidedRow{copy, MakeKeypoint(off_line, 1.1f * s), -1, false});
-  }
-  FinishGuidedScene(std::move(rows2), n, &rng, &g);
-  return g;
+  return GenerateGuidedScene(
+      num_features, seed, 3,
+      [](const SyntheticScene& scene, int i, const std::vector<uint8_t>& d, float s, const EpipolarLine& line,
+         std::mt19937* rng, std::vector<GuidedRow>* rows) {
+        if (i % 3 != 0) {
+          rows->push_back(GuidedRow{PerturbedDescriptor(d, rng), MakeKeypoint(scene.points2[i], 1.1f * s), i, false});
+          return;
+        }
+        // Along the line: direction (-b, a) from the true position.
+        const double length = 40.0 + 160.0 * UnitDraw(rng);
+        const double t = length * (UnitDraw(rng) < 0.5 ? -1.0 : 1.0);
+        const Eigen::Vector2d on_line = scene.points2[i] + t * Eigen::Vector2d(-line.b, line.a);
+        const std::vector<uint8_t> copy = PerturbedDescriptor(d, rng);
+        rows->push_back(GuidedRow{copy, MakeKeypoint(on_line, 1.1f * s), i, true});
+        rows->push_back(GuidedRow{copy, MakeKeypoint(PointOffLine(line, scene, rng), 1.1f * s), -1, false});
+      });
 }
 
 // An image that shares nothing with the others.
