@@ -281,9 +281,9 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
     const TwoViewModelEstimate* F = nullptr;
     if (next_candidate < candidates.size() && candidates[next_candidate] == k) F = &fundamentals[next_candidate++];
     last_outcomes_[k] = DecideGuidedStage1(stage1[k].size(), F, options_);
-    if (last_outcomes_[k] == GuidedStage1Outcome::kNoModel) ++stats_.pairs_weak;
-    if ((last_outcomes_[k] == GuidedStage1Outcome::kFewInliers && options_.unguided_fallback) ||
-        last_outcomes_[k] == GuidedStage1Outcome::kNoModel) {
+    if (last_outcomes_[k] == GuidedStage1Outcome::kNoModel) ++stats_.pairs_weak;  // only with the fallback
+    if (options_.unguided_fallback && (last_outcomes_[k] == GuidedStage1Outcome::kFewInliers ||
+                                       last_outcomes_[k] == GuidedStage1Outcome::kNoModel)) {
       fallback.push_back(pairs[k]);
       fallback_index.push_back(k);
     }
