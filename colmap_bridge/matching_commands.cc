@@ -85,7 +85,11 @@ int ReportSummary(const MatchingSummary& summary) {
   // verification and writing run beside them.
   std::cout << std::setprecision(3) << "Time: loading " << stats.seconds_loading << " s, hashing "
             << stats.seconds_hashing << " s, matching " << stats.seconds_matching << " s, verification "
-            << stats.seconds_verification << " s, writing " << stats.seconds_writing << " s" << std::endl;
+            << stats.seconds_verification << " s";
+  if (stats.verification_threads > 1) {
+    std::cout << " (summed over up to " << stats.verification_threads << " chunks verified at once)";
+  }
+  std::cout << ", writing " << stats.seconds_writing << " s" << std::endl;
   // Waiting, apart from the busy times: which stage held the others up.
   std::cout << "Waiting: matching for verification " << stats.seconds_matching_wait_queue
             << " s, verification for matching " << stats.seconds_verification_wait_input << " s and for writing "

@@ -2,8 +2,13 @@
 // it is given (the GPU one in production) and stores what it returns.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <map>
 #include <mutex>
+#include <stdexcept>
+#include <thread>
 
 #include "cashash/batch_verifier.h"
 #include "cashash/matching_pipeline.h"
@@ -66,15 +71,54 @@ class RecordingVerifier : public BatchVerifier {
   std::vector<uint64_t> seeds;
 };
 
+// Verifies up to three chunks at once. Every third call is slow, so calls
+// finish out of order; call `fail_at` (if any) throws.
+class ConcurrentVerifier : public BatchVerifier {
+ public:
+  explicit ConcurrentVerifier(int fail_at = -1) : fail_at_(fail_at) {}
+  std::string Name() const override { return "concurrent"; }
+  int MaxConcurrentCalls() const override { return 3; }
+  std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+    const int now = ++in_flight_;
+    int seen = max_in_flight.load();
+    while (now > seen && !max_in_flight.compare_exchange_weak(seen, now)) {
+    }
+    const int call = calls_++;
+    std::this_thread::sleep_for(std::chrono::milliseconds(call % 3 == 0 ? 60 : 5));
+    --in_flight_;
+    if (call == fail_at_) throw std::runtime_error("verifier failed on purpose");
+    std::vector<TwoViewGeometry> out(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      out[k].config = kUncalibrated;
+      out[k].inlier_matches.push_back(pairs[k].matches->front());
+    }
+    return out;
+  }
+  std::atomic<int> max_in_flight{0};
+
+ private:
+  const int fail_at_;
+  std::atomic<int> calls_{0};
+  std::atomic<int> in_flight_{0};
+};
+
 class Sink : public ResultSink {
  public:
   void WriteChunk(const std::vector<PairResult>& results) override {
     std::lock_guard<std::mutex> lock(mutex);
     for (const PairResult& r : results) configs[r.pair] = r.geometry.config;
+    if (!results.empty()) first_pairs.push_back(results.front().pair);
   }
   std::mutex mutex;
   std::map<ImagePair, int> configs;
+  std::vector<ImagePair> first_pairs;  // of each chunk, in the order written
 };
+
+std::vector<ImagePair> FirstPairs(const std::vector<PairChunk>& chunks) {
+  std::vector<ImagePair> first;
+  for (const PairChunk& c : chunks) first.push_back(c.pairs.front());
+  return first;
+}
 
 TEST(BatchVerifierPipeline, WholeChunksGoToTheGivenVerifier) {
   std::vector<image_t> ids;
@@ -117,6 +161,60 @@ TEST(BatchVerifierPipeline, SkippingVerificationNeverCallsTheVerifier) {
   pipeline.Run(ExhaustivePairChunks({1, 2, 3}, 2));
   EXPECT_TRUE(verifier.batch_sizes.empty());
   for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUndefined);
+}
+
+TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
+  std::vector<image_t> ids;
+  for (image_t i = 1; i <= 16; ++i) ids.push_back(i);
+  const std::vector<PairChunk> chunks = ExhaustivePairChunks(ids, 3);
+  ASSERT_GE(chunks.size(), 10u);
+  size_t num_pairs = 0;
+  for (const PairChunk& c : chunks) num_pairs += c.pairs.size();
+  PointSource source;
+  IdentityMatcher matcher;
+  Sink sink;
+  ConcurrentVerifier verifier;
+  PipelineOptions options;
+  options.num_threads = 2;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  pipeline.SetBatchVerifier(&verifier);
+  const PipelineStats stats = pipeline.Run(chunks);
+  EXPECT_EQ(stats.verification_threads, 3);
+  EXPECT_EQ(stats.pairs_done, num_pairs);
+  EXPECT_EQ(stats.verified_pairs, num_pairs);
+  // The slow calls let the next chunks overtake them; they still wait.
+  EXPECT_GE(verifier.max_in_flight.load(), 2);
+  EXPECT_LE(verifier.max_in_flight.load(), 3);
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+  ASSERT_EQ(sink.configs.size(), num_pairs);
+  for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUncalibrated);
+}
+
+TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChunk) {
+  std::vector<image_t> ids;
+  for (image_t i = 1; i <= 16; ++i) ids.push_back(i);
+  const std::vector<PairChunk> chunks = ExhaustivePairChunks(ids, 3);
+  PointSource source;
+  IdentityMatcher matcher;
+  Sink sink;
+  ConcurrentVerifier verifier(/*fail_at=*/4);
+  PipelineOptions options;
+  options.num_threads = 2;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  pipeline.SetBatchVerifier(&verifier);
+  try {
+    pipeline.Run(chunks);
+    FAIL() << "the verifier's error was not rethrown";
+  } catch (const std::runtime_error& e) {
+    EXPECT_STREQ(e.what(), "verifier failed on purpose");
+  }
+  // Whole chunks only, in matching order, and none after the failed one.
+  const std::vector<ImagePair> all = FirstPairs(chunks);
+  ASSERT_LT(sink.first_pairs.size(), all.size());
+  EXPECT_TRUE(std::equal(sink.first_pairs.begin(), sink.first_pairs.end(), all.begin()));
+  size_t written_pairs = 0;
+  for (size_t c = 0; c < sink.first_pairs.size(); ++c) written_pairs += chunks[c].pairs.size();
+  EXPECT_EQ(sink.configs.size(), written_pairs);
 }
 
 }  // namespace

@@ -81,5 +81,16 @@ std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptio
 // variable CASHASH_GPU_ESSENTIAL is "cpu".
 bool GpuEssentialFromEnvironment();
 
+// Chunks the GPU verifier keeps on the device at once (its
+// MaxConcurrentCalls): CASHASH_GPU_VERIFICATIONS_IN_FLIGHT (1 to 8) to
+// compare, else kDefaultGpuVerificationsInFlight.
+constexpr int kDefaultGpuVerificationsInFlight = 3;
+int GpuVerificationsInFlightFromEnvironment();
+
+// Threads per E block (128 or 256): CASHASH_ESSENTIAL_BLOCK_THREADS to
+// compare, else kDefaultEssentialBlockThreads.
+constexpr int kDefaultEssentialBlockThreads = 128;
+int EssentialBlockThreadsFromEnvironment();
+
 }  // namespace cuda
 }  // namespace cashash

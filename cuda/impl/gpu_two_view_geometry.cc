@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
@@ -215,6 +216,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   E_launch.outputs = d.outputs.as<RansacPairOutput>() + 2 * num_pairs;
   E_launch.masks = d.masks.as<uint8_t>() + total;
   E_launch.max_trials = RansacMaxTrials(ransac, 5);
+  E_launch.block_threads = EssentialBlockThreadsFromEnvironment();
   E_launch.shared_points = std::min(max_count_E, kRansacMaxSharedPoints);
   if (num_E > 0) {
     // E (the longest) starts first on its own stream; F and H run beside it.
@@ -299,6 +301,25 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+int EssentialBlockThreadsFromEnvironment() {
+  static const int threads = [] {
+    const char* text = std::getenv("CASHASH_ESSENTIAL_BLOCK_THREADS");
+    if (text == nullptr) return kDefaultEssentialBlockThreads;
+    return std::string(text) == std::to_string(kEssentialLargeBlockThreads) ? kEssentialLargeBlockThreads
+                                                                              : kRansacThreads;
+  }();
+  return threads;
+}
+
+int GpuVerificationsInFlightFromEnvironment() {
+  static const int calls = [] {
+    const char* text = std::getenv("CASHASH_GPU_VERIFICATIONS_IN_FLIGHT");
+    const int value = text == nullptr ? kDefaultGpuVerificationsInFlight : std::atoi(text);
+    return std::min(std::max(value, 1), 8);
+  }();
+  return calls;
+}
+
 bool GpuEssentialFromEnvironment() {
   const char* where = std::getenv("CASHASH_GPU_ESSENTIAL");
   return where == nullptr || std::string(where) != "cpu";
@@ -311,21 +332,30 @@ class GpuBatchVerifier : public BatchVerifier {
   GpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index, int num_threads)
       : options_(options),
         num_threads_(num_threads),
-        essential_on_gpu_(GpuEssentialFromEnvironment()),
-        ransac_(options, gpu_index) {}
+        gpu_index_(gpu_index),
+        max_calls_(GpuVerificationsInFlightFromEnvironment()),
+        essential_on_gpu_(GpuEssentialFromEnvironment()) {
+    // The first estimator now, so that an unusable device fails here.
+    estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index));
+    free_.push_back(estimators_.back().get());
+  }
 
   std::string Name() const override { return "gpu"; }
 
+  int MaxConcurrentCalls() const override { return max_calls_; }
+
   std::string StatsSummary() const override {
-    const GpuRansacStats& st = ransac_.stats();
+    const GpuRansacStats st = SummedStats();
     if (st.pairs == 0) return {};
     auto per_pair = [](long long value, size_t pairs) { return pairs ? static_cast<double>(value) / pairs : 0.0; };
     char line[512];
     std::snprintf(line, sizeof(line),
-                  "GPU verification: %zu pairs (%zu with E), device busy %.3f s of %.3f s; trials per pair F %.0f, "
+                  "GPU verification: %zu pairs (%zu with E), device busy %.3f s of %.3f s (summed over up to %d "
+                  "chunks at once, E blocks of %d threads); trials per pair F %.0f, "
                   "H %.0f, E %.0f; stopped early (chance, or H below what could change the decision) F %lld, "
                   "H %lld, E %lld",
-                  st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, per_pair(st.trials_F, st.pairs),
+                  st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, max_calls_,
+                  EssentialBlockThreadsFromEnvironment(), per_pair(st.trials_F, st.pairs),
                   per_pair(st.trials_H, st.pairs), per_pair(st.trials_E, st.pairs_E), st.early_exits_F,
                   st.early_exits_H, st.early_exits_E);
     return line;
@@ -361,12 +391,13 @@ class GpuBatchVerifier : public BatchVerifier {
       if (calibrated[k]) calibrated_pairs.push_back(k);
     }
     std::vector<TwoViewModelEstimate> F, H, E_batch, E(n);
+    EstimatorLease ransac(this);
     if (essential_on_gpu_) {
-      ransac_.Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
+      ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
       for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
     } else {
       // E (calibrated pairs) on the CPU while the GPU estimates F and H.
-      ransac_.Estimate(batch_points, batch_seeds, &F, &H, [&]() {
+      ransac->Estimate(batch_points, batch_seeds, &F, &H, [&]() {
         ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
           const size_t k = calibrated_pairs[i];
           E[k] = EstimateEssential(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, PairOptions(pairs[k]));
@@ -392,10 +423,63 @@ class GpuBatchVerifier : public BatchVerifier {
     return options;
   }
 
+  // One estimator (streams and buffers) per Verify call in flight, made on
+  // first need and handed back when the call returns.
+  class EstimatorLease {
+   public:
+    explicit EstimatorLease(GpuBatchVerifier* owner) : owner_(owner) {
+      std::unique_lock<std::mutex> lock(owner_->mutex_);
+      if (owner_->free_.empty()) {
+        owner_->estimators_.push_back(std::make_unique<GpuTwoViewRansac>(owner_->options_, owner_->gpu_index_));
+        owner_->free_.push_back(owner_->estimators_.back().get());
+      }
+      estimator_ = owner_->free_.back();
+      owner_->free_.pop_back();
+    }
+    ~EstimatorLease() {
+      std::lock_guard<std::mutex> lock(owner_->mutex_);
+      owner_->free_.push_back(estimator_);
+    }
+    EstimatorLease(const EstimatorLease&) = delete;
+    EstimatorLease& operator=(const EstimatorLease&) = delete;
+    GpuTwoViewRansac* operator->() const { return estimator_; }
+
+   private:
+    GpuBatchVerifier* owner_;
+    GpuTwoViewRansac* estimator_ = nullptr;
+  };
+
+  GpuRansacStats SummedStats() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    GpuRansacStats sum;
+    for (const auto& estimator : estimators_) {
+      const GpuRansacStats& st = estimator->stats();
+      sum.pairs += st.pairs;
+      sum.points += st.points;
+      sum.seconds_total += st.seconds_total;
+      sum.seconds_gpu += st.seconds_gpu;
+      sum.trials_F += st.trials_F;
+      sum.trials_H += st.trials_H;
+      sum.local_refits_F += st.local_refits_F;
+      sum.local_refits_H += st.local_refits_H;
+      sum.pairs_E += st.pairs_E;
+      sum.trials_E += st.trials_E;
+      sum.local_refits_E += st.local_refits_E;
+      sum.early_exits_F += st.early_exits_F;
+      sum.early_exits_H += st.early_exits_H;
+      sum.early_exits_E += st.early_exits_E;
+    }
+    return sum;
+  }
+
   TwoViewGeometryOptions options_;
   int num_threads_;
+  int gpu_index_;
+  int max_calls_;
   bool essential_on_gpu_;
-  GpuTwoViewRansac ransac_;
+  mutable std::mutex mutex_;
+  std::vector<std::unique_ptr<GpuTwoViewRansac>> estimators_;
+  std::vector<GpuTwoViewRansac*> free_;
 };
 
 }  // namespace

@@ -24,7 +24,6 @@ namespace {
 
 using namespace ransac;  // NOLINT: the solvers of this kernel
 
-constexpr int kWarps = kRansacThreads / 32;
 constexpr int kMaxLocalIterations = 10;
 constexpr int kMaxLocalModels = five_point::kMaxSolutions;  // models of one local refit
 
@@ -115,9 +114,11 @@ __device__ inline unsigned long long SupportKey(int count, float sum) {
          (0xFFFFFFFFull - static_cast<unsigned long long>(__float_as_uint(sum)));
 }
 
+template <int Threads>
 struct BlockScratch {
-  unsigned long long keys[kRansacThreads];  // each trial's best support this round
-  double models[kRansacThreads][9];         // and its model
+  static constexpr int kWarps = Threads / 32;
+  unsigned long long keys[Threads];  // each trial's best support this round
+  double models[Threads][9];         // and its model
   int warp_count[kWarps];
   double warp_sum[kWarps];
   double warp_upper[kWarps][45];
@@ -137,12 +138,12 @@ struct BlockScratch {
 };
 
 // Inlier count and residual sum of one model over the pair, by the block.
-template <typename Model>
-__device__ void BlockScore(const float* m, const float4* points, int n, float threshold, BlockScratch& s, int* count,
-                           float* sum) {
+template <typename Model, int Threads>
+__device__ void BlockScore(const float* m, const float4* points, int n, float threshold, BlockScratch<Threads>& s,
+                           int* count, float* sum) {
   int c = 0;
   float r_sum = 0;
-  for (int i = threadIdx.x; i < n; i += kRansacThreads) {
+  for (int i = threadIdx.x; i < n; i += Threads) {
     const float r = Model::Residual(m, points[i]);
     if (r <= threshold) {
       ++c;
@@ -162,7 +163,7 @@ __device__ void BlockScore(const float* m, const float4* points, int n, float th
   __syncthreads();
   int total = 0;
   double total_sum = 0;
-  for (int w = 0; w < kWarps; ++w) {
+  for (int w = 0; w < BlockScratch<Threads>::kWarps; ++w) {
     total += s.warp_count[w];
     total_sum += s.warp_sum[w];
   }
@@ -173,11 +174,12 @@ __device__ void BlockScore(const float* m, const float4* points, int n, float th
 
 // Least-squares refit of the best model on its inliers: the block sums the
 // normal matrix, thread 0 solves it (s.num_local models in s.local_models).
-template <typename Model>
-__device__ void BlockLocalSolve(const float* best, const float4* points, int n, float threshold, BlockScratch& s) {
+template <typename Model, int Threads>
+__device__ void BlockLocalSolve(const float* best, const float4* points, int n, float threshold,
+                                BlockScratch<Threads>& s) {
   double upper[45];
   for (int k = 0; k < 45; ++k) upper[k] = 0;
-  for (int i = threadIdx.x; i < n; i += kRansacThreads) {
+  for (int i = threadIdx.x; i < n; i += Threads) {
     const float4 p = points[i];
     if (Model::Residual(best, p) <= threshold) Model::AddRows(p, upper);
   }
@@ -190,7 +192,7 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   __syncthreads();
   if (threadIdx.x < 45) {
     double v = 0;
-    for (int w = 0; w < kWarps; ++w) v += s.warp_upper[w][threadIdx.x];
+    for (int w = 0; w < BlockScratch<Threads>::kWarps; ++w) v += s.warp_upper[w][threadIdx.x];
     s.upper[threadIdx.x] = v;
   }
   __syncthreads();
@@ -201,14 +203,14 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   __syncthreads();
 }
 
-template <typename Model>
-__device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cached_points, BlockScratch& s) {
+template <typename Model, int Threads>
+__device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cached_points, BlockScratch<Threads>& s) {
   const RansacPairInput input = launch.pairs[pair];
   const int n = input.count;
   const float threshold = input.squared_threshold;
   const float4* points = launch.points + input.offset;
   if (n <= launch.shared_points) {
-    for (int i = threadIdx.x; i < n; i += kRansacThreads) cached_points[i] = points[i];
+    for (int i = threadIdx.x; i < n; i += Threads) cached_points[i] = points[i];
     points = cached_points;
   }
   if (threadIdx.x == 0) {
@@ -248,7 +250,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
                                                             Model::kSampleSize));
   }
   for (int round = 0;; ++round) {
-    const int trial = round * kRansacThreads + threadIdx.x;
+    const int trial = round * Threads + threadIdx.x;
     // Window trials are scored in full: their supports fit the chance model.
     const bool in_window = early.min_num_inliers > 0 && trial < early.window;
     const int must_reach = in_window ? 0 : s.best_count;
@@ -310,7 +312,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     __syncthreads();
     unsigned long long best_key = s.best_key;
     __syncthreads();  // everyone has read the best before thread 0 may change it
-    for (int t = 0; t < kRansacThreads; ++t) {
+    for (int t = 0; t < Threads; ++t) {
       if (s.keys[t] <= best_key) continue;  // same decision in every thread
       if (threadIdx.x == 0) {
         for (int k = 0; k < 9; ++k) s.best_model[k] = s.models[t][k];
@@ -324,14 +326,14 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
           const int previous = s.best_count;
           float f[9];
           for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
-          BlockLocalSolve<Model>(f, points, n, threshold, s);
+          BlockLocalSolve<Model, Threads>(f, points, n, threshold, s);
           // Each model of the refit in turn, as the CPU loop compares them.
           for (int l = 0; l < s.num_local; ++l) {
             float lf[9];
             for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_models[l][k]);
             int count;
             float sum;
-            BlockScore<Model>(lf, points, n, threshold, s, &count, &sum);
+            BlockScore<Model, Threads>(lf, points, n, threshold, s, &count, &sum);
             // Only thread 0 reads the best here (others would race with its write).
             if (threadIdx.x == 0) {
               const unsigned long long key = SupportKey(count, sum);
@@ -351,7 +353,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       best_key = s.best_key;
       __syncthreads();  // everyone has read the best before thread 0 may change it
     }
-    trials_done = min((round + 1) * kRansacThreads, launch.max_trials);
+    trials_done = min((round + 1) * Threads, launch.max_trials);
     const bool irrelevant = relevant > 0 && s.best_count < relevant && trials_done >= relevant_trials;
     const bool stop = trials_done >= launch.max_trials ||
                       (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant;
@@ -369,7 +371,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
   uint8_t* mask = launch.masks + input.offset;
   float f[9];
   for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
-  for (int i = threadIdx.x; i < n; i += kRansacThreads) {
+  for (int i = threadIdx.x; i < n; i += Threads) {
     mask[i] = success && Model::Residual(f, points[i]) <= threshold ? 1 : 0;
   }
   if (threadIdx.x == 0) {
@@ -385,28 +387,36 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
 // F blocks first, then H blocks, in one grid: no tail between two launches.
 __global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaunch F, RansacLaunch H) {
   extern __shared__ float4 cached_points[];
-  __shared__ BlockScratch s;
+  __shared__ BlockScratch<kRansacThreads> s;
   const int block = static_cast<int>(blockIdx.x);
   if (block < F.num_pairs) {
-    LoRansacBlock<FundamentalModel>(F, block, cached_points, s);
+    LoRansacBlock<FundamentalModel, kRansacThreads>(F, block, cached_points, s);
   } else {
-    LoRansacBlock<HomographyModel>(H, block - F.num_pairs, cached_points, s);
+    LoRansacBlock<HomographyModel, kRansacThreads>(H, block - F.num_pairs, cached_points, s);
   }
 }
 
 // E blocks: a kernel of their own, so the 5-point solver's registers and
-// stack do not weigh on the F/H kernel's occupancy. By default it takes 255
-// registers (two blocks per SM); CASHASH_ESSENTIAL_MIN_BLOCKS=3 at compile
-// time caps them for three (168 registers, more spills) to compare.
-#if defined(CASHASH_ESSENTIAL_MIN_BLOCKS) && CASHASH_ESSENTIAL_MIN_BLOCKS > 1
-#define CASHASH_ESSENTIAL_LAUNCH_BOUNDS __launch_bounds__(kRansacThreads, CASHASH_ESSENTIAL_MIN_BLOCKS)
-#else
-#define CASHASH_ESSENTIAL_LAUNCH_BOUNDS __launch_bounds__(kRansacThreads)
-#endif
-__global__ void CASHASH_ESSENTIAL_LAUNCH_BOUNDS EssentialRansacKernel(RansacLaunch E) {
+// stack do not weigh on the F/H kernel's occupancy. It takes 255 registers,
+// so an SM holds 256 of its threads either way: two blocks of 128 or one of
+// 256 (E.block_threads). The larger block runs twice the trials per round,
+// so a pair that needs thousands of trials takes half as many rounds: those
+// pairs are what a chunk waits for once the others are done.
+template <int Threads>
+__global__ void __launch_bounds__(Threads) EssentialRansacKernel(RansacLaunch E) {
   extern __shared__ float4 cached_points[];
-  __shared__ BlockScratch s;
-  LoRansacBlock<EssentialModel>(E, static_cast<int>(blockIdx.x), cached_points, s);
+  __shared__ BlockScratch<Threads> s;
+  LoRansacBlock<EssentialModel, Threads>(E, static_cast<int>(blockIdx.x), cached_points, s);
+}
+
+template <int Threads>
+void LaunchEssentialKernel(const RansacLaunch& E, size_t shared_bytes, cudaStream_t stream) {
+  static const cudaError_t opt_in =
+      cudaFuncSetAttribute(EssentialRansacKernel<Threads>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
+  CUDA_CHECK(opt_in);
+  EssentialRansacKernel<Threads><<<E.num_pairs, Threads, shared_bytes, stream>>>(E);
+  CUDA_CHECK_LAUNCH();
 }
 
 // One thread per 5-point sample (tests).
@@ -425,12 +435,11 @@ __global__ void EssentialFivePointKernel(const float4* samples, int num_samples,
 void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
   if (E.num_pairs == 0) return;
   const size_t shared_bytes = static_cast<size_t>(E.shared_points) * sizeof(float4);
-  static const cudaError_t opt_in =
-      cudaFuncSetAttribute(EssentialRansacKernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
-  CUDA_CHECK(opt_in);
-  EssentialRansacKernel<<<E.num_pairs, kRansacThreads, shared_bytes, stream>>>(E);
-  CUDA_CHECK_LAUNCH();
+  if (E.block_threads == kEssentialLargeBlockThreads) {
+    LaunchEssentialKernel<kEssentialLargeBlockThreads>(E, shared_bytes, stream);
+  } else {
+    LaunchEssentialKernel<kRansacThreads>(E, shared_bytes, stream);
+  }
 }
 
 float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {

@@ -49,9 +49,13 @@ struct RansacLaunch {
   const RansacPairOutput* relevance = nullptr;
   double relevance_ratio = 0;
   int relevance_min_inliers = 0;
+  // Threads per block (trials per round): kRansacThreads, or for E also
+  // kEssentialLargeBlockThreads.
+  int block_threads = 128;
 };
 
 constexpr int kRansacThreads = 128;
+constexpr int kEssentialLargeBlockThreads = 256;
 
 // Largest shared-memory point cache a launch may ask for (48 KiB of float4).
 constexpr int kRansacMaxSharedPoints = 3072;

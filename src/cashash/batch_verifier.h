@@ -33,8 +33,14 @@ class BatchVerifier {
   virtual ~BatchVerifier() = default;
   // "cpu" or "gpu", for the run's summary.
   virtual std::string Name() const = 0;
-  // Geometries of pairs[k] in the same order. One call at a time.
+  // Geometries of pairs[k] in the same order. Up to MaxConcurrentCalls()
+  // calls at once, from different threads.
   virtual std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) = 0;
+  // How many Verify calls may run at once. The CPU verifier already spreads
+  // one chunk over every core (1); the GPU verifier keeps several chunks on
+  // the device, because one chunk's device time is set by its slowest pair
+  // while most of the device idles.
+  virtual int MaxConcurrentCalls() const { return 1; }
   // One line on where the time went (device time, trials, early exits), for
   // the run's log; empty when there is nothing beyond the pipeline's times.
   virtual std::string StatsSummary() const { return {}; }

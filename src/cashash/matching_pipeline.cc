@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include "cashash/blocking_queue.h"
+#include "cashash/in_order_turnstile.h"
 #include "cashash/pair_id.h"
 #include "cashash/thread_pool.h"
 
@@ -24,6 +25,7 @@ using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
 
 // What travels from the matching stage to the verification stage.
 struct MatchedChunk {
+  size_t index = 0;  // position in the run's chunks: the writer's order
   const PairChunk* chunk = nullptr;
   std::unordered_map<image_t, FeaturesPtr> features;
   std::vector<FeatureMatches> matches;
@@ -54,6 +56,46 @@ class FirstError {
   std::exception_ptr error_;
   std::atomic<bool> failed_{false};
 };
+
+// The verification of one matched chunk: results in the chunk's pair order,
+// geometries left undefined when verification is skipped. Releases the
+// chunk's features.
+VerifiedChunk VerifyChunk(const PipelineOptions& options, FeatureSource* source, MatchedChunk* item,
+                          BatchVerifier* verifier) {
+  VerifiedChunk out;
+  out.chunk = item->chunk;
+  out.started = item->started;
+  const std::vector<ImagePair>& pairs = item->chunk->pairs;
+  out.results.resize(pairs.size());
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    out.results[k].pair = pairs[k];
+    out.results[k].matches = std::move(item->matches[k]);
+  }
+  if (!options.skip_geometric_verification) {
+    // Keypoint positions once per image of the chunk, not once per pair.
+    std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
+    for (const auto& entry : item->features) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
+    std::vector<std::pair<const image_t, std::vector<Eigen::Vector2d>>*> slots;
+    for (auto& entry : positions) slots.push_back(&entry);
+    ParallelFor(slots.size(), options.num_threads, [&](size_t i) {
+      slots[i]->second = KeypointPositions(item->features.at(slots[i]->first)->keypoints);
+    });
+    std::vector<VerificationPair> tasks(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      VerificationPair& task = tasks[k];
+      task.camera1 = &source->CameraOfImage(pairs[k].first);
+      task.camera2 = &source->CameraOfImage(pairs[k].second);
+      task.points1 = &positions.at(pairs[k].first);
+      task.points2 = &positions.at(pairs[k].second);
+      task.matches = &out.results[k].matches;
+      task.random_seed = PairRandomSeed(options.two_view.random_seed, pairs[k]);
+    }
+    std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
+    for (size_t k = 0; k < pairs.size(); ++k) out.results[k].geometry = std::move(geometries[k]);
+  }
+  item->features.clear();
+  return out;
+}
 
 }  // namespace
 
@@ -135,14 +177,21 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     }
   });
 
-  // Stage 2: verification of a whole chunk by the batch verifier.
+  // Stage 2: verification of whole chunks by the batch verifier, on as many
+  // threads as it takes calls at once. Chunks still reach the writer in the
+  // order they were matched (the turnstile).
   std::unique_ptr<BatchVerifier> default_verifier;
   BatchVerifier* verifier = verifier_;
   if (verifier == nullptr && !options_.skip_geometric_verification) {
     default_verifier = CreateCpuBatchVerifier(options_.two_view, options_.num_threads);
     verifier = default_verifier.get();
   }
-  std::thread verifier_thread([&]() {
+  const int num_verifier_threads =
+      options_.skip_geometric_verification ? 1 : std::max(1, verifier->MaxConcurrentCalls());
+  stats.verification_threads = num_verifier_threads;
+  InOrderTurnstile to_writer_in_order;
+  std::atomic<int> verifier_threads_left{num_verifier_threads};
+  auto verification_stage = [&]() {
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
@@ -150,50 +199,24 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
-        VerifiedChunk out;
-        out.chunk = item->chunk;
-        out.started = item->started;
-        const std::vector<ImagePair>& pairs = item->chunk->pairs;
-        out.results.resize(pairs.size());
-        for (size_t k = 0; k < pairs.size(); ++k) {
-          out.results[k].pair = pairs[k];
-          out.results[k].matches = std::move(item->matches[k]);
-        }
-        if (!options_.skip_geometric_verification) {
-          // Keypoint positions once per image of the chunk, not once per pair.
-          std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
-          for (const auto& entry : item->features) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
-          std::vector<std::pair<const image_t, std::vector<Eigen::Vector2d>>*> slots;
-          for (auto& entry : positions) slots.push_back(&entry);
-          ParallelFor(slots.size(), options_.num_threads, [&](size_t i) {
-            slots[i]->second = KeypointPositions(item->features.at(slots[i]->first)->keypoints);
-          });
-          std::vector<VerificationPair> tasks(pairs.size());
-          for (size_t k = 0; k < pairs.size(); ++k) {
-            VerificationPair& task = tasks[k];
-            task.camera1 = &source_->CameraOfImage(pairs[k].first);
-            task.camera2 = &source_->CameraOfImage(pairs[k].second);
-            task.points1 = &positions.at(pairs[k].first);
-            task.points2 = &positions.at(pairs[k].second);
-            task.matches = &out.results[k].matches;
-            task.random_seed = PairRandomSeed(options_.two_view.random_seed, pairs[k]);
-          }
-          std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
-          for (size_t k = 0; k < pairs.size(); ++k) out.results[k].geometry = std::move(geometries[k]);
-        }
+        VerifiedChunk out = VerifyChunk(options_, source_, &*item, verifier);
         add_seconds(&PipelineStats::seconds_verification, t0);
-        item->features.clear();
         const Clock::time_point t_push = Clock::now();
+        if (!to_writer_in_order.Wait(item->index)) break;
         const bool pushed = to_write.Push(std::move(out));
+        to_writer_in_order.Pass(item->index);
         add_seconds(&PipelineStats::seconds_verification_wait_writer, t_push);
         if (!pushed) break;
       }
     } catch (...) {
       error.Set(std::current_exception());
       to_verify.Close();
+      to_writer_in_order.Cancel();
     }
-    to_write.Close();
-  });
+    if (--verifier_threads_left == 0) to_write.Close();
+  };
+  std::vector<std::thread> verifier_threads;
+  for (int t = 0; t < num_verifier_threads; ++t) verifier_threads.emplace_back(verification_stage);
 
   // Stage 1 (this thread): load what the chunk needs, match.
   try {
@@ -231,6 +254,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
 
       const Clock::time_point t_match = Clock::now();
       MatchedChunk item;
+      item.index = c;
       item.chunk = &chunk;
       item.started = chunk_start;
       item.matches = matcher_->MatchPairs(chunk.pairs);
@@ -250,7 +274,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     error.Set(std::current_exception());
   }
   to_verify.Close();
-  verifier_thread.join();
+  for (std::thread& thread : verifier_threads) thread.join();
   writer.join();
   error.RethrowIfAny();
   if (stop_ && stop_->load() && stats.pairs_done < stats.pairs_total) stats.stopped = true;

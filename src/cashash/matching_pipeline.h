@@ -77,7 +77,9 @@ struct PipelineStats {
   double seconds_loading = 0;  // features from the source (waits on a cache's loader too)
   double seconds_hashing = 0;  // adding images to the matcher (hash codes, device upload)
   double seconds_matching = 0;
-  double seconds_verification = 0;  // summed wall time of verification stage
+  // Summed over the verification threads when chunks are verified
+  // concurrently (verification_threads > 1), as are its waits below.
+  double seconds_verification = 0;
   double seconds_writing = 0;
   // Waiting, apart from the busy times above: the matching thread for room
   // in the queue to verification (verification is slower), verification for
@@ -88,6 +90,7 @@ struct PipelineStats {
   double seconds_verification_wait_writer = 0;
   double seconds_writing_wait_input = 0;
   bool stopped = false;  // the stop flag was raised before the end
+  int verification_threads = 1;  // chunks verified at once (BatchVerifier::MaxConcurrentCalls)
 };
 
 class MatchingPipeline {

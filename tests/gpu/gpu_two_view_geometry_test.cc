@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "../synthetic_two_view.h"
@@ -295,6 +296,49 @@ TEST(GpuBatchVerifier, SameConfigurationsAsCpuOnSyntheticPairs) {
         << gpu[k].inlier_matches.size() << " vs " << cpu[k].inlier_matches.size();
   }
   EXPECT_EQ(gpu.back().config, kDegenerate);
+}
+
+// The pipeline verifies up to MaxConcurrentCalls() chunks at once on one
+// verifier: calls in flight together must give what each gives alone (each
+// call leases its own streams and buffers; the seeds alone decide).
+TEST(GpuBatchVerifier, ConcurrentCallsGiveWhatEachGivesAlone) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const std::vector<Case> cases = SyntheticCases();
+  const Camera with_prior = cases[0].scene.MakeCamera(true), without = cases[0].scene.MakeCamera(false);
+  // Three different chunks: the cases in turn, with and without priors.
+  std::vector<std::vector<VerificationPair>> chunks(3);
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    for (size_t k = 0; k < cases.size(); ++k) {
+      VerificationPair p;
+      p.camera1 = p.camera2 = (k + c) % 2 ? &without : &with_prior;
+      p.points1 = &cases[k].scene.points1;
+      p.points2 = &cases[k].scene.points2;
+      p.matches = &cases[k].scene.matches;
+      p.random_seed = 77 * (c + 1) + k;
+      chunks[c].push_back(p);
+    }
+  }
+  const TwoViewGeometryOptions options;
+  std::unique_ptr<BatchVerifier> verifier = cuda::CreateGpuBatchVerifier(options, 0, -1);
+  ASSERT_GE(verifier->MaxConcurrentCalls(), 1);
+  std::vector<std::vector<TwoViewGeometry>> alone, together(chunks.size());
+  for (const auto& chunk : chunks) alone.push_back(verifier->Verify(chunk));
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    std::vector<std::thread> threads;
+    for (size_t c = 0; c < chunks.size(); ++c) {
+      threads.emplace_back([&, c] { together[c] = verifier->Verify(chunks[c]); });
+    }
+    for (std::thread& thread : threads) thread.join();
+    for (size_t c = 0; c < chunks.size(); ++c) {
+      ASSERT_EQ(together[c].size(), alone[c].size());
+      for (size_t k = 0; k < alone[c].size(); ++k) {
+        SCOPED_TRACE("chunk " + std::to_string(c) + ", " + cases[k].name);
+        EXPECT_EQ(together[c][k].config, alone[c][k].config);
+        EXPECT_EQ(together[c][k].inlier_matches.size(), alone[c][k].inlier_matches.size());
+        EXPECT_TRUE(together[c][k].F.isApprox(alone[c][k].F));
+      }
+    }
+  }
 }
 
 // Agreement of one verifier run with the CPU reference on real pairs.
