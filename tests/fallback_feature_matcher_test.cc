@@ -1,5 +1,6 @@
 #include "cashash/fallback_feature_matcher.h"
 
+#include <memory>
 #include <random>
 #include <stdexcept>
 
@@ -95,6 +96,26 @@ TEST(FallbackFeatureMatcher, DeviceMemoryErrorsMoveTheRunToTheFallback) {
     EXPECT_NE(warnings[0].find("continuing on cpu-"), std::string::npos) << warnings[0];
     EXPECT_NE(matcher->Name(), "failing-gpu");
   }
+}
+
+// The pipeline shares its features with the matcher: the fallback keeps
+// that handle (no copy) until the image is removed, and rebuilds from it.
+TEST(FallbackFeatureMatcher, SharedImagesAreKeptWithoutACopyAndRebuiltFrom) {
+  const Scene scene = MakeScene();
+  const std::vector<FeatureMatches> expected = AddAndMatch(Cpu(scene).get(), scene);
+  std::vector<std::shared_ptr<const FeatureDescriptors>> shared;
+  for (const FeatureDescriptors& d : scene.images) shared.push_back(std::make_shared<const FeatureDescriptors>(d));
+  // Fails at the first MatchPairs (call 6: five adds first).
+  auto matcher = CreateFallbackFeatureMatcher(
+      std::make_unique<FailingMatcher>(Cpu(scene), 6, "GPU out of memory allocating 2 MiB for codes"),
+      [&] { return Cpu(scene); }, IsDeviceMemoryError, nullptr);
+  for (size_t i = 0; i < shared.size(); ++i) matcher->AddSharedImage(static_cast<image_t>(i), shared[i]);
+  for (const auto& handle : shared) EXPECT_EQ(handle.use_count(), 2) << "held once by the fallback, not copied";
+  matcher->RemoveImage(4);
+  EXPECT_EQ(shared[4].use_count(), 1) << "released with the image";
+  matcher->AddSharedImage(4, shared[4]);
+  EXPECT_EQ(matcher->MatchPairs(scene.pairs), expected);  // rebuilt on the CPU from the handles
+  EXPECT_NE(matcher->Name(), "failing-gpu");
 }
 
 TEST(FallbackFeatureMatcher, OtherErrorsPropagate) {

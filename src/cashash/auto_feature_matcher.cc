@@ -60,6 +60,13 @@ void AutoFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& de
   images_.insert(image_id);
 }
 
+void AutoFeatureMatcher::AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
+  if (winner_ != nullptr) return winner_->AddSharedImage(image_id, std::move(descriptors));
+  cascade_->AddSharedImage(image_id, descriptors);
+  brute_force_->AddSharedImage(image_id, descriptors);
+  images_.insert(image_id);
+}
+
 void AutoFeatureMatcher::RemoveImage(image_t image_id) {
   if (winner_ != nullptr) return winner_->RemoveImage(image_id);
   cascade_->RemoveImage(image_id);

@@ -76,6 +76,7 @@ class AutoFeatureMatcher : public FeatureMatcher {
                      AutoMatcherOptions options, std::function<void(const std::string&)> info);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   // The winner's name once decided; "auto(cascade name|brute-force name)" before.

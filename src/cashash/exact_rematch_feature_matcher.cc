@@ -27,6 +27,11 @@ void ExactRematchFeatureMatcher::AddImage(image_t image_id, const FeatureDescrip
   cascade_->AddImage(image_id, descriptors);
 }
 
+void ExactRematchFeatureMatcher::AddSharedImage(image_t image_id,
+                                                std::shared_ptr<const FeatureDescriptors> descriptors) {
+  cascade_->AddSharedImage(image_id, std::move(descriptors));
+}
+
 void ExactRematchFeatureMatcher::RemoveImage(image_t image_id) { cascade_->RemoveImage(image_id); }
 
 std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {

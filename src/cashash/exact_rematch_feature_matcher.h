@@ -44,6 +44,7 @@ class ExactRematchFeatureMatcher : public FeatureMatcher {
                              std::shared_ptr<ExactRematchCounts> counts = nullptr);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   // "<cascade>+exact-rematch"

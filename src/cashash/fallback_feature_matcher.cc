@@ -17,10 +17,17 @@ class FallbackFeatureMatcher : public FeatureMatcher {
         warn_(std::move(warn)) {}
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override {
-    // The host copy is what the fallback is rebuilt from; the pipeline drops
-    // its own copy when the block moves on.
-    if (!fell_back_) images_[image_id] = descriptors;
+    // The host copy is what the fallback is rebuilt from; the caller's
+    // descriptors may go away once we return.
+    if (!fell_back_) images_[image_id] = std::make_shared<const FeatureDescriptors>(descriptors);
     Run([&] { active_->AddImage(image_id, descriptors); });
+  }
+
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override {
+    // The pipeline's own handle: no copy, and the features stay alive only
+    // while this matcher holds the image.
+    if (!fell_back_) images_[image_id] = descriptors;
+    Run([&] { active_->AddSharedImage(image_id, descriptors); });
   }
 
   void RemoveImage(image_t image_id) override {
@@ -66,7 +73,7 @@ class FallbackFeatureMatcher : public FeatureMatcher {
       active_ = make_fallback_();
       fell_back_ = true;
       if (warn_) warn_(from + " failed (" + what + "); continuing on " + active_->Name());
-      for (const auto& [id, descriptors] : images_) active_->AddImage(id, descriptors);
+      for (const auto& [id, descriptors] : images_) active_->AddImage(id, *descriptors);
       images_.clear();
       step();
     }
@@ -76,7 +83,7 @@ class FallbackFeatureMatcher : public FeatureMatcher {
   std::function<std::unique_ptr<FeatureMatcher>()> make_fallback_;
   std::function<bool(const std::exception&)> recoverable_;
   std::function<void(const std::string&)> warn_;
-  std::map<image_t, FeatureDescriptors> images_;
+  std::map<image_t, std::shared_ptr<const FeatureDescriptors>> images_;
   bool fell_back_ = false;
 };
 

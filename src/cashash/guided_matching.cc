@@ -187,6 +187,15 @@ GuidedFeatureMatcher::GuidedFeatureMatcher(std::unique_ptr<FeatureMatcher> full,
 }
 
 void GuidedFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
+  AddGuidedImage(image_id, descriptors, nullptr);
+}
+
+void GuidedFeatureMatcher::AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
+  AddGuidedImage(image_id, *descriptors, descriptors);
+}
+
+void GuidedFeatureMatcher::AddGuidedImage(image_t image_id, const FeatureDescriptors& descriptors,
+                                          const std::shared_ptr<const FeatureDescriptors>& shared) {
   Keypoints keypoints;
   if (!keypoints_->Take(image_id, &keypoints)) {
     throw std::logic_error("guided matching: image " + std::to_string(image_id) +
@@ -212,6 +221,8 @@ void GuidedFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& 
     FeatureDescriptors head;
     head.data.assign(descriptors.data.begin(), descriptors.data.begin() + n * kDescriptorDim);
     full_->AddImage(image_id, head);
+  } else if (shared) {
+    full_->AddSharedImage(image_id, shared);
   } else {
     full_->AddImage(image_id, descriptors);
   }

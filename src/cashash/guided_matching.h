@@ -224,6 +224,7 @@ class GuidedFeatureMatcher : public FeatureMatcher {
                        int num_threads);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   // "guided(<full matcher>, F on <estimator>)"
@@ -234,6 +235,10 @@ class GuidedFeatureMatcher : public FeatureMatcher {
   const std::vector<GuidedStage1Outcome>& last_outcomes() const { return last_outcomes_; }
 
  private:
+  // AddImage and AddSharedImage (`shared` set: passed on to the full matcher).
+  void AddGuidedImage(image_t image_id, const FeatureDescriptors& descriptors,
+                      const std::shared_ptr<const FeatureDescriptors>& shared);
+
   struct GuidedImage {
     std::vector<uint32_t> top_scale_rows;          // stage-1 row -> row
     std::vector<Eigen::Vector2d> positions;        // pixels of the matched rows

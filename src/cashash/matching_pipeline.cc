@@ -247,7 +247,8 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         FeaturesPtr features = source_->LoadSharedFeatures(image_id);
         const Clock::time_point t_hash = Clock::now();
         load_seconds += std::chrono::duration<double>(t_hash - t_load).count();
-        matcher_->AddImage(image_id, features->descriptors);
+        // The matcher may keep the descriptors (aliasing the features).
+        matcher_->AddSharedImage(image_id, std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors));
         hash_seconds += SecondsSince(t_hash);
         loaded.emplace(image_id, std::move(features));
       }

@@ -9,6 +9,15 @@ RetainingFeatureMatcher::RetainingFeatureMatcher(std::unique_ptr<FeatureMatcher>
     : inner_(std::move(inner)), budget_bytes_(budget_bytes), bytes_of_(std::move(bytes_of)) {}
 
 void RetainingFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
+  Add(image_id, descriptors, [&] { inner_->AddImage(image_id, descriptors); });
+}
+
+void RetainingFeatureMatcher::AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
+  Add(image_id, *descriptors, [&] { inner_->AddSharedImage(image_id, descriptors); });
+}
+
+void RetainingFeatureMatcher::Add(image_t image_id, const FeatureDescriptors& descriptors,
+                                  const std::function<void()>& add_to_inner) {
   const auto it = kept_.find(image_id);
   if (it != kept_.end()) {
     if (!it->second.in_use) {
@@ -18,7 +27,7 @@ void RetainingFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptor
     ++stats_.images_reused;
     return;
   }
-  inner_->AddImage(image_id, descriptors);
+  add_to_inner();
   Kept kept;
   kept.bytes = bytes_of_(descriptors);
   kept.in_use = true;

@@ -35,6 +35,7 @@ class RetainingFeatureMatcher : public FeatureMatcher {
                           std::function<size_t(const FeatureDescriptors&)> bytes_of);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   std::string Name() const override;
@@ -42,6 +43,8 @@ class RetainingFeatureMatcher : public FeatureMatcher {
   const RetainingStats& stats() const { return stats_; }
 
  private:
+  // AddImage and AddSharedImage: add_to_inner passes the image on.
+  void Add(image_t image_id, const FeatureDescriptors& descriptors, const std::function<void()>& add_to_inner);
   struct Kept {
     size_t bytes = 0;
     bool in_use = false;

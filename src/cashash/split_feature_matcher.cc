@@ -20,6 +20,10 @@ void SplitFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& d
   for (auto& part : parts_) part->AddImage(image_id, descriptors);
 }
 
+void SplitFeatureMatcher::AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
+  for (auto& part : parts_) part->AddSharedImage(image_id, descriptors);
+}
+
 void SplitFeatureMatcher::RemoveImage(image_t image_id) {
   for (auto& part : parts_) part->RemoveImage(image_id);
 }

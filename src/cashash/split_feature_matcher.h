@@ -20,6 +20,7 @@ class SplitFeatureMatcher : public FeatureMatcher {
   explicit SplitFeatureMatcher(std::vector<std::unique_ptr<FeatureMatcher>> parts);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   std::string Name() const override;
