@@ -83,8 +83,13 @@ bool GpuEssentialFromEnvironment();
 
 // Chunks the GPU verifier keeps on the device at once (its
 // MaxConcurrentCalls): CASHASH_GPU_VERIFICATIONS_IN_FLIGHT (1 to 8) to
-// compare, else kDefaultGpuVerificationsInFlight.
-constexpr int kDefaultGpuVerificationsInFlight = 3;
+// compare, else kDefaultGpuVerificationsInFlight. Measured on the H200
+// (device runs 21 and 22): more chunks at once help where verification sets
+// the pace (guided matching: 23.5k, 25.6k and 26.9k pairs/s at 300 images
+// with 1, 2 and 3) and cost a little where matching does (exhaustive: 20.6k,
+// 20.4k, 19.7k), since their E blocks hold SMs the matching kernels want;
+// 2 takes most of the first and little of the second.
+constexpr int kDefaultGpuVerificationsInFlight = 2;
 int GpuVerificationsInFlightFromEnvironment();
 
 // Threads per E block (128 or 256): CASHASH_ESSENTIAL_BLOCK_THREADS to
