@@ -99,9 +99,5 @@ int GpuVerificationsInFlightFromEnvironment();
 constexpr int kDefaultEssentialBlockThreads = 256;
 int EssentialBlockThreadsFromEnvironment();
 
-// Most E blocks per launch (0: one per pair): CASHASH_ESSENTIAL_MAX_BLOCKS,
-// to compare; capped launches loop over their pairs.
-int EssentialMaxBlocksFromEnvironment();
-
 }  // namespace cuda
 }  // namespace cashash

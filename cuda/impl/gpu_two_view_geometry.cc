@@ -217,7 +217,6 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   E_launch.masks = d.masks.as<uint8_t>() + total;
   E_launch.max_trials = RansacMaxTrials(ransac, 5);
   E_launch.block_threads = EssentialBlockThreadsFromEnvironment();
-  E_launch.max_blocks = EssentialMaxBlocksFromEnvironment();
   E_launch.shared_points = std::min(max_count_E, kRansacMaxSharedPoints);
   if (num_E > 0) {
     // E (the longest) starts first on its own stream; F and H run beside it.
@@ -310,14 +309,6 @@ int EssentialBlockThreadsFromEnvironment() {
                                                                               : kRansacThreads;
   }();
   return threads;
-}
-
-int EssentialMaxBlocksFromEnvironment() {
-  static const int blocks = [] {
-    const char* text = std::getenv("CASHASH_ESSENTIAL_MAX_BLOCKS");
-    return text == nullptr ? 0 : std::max(0, std::atoi(text));
-  }();
-  return blocks;
 }
 
 int GpuVerificationsInFlightFromEnvironment() {

@@ -402,16 +402,11 @@ __global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaun
 // 256 (E.block_threads). The larger block runs twice the trials per round,
 // so a pair that needs thousands of trials takes half as many rounds: those
 // pairs are what a chunk waits for once the others are done.
-// With E.max_blocks set the grid is capped and each block takes every
-// gridDim.x-th pair, so that E leaves the other SMs to the matching kernels.
 template <int Threads>
 __global__ void __launch_bounds__(Threads) EssentialRansacKernel(RansacLaunch E) {
   extern __shared__ float4 cached_points[];
   __shared__ BlockScratch<Threads> s;
-  for (int pair = static_cast<int>(blockIdx.x); pair < E.num_pairs; pair += static_cast<int>(gridDim.x)) {
-    LoRansacBlock<EssentialModel, Threads>(E, pair, cached_points, s);
-    __syncthreads();  // the point cache and the scratch are reused
-  }
+  LoRansacBlock<EssentialModel, Threads>(E, static_cast<int>(blockIdx.x), cached_points, s);
 }
 
 template <int Threads>
@@ -420,8 +415,7 @@ void LaunchEssentialKernel(const RansacLaunch& E, size_t shared_bytes, cudaStrea
       cudaFuncSetAttribute(EssentialRansacKernel<Threads>, cudaFuncAttributeMaxDynamicSharedMemorySize,
                            static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
   CUDA_CHECK(opt_in);
-  const int blocks = E.max_blocks > 0 ? std::min(E.num_pairs, E.max_blocks) : E.num_pairs;
-  EssentialRansacKernel<Threads><<<blocks, Threads, shared_bytes, stream>>>(E);
+  EssentialRansacKernel<Threads><<<E.num_pairs, Threads, shared_bytes, stream>>>(E);
   CUDA_CHECK_LAUNCH();
 }
 

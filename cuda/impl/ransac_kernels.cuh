@@ -52,9 +52,6 @@ struct RansacLaunch {
   // Threads per block (trials per round): kRansacThreads, or for E also
   // kEssentialLargeBlockThreads.
   int block_threads = 128;
-  // E only: at most this many blocks (0: one per pair), each looping over
-  // the pairs.
-  int max_blocks = 0;
 };
 
 constexpr int kRansacThreads = 128;
