@@ -29,8 +29,9 @@ size_t PhysicalMemoryBytes();
 
 constexpr int kMatcherBlocks = 4;
 // The loader's current and next chunk, two chunks queued for verification,
-// one being verified, one waiting to be queued: 6 chunks of 2 blocks.
-constexpr int kPipelineBlocks = 12;
+// two being verified (the GPU verifier's default; the CPU's one), one
+// waiting to be queued: 7 chunks of 2 blocks.
+constexpr int kPipelineBlocks = 14;
 constexpr int kCacheGroups = 3;
 // Blocks are never made larger than COLMAP's default on their own: a chunk
 // (block_size^2 pairs) is the unit of progress and of commits.
