@@ -114,6 +114,19 @@ class Sink : public ResultSink {
   std::vector<ImagePair> first_pairs;  // of each chunk, in the order written
 };
 
+// Exhaustive chunks of images 1..num_images in blocks of `block`.
+std::vector<PairChunk> Chunks(image_t num_images, size_t block) {
+  std::vector<image_t> ids;
+  for (image_t i = 1; i <= num_images; ++i) ids.push_back(i);
+  return ExhaustivePairChunks(ids, block);
+}
+
+size_t NumPairs(const std::vector<PairChunk>& chunks) {
+  size_t num_pairs = 0;
+  for (const PairChunk& c : chunks) num_pairs += c.pairs.size();
+  return num_pairs;
+}
+
 std::vector<ImagePair> FirstPairs(const std::vector<PairChunk>& chunks) {
   std::vector<ImagePair> first;
   for (const PairChunk& c : chunks) first.push_back(c.pairs.front());
@@ -121,11 +134,8 @@ std::vector<ImagePair> FirstPairs(const std::vector<PairChunk>& chunks) {
 }
 
 TEST(BatchVerifierPipeline, WholeChunksGoToTheGivenVerifier) {
-  std::vector<image_t> ids;
-  for (image_t i = 1; i <= 9; ++i) ids.push_back(i);
-  const std::vector<PairChunk> chunks = ExhaustivePairChunks(ids, 4);
-  size_t num_pairs = 0;
-  for (const PairChunk& c : chunks) num_pairs += c.pairs.size();
+  const std::vector<PairChunk> chunks = Chunks(9, 4);
+  const size_t num_pairs = NumPairs(chunks);
   PointSource source;
   IdentityMatcher matcher;
   Sink sink;
@@ -164,12 +174,9 @@ TEST(BatchVerifierPipeline, SkippingVerificationNeverCallsTheVerifier) {
 }
 
 TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
-  std::vector<image_t> ids;
-  for (image_t i = 1; i <= 16; ++i) ids.push_back(i);
-  const std::vector<PairChunk> chunks = ExhaustivePairChunks(ids, 3);
+  const std::vector<PairChunk> chunks = Chunks(16, 3);
   ASSERT_GE(chunks.size(), 10u);
-  size_t num_pairs = 0;
-  for (const PairChunk& c : chunks) num_pairs += c.pairs.size();
+  const size_t num_pairs = NumPairs(chunks);
   PointSource source;
   IdentityMatcher matcher;
   Sink sink;
@@ -191,9 +198,7 @@ TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
 }
 
 TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChunk) {
-  std::vector<image_t> ids;
-  for (image_t i = 1; i <= 16; ++i) ids.push_back(i);
-  const std::vector<PairChunk> chunks = ExhaustivePairChunks(ids, 3);
+  const std::vector<PairChunk> chunks = Chunks(16, 3);
   PointSource source;
   IdentityMatcher matcher;
   Sink sink;
