@@ -172,6 +172,26 @@ TEST(AutoFeatureMatcher, CloseCallsAreDecidedOnLongerSamplesAndPickTheFaster) {
   }
 }
 
+TEST(AutoFeatureMatcher, ADecisiveGapEndsTheProbeOnAShortBatch) {
+  // The H200's figures at 8,192 features: cascade 0.015 ms per pair, brute
+  // force 0.051 ms (3.4x). Rounds of 64, 128 and 256 pairs: the 256-pair
+  // round's 13 ms of brute force passes min_decisive_seconds, so the probe
+  // stops there, long before min_probe_seconds.
+  AutoMatcherOptions options;
+  options.min_batch_pairs = 64;
+  Harness h(0.000015, 0.000051, options);
+  RunChunks(&h, 80, 2500);
+  ASSERT_TRUE(h.matcher->decision().decided);
+  EXPECT_TRUE(h.matcher->decision().cascade_won);
+  EXPECT_EQ(h.brute_force.matched.size(), 64u + 128u + 256u);
+  // A 2x gap is not decisive: the probe goes on until min_probe_seconds.
+  Harness close(0.000025, 0.000051, options);
+  RunChunks(&close, 100, 2500);
+  ASSERT_TRUE(close.matcher->decision().decided);
+  EXPECT_TRUE(close.matcher->decision().cascade_won);
+  EXPECT_EQ(close.brute_force.matched.size(), 64u + 128u + 256u + 512u + 1024u);
+}
+
 TEST(AutoFeatureMatcher, FixedCostPerCallDoesNotFavourEither) {
   // Both pay 5 ms per call; brute force is 3x slower per pair. Equal batch
   // sizes make the per-call cost the same on both sides.

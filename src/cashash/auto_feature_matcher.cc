@@ -167,9 +167,11 @@ void AutoFeatureMatcher::TryDecide() {
   const double fast_per_pair = std::min(cascade_per_pair, brute_per_pair);
   const bool slow_long = slow.seconds >= options_.min_probe_seconds;
   const bool clear = slow_long && slow_per_pair >= options_.clear_ratio * fast_per_pair;
+  const bool decisive =
+      slow.seconds >= options_.min_decisive_seconds && slow_per_pair >= options_.decisive_ratio * fast_per_pair;
   const bool both_long = slow_long && fast.seconds >= options_.min_probe_seconds;
   const bool enough = std::min(cascade_timing_.timed_pairs, brute_force_timing_.timed_pairs) >= options_.max_probe_pairs;
-  if (clear || both_long || enough) Decide(cascade_faster, "measured");
+  if (clear || decisive || both_long || enough) Decide(cascade_faster, "measured");
 }
 
 void AutoFeatureMatcher::Decide(bool cascade, const std::string& reason) {

@@ -37,6 +37,15 @@ struct AutoMatcherOptions {
   // both batches took at least min_probe_seconds (the faster per pair wins).
   double min_probe_seconds = 0.05;
   double clear_ratio = 1.5;
+  // A round also decides when the slower backend's batch took at least
+  // min_decisive_seconds and is decisive_ratio times slower per pair: every
+  // probe pair costs the slower backend's time, (ratio - 1) pairs' worth
+  // more than the winner's, while noise of a few milliseconds (verification
+  // sharing the GPU) cannot turn a 3x gap round. On the H200 at 8,192
+  // features this decides after the 256-pair round instead of the
+  // 1,024-pair one.
+  double min_decisive_seconds = 0.01;
+  double decisive_ratio = 3.0;
   // Timed pairs per backend after which the faster so far wins anyway.
   size_t max_probe_pairs = 4096;
   // The MatchPairs call (chunk) from which on timings count: earlier calls
