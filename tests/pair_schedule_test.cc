@@ -138,5 +138,28 @@ TEST(PairSchedule, SmallExampleOrder) {
   EXPECT_EQ(order, expected);
 }
 
+// The run ends on a chunk of two blocks apart, not on a diagonal one (the
+// slowest to verify, and nothing hides the last chunk's verification).
+TEST(PairSchedule, RunEndsOnBlocksTwoApart) {
+  // 6 blocks in one group (300 images in blocks of 50).
+  const std::vector<PairChunk> chunks = ScheduledPairChunks(Ids(12), 2, 6);
+  std::vector<std::pair<int, int>> order;
+  for (const PairChunk& chunk : chunks) order.emplace_back(chunk.block_i, chunk.block_j);
+  const std::vector<std::pair<int, int>> expected = {
+      {0, 0}, {0, 5}, {0, 4}, {0, 3}, {0, 2}, {0, 1}, {1, 1}, {1, 5}, {1, 4}, {1, 3}, {1, 2},
+      {2, 2}, {2, 5}, {2, 4}, {2, 3}, {3, 3}, {3, 4}, {4, 4}, {4, 5}, {5, 5}, {3, 5}};
+  EXPECT_EQ(order, expected);
+  // Several groups: the last group pair ends the same way.
+  for (const Case& c : OddCases()) {
+    const std::vector<PairChunk> run = ScheduledPairChunks(Ids(c.n), c.block_size, c.blocks_per_group);
+    if (run.empty()) continue;
+    const int per_group = std::min(run[0].num_blocks, c.blocks_per_group);
+    const int last_group_blocks = run[0].num_blocks - (run[0].num_groups - 1) * per_group;
+    if (last_group_blocks < 3) continue;
+    EXPECT_EQ(run.back().block_j - run.back().block_i, 2)
+        << "n=" << c.n << " block_size=" << c.block_size << " blocks_per_group=" << c.blocks_per_group;
+  }
+}
+
 }  // namespace
 }  // namespace cashash

@@ -43,7 +43,7 @@ class BlockPairOrder {
   std::vector<std::pair<int, int>> Build() {
     const int num_groups = (num_blocks_ + per_group_ - 1) / per_group_;
     for (int gi = 0; gi < num_groups; ++gi) {
-      Diagonal(gi);
+      Diagonal(gi, /*last=*/gi == num_groups - 1);
       for (int gk = num_groups - 1; gk > gi; --gk) Cross(gi, gk);
     }
     return order_;
@@ -64,14 +64,28 @@ class BlockPairOrder {
   // Row r: (L[r], L[r]) then (L[r], L[c]) for c from the last down to r + 1,
   // so row r ends on L[r + 1], where row r + 1 starts. Starts on L[0]: the
   // list is reversed when the previous group pair ended on the last block.
-  void Diagonal(int group) {
+  //
+  // The run's last chunk is what the run waits for after matching ends: its
+  // verification and writing are not hidden behind anything. A diagonal
+  // chunk, of neighbouring images that mostly overlap, is the slowest to
+  // verify (0.35 s against 0.2 s for a far one at 300 images on the H200),
+  // and the plain order ends on one. So the last group moves
+  // (L[m-3], L[m-1]), two blocks apart, to the very end: it still shares
+  // L[m-1] with the chunk before it, at the price of uploading L[m-3] once
+  // more when the matcher cannot keep it.
+  void Diagonal(int group, bool last) {
     std::vector<int> blocks = BlocksOf(group);
     if (end_block_ == blocks.back() && blocks.size() > 1) std::reverse(blocks.begin(), blocks.end());
     const int m = static_cast<int>(blocks.size());
+    const bool far_pair_last = last && m >= 3;
     for (int r = 0; r < m; ++r) {
       Emit(blocks[r], blocks[r]);
-      for (int c = m - 1; c > r; --c) Emit(blocks[r], blocks[c]);
+      for (int c = m - 1; c > r; --c) {
+        if (far_pair_last && r == m - 3 && c == m - 1) continue;
+        Emit(blocks[r], blocks[c]);
+      }
     }
+    if (far_pair_last) Emit(blocks[m - 3], blocks[m - 1]);
   }
 
   // Rows over gi's blocks, starting from the one the previous pair ended

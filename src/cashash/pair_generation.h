@@ -40,7 +40,9 @@ std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_id
 // pairs in a row first, then the rest of the row from the far end; across
 // two groups a snake), and each group pair starts on a block the previous
 // one ended on, so every chunk after the first shares a block with the one
-// before it: the matcher never needs more than three blocks at once.
+// before it: the matcher never needs more than three blocks at once. The
+// run ends on a chunk of two blocks apart rather than a diagonal one, which
+// is the slowest to verify (see BlockPairOrder::Diagonal).
 std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
                                            int blocks_per_group);
 
