@@ -44,9 +44,16 @@ class FakeMatcher : public FeatureMatcher {
   ~FakeMatcher() override { record_->destroyed = true; }
   void AddImage(image_t id, const FeatureDescriptors&) override { record_->images.insert(id); }
   void RemoveImage(image_t id) override { record_->images.erase(id); }
+  // Calls that start before *busy_until take busy_factor times as long (the
+  // GPU shared with a verification that ends then).
+  void SetBusy(const double* busy_until, double busy_factor) {
+    busy_until_ = busy_until;
+    busy_factor_ = busy_factor;
+  }
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
     ++record_->calls;
-    *clock_ += per_call_ + per_pair_ * static_cast<double>(pairs.size());
+    const double factor = busy_until_ != nullptr && *clock_ < *busy_until_ ? busy_factor_ : 1.0;
+    *clock_ += factor * (per_call_ + per_pair_ * static_cast<double>(pairs.size()));
     std::vector<FeatureMatches> results;
     for (const ImagePair& pair : pairs) {
       if (!record_->images.count(pair.first) || !record_->images.count(pair.second)) {
@@ -72,6 +79,8 @@ class FakeMatcher : public FeatureMatcher {
   double per_pair_, per_call_;
   Record* record_;
   bool guided_;
+  const double* busy_until_ = nullptr;
+  double busy_factor_ = 1.0;
 };
 
 struct Harness {
@@ -79,14 +88,18 @@ struct Harness {
   Record cascade, brute_force;
   std::vector<std::string> log;
   std::unique_ptr<AutoFeatureMatcher> matcher;
+  double busy_until = -1;  // see FakeMatcher::SetBusy
 
   Harness(double cascade_per_pair, double brute_force_per_pair, AutoMatcherOptions options = AutoMatcherOptions(),
-          double per_call = 0) {
+          double per_call = 0, double busy_factor = 1.0) {
     options.now = [this] { return clock; };
-    matcher = std::make_unique<AutoFeatureMatcher>(
-        std::make_unique<FakeMatcher>("fake-cascade", &clock, cascade_per_pair, per_call, &cascade, true),
-        std::make_unique<FakeMatcher>("fake-bruteforce", &clock, brute_force_per_pair, per_call, &brute_force),
-        options, [this](const std::string& text) { log.push_back(text); });
+    auto fake_cascade = std::make_unique<FakeMatcher>("fake-cascade", &clock, cascade_per_pair, per_call, &cascade, true);
+    auto fake_brute_force =
+        std::make_unique<FakeMatcher>("fake-bruteforce", &clock, brute_force_per_pair, per_call, &brute_force);
+    fake_cascade->SetBusy(&busy_until, busy_factor);
+    fake_brute_force->SetBusy(&busy_until, busy_factor);
+    matcher = std::make_unique<AutoFeatureMatcher>(std::move(fake_cascade), std::move(fake_brute_force), options,
+                                                   [this](const std::string& text) { log.push_back(text); });
   }
 };
 
@@ -190,6 +203,42 @@ TEST(AutoFeatureMatcher, ADecisiveGapEndsTheProbeOnAShortBatch) {
   ASSERT_TRUE(close.matcher->decision().decided);
   EXPECT_TRUE(close.matcher->decision().cascade_won);
   EXPECT_EQ(close.brute_force.matched.size(), 64u + 128u + 256u + 512u + 1024u);
+}
+
+TEST(AutoFeatureMatcher, ALoadThatEndsMidRoundDoesNotDecide) {
+  // The GPU's settings (rounds from 64 pairs, slices of 64). The device is
+  // 20x slower until 19 ms: the cascade's first 64 pairs take 19.2 ms there,
+  // brute force's, right after, its unloaded 3.3 ms, so that round alone
+  // says brute force is 5.9x faster. It is one slice each and does not
+  // decide; the next round, two slices each, does, for the cascade.
+  AutoMatcherOptions options;
+  options.min_batch_pairs = 64;
+  options.interleave_slice_pairs = 64;
+  Harness h(0.000015, 0.000051, options, 0, 20.0);
+  h.busy_until = 0.019;
+  RunChunks(&h, 80, 2500);
+  ASSERT_TRUE(h.matcher->decision().decided);
+  EXPECT_TRUE(h.matcher->decision().cascade_won);
+  // Without turns the first round decides, wrongly.
+  options.interleave_slice_pairs = 0;
+  Harness once(0.000015, 0.000051, options, 0, 20.0);
+  once.busy_until = 0.019;
+  RunChunks(&once, 80, 2500);
+  ASSERT_TRUE(once.matcher->decision().decided);
+  EXPECT_FALSE(once.matcher->decision().cascade_won);
+}
+
+TEST(AutoFeatureMatcher, TurnsSplitARoundIntoEqualSlices) {
+  // Rounds of 64, 128, 256 pairs: 1, 2 and 4 slices a backend.
+  AutoMatcherOptions options;
+  options.min_batch_pairs = 64;
+  options.interleave_slice_pairs = 64;
+  Harness h(0.000015, 0.000051, options);
+  RunChunks(&h, 80, 2500);
+  ASSERT_TRUE(h.matcher->decision().decided);
+  EXPECT_EQ(h.brute_force.matched.size(), 64u + 128u + 256u);
+  EXPECT_EQ(h.brute_force.calls, 1u + 2u + 4u);
+  EXPECT_EQ(h.cascade.calls, 1u + 2u + 4u + 2u);  // and the rest of both chunks
 }
 
 TEST(AutoFeatureMatcher, FixedCostPerCallDoesNotFavourEither) {
