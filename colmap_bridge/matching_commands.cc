@@ -1,5 +1,6 @@
 #include "colmap_bridge/matching_commands.h"
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include "cashash/schedule_sizing.h"
 #include "colmap_bridge/command_options.h"
 #include "colmap_bridge/matching_api.h"
+#include "colmap_bridge/process_clock.h"
 
 namespace cashash {
 namespace colmap {
@@ -90,6 +92,12 @@ int ReportSummary(const MatchingSummary& summary) {
     std::cout << " (summed over up to " << stats.verification_threads << " chunks verified at once)";
   }
   std::cout << ", writing " << stats.seconds_writing << " s" << std::endl;
+  // What the user waited for beyond the pipeline: the summary's rate leaves
+  // it out.
+  const double process_seconds = SecondsSinceProcessStart();
+  std::cout << "Process: " << process_seconds << " s so far, " << std::max(0.0, process_seconds - stats.seconds_total)
+            << " s of it outside the pipeline (opening the database, starting the GPU, sizing the hash tables)"
+            << std::endl;
   // Waiting, apart from the busy times: which stage held the others up.
   std::cout << "Waiting: matching for verification " << stats.seconds_matching_wait_queue
             << " s, verification for matching " << stats.seconds_verification_wait_input << " s and for writing "
