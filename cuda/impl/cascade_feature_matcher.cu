@@ -114,7 +114,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
       slot.stream = CreateStageStream(StreamRole::kMatching);
       CUDA_CHECK(cudaEventCreateWithFlags(&slot.done, cudaEventDisableTiming));
     }
-    for (StagingSlot& slot : staging_) CUDA_CHECK(cudaEventCreateWithFlags(&slot.uploaded, cudaEventDisableTiming));
     grid_size_ = CascadeMatchGridSize(device_);
   }
 
@@ -127,9 +126,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
         cudaStreamDestroy(slot.stream);
       }
       if (slot.done != nullptr) cudaEventDestroy(slot.done);
-    }
-    for (StagingSlot& slot : staging_) {
-      if (slot.uploaded != nullptr) cudaEventDestroy(slot.uploaded);
     }
   }
 
@@ -153,7 +149,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
       // On the stream that hashes: the upload and the zeroed counts are
       // ordered before the hash launch (the streams do not sync with the
       // legacy default stream).
-      UploadDescriptors(descriptors.data.data(), n * kDescriptorDim, image.parts.descriptors);
+      uploads_.Upload(descriptors.data.data(), n * kDescriptorDim, image.parts.descriptors, slots_[0].stream);
       CUDA_CHECK(cudaMemsetAsync(image.parts.offsets, 0, layout.offsets_bytes, slots_[0].stream));
       pending_.push_back(image_id);
     }
@@ -303,29 +299,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
       CUDA_CHECK(cudaStreamSynchronize(slots_[0].stream));
     }
   }
-  // Copies `bytes` of host descriptors to the device on the hashing stream.
-  // They go through a ring of pinned staging buffers, so that this returns
-  // once they are copied on the host, without waiting for the device (the
-  // pageable copy and its wait were most of what was left of adding an
-  // image); a slot is reused once its upload is done.
-  void UploadDescriptors(const uint8_t* host, size_t bytes, uint8_t* device) {
-    StagingSlot& slot = staging_[next_staging_];
-    next_staging_ = (next_staging_ + 1) % kStagingSlots;
-    if (slot.in_flight) CUDA_CHECK(cudaEventSynchronize(slot.uploaded));
-    if (slot.buffer.bytes() < bytes) slot.buffer.Allocate(bytes, /*mapped=*/false, "descriptor upload staging");
-    std::memcpy(slot.buffer.host<uint8_t>(), host, bytes);
-    CUDA_CHECK(cudaMemcpyAsync(device, slot.buffer.host<uint8_t>(), bytes, cudaMemcpyHostToDevice, slots_[0].stream));
-    CUDA_CHECK(cudaEventRecord(slot.uploaded, slots_[0].stream));
-    slot.in_flight = true;
-  }
-
-  static constexpr int kStagingSlots = 4;
-  struct StagingSlot {
-    PinnedBuffer buffer;
-    cudaEvent_t uploaded = nullptr;
-    bool in_flight = false;
-  };
-
   struct Image {
     PooledDeviceBlock memory;
     DeviceImageParts parts;
@@ -593,8 +566,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
   DeviceBlockPool image_pool_;  // before images_: outlives their blocks
   std::unordered_map<image_t, Image> images_;
   std::vector<image_t> pending_;
-  StagingSlot staging_[kStagingSlots];
-  int next_staging_ = 0;
+  PinnedUploadRing uploads_;  // descriptors to the device, on slots_[0]'s stream
   BatchSlot slots_[2];
   // MatchPairsExact's kernels and scratch, made on first use.
   std::unique_ptr<BruteForceKernels> exact_kernels_;

@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -191,6 +193,52 @@ class PinnedBuffer {
   void* ptr_ = nullptr;
   void* device_ptr_ = nullptr;
   size_t bytes_ = 0;
+};
+
+// Host-to-device copies through a ring of pinned staging buffers: Upload
+// returns once the bytes are copied on the host, without waiting for the
+// device, and a buffer is reused once its copy is done. A pageable
+// cudaMemcpy and its wait were most of what adding an image cost. Make it
+// with the device current; one thread at a time.
+class PinnedUploadRing {
+ public:
+  static constexpr int kSlots = 4;
+
+  PinnedUploadRing() {
+    for (Slot& slot : slots_) CUDA_CHECK(cudaEventCreateWithFlags(&slot.uploaded, cudaEventDisableTiming));
+  }
+  ~PinnedUploadRing() {
+    for (Slot& slot : slots_) {
+      if (slot.uploaded != nullptr) {
+        cudaEventSynchronize(slot.uploaded);  // the copy still reads the buffer
+        cudaEventDestroy(slot.uploaded);
+      }
+    }
+  }
+  PinnedUploadRing(const PinnedUploadRing&) = delete;
+  PinnedUploadRing& operator=(const PinnedUploadRing&) = delete;
+
+  // Copies `bytes` from `host` to `device` on `stream`: ordered before what
+  // is enqueued on that stream later.
+  void Upload(const void* host, size_t bytes, void* device, cudaStream_t stream) {
+    Slot& slot = slots_[next_];
+    next_ = (next_ + 1) % kSlots;
+    if (slot.in_flight) CUDA_CHECK(cudaEventSynchronize(slot.uploaded));
+    if (slot.buffer.bytes() < bytes) slot.buffer.Allocate(bytes, /*mapped=*/false, "upload staging");
+    std::memcpy(slot.buffer.host<uint8_t>(), host, bytes);
+    CUDA_CHECK(cudaMemcpyAsync(device, slot.buffer.host<uint8_t>(), bytes, cudaMemcpyHostToDevice, stream));
+    CUDA_CHECK(cudaEventRecord(slot.uploaded, stream));
+    slot.in_flight = true;
+  }
+
+ private:
+  struct Slot {
+    PinnedBuffer buffer;
+    cudaEvent_t uploaded = nullptr;
+    bool in_flight = false;
+  };
+  Slot slots_[kSlots];
+  int next_ = 0;
 };
 
 }  // namespace cuda

@@ -40,6 +40,7 @@ class GpuBruteForceMatcher : public FeatureMatcher {
   }
   ~GpuBruteForceMatcher() override {
     cudaSetDevice(device_);
+    if (stream_ != nullptr) cudaStreamSynchronize(stream_);
     kernels_.reset();
     images_.clear();
     if (stream_ != nullptr) cudaStreamDestroy(stream_);
@@ -57,8 +58,11 @@ class GpuBruteForceMatcher : public FeatureMatcher {
         throw std::runtime_error("GPU memory budget exceeded by image " + std::to_string(image_id) + ": it needs " +
                                  MiB(bytes) + ", " + MiB(used_) + " of " + MiB(budget_) + " are in use");
       }
-      image.memory.Allocate(bytes, "image descriptors");
-      CUDA_CHECK(cudaMemcpy(image.memory.as<uint8_t>(), descriptors.data.data(), bytes, cudaMemcpyHostToDevice));
+      // From the pool, through pinned staging, on the stream the kernels
+      // use: no cudaMalloc, no wait (as the cascade's images).
+      image.memory = PooledDeviceBlock(&image_pool_, bytes, "image descriptors");
+      image.bytes = bytes;
+      uploads_.Upload(descriptors.data.data(), bytes, image.memory.as<uint8_t>(), stream_);
       used_ += bytes;
     }
     images_.emplace(image_id, std::move(image));
@@ -67,7 +71,7 @@ class GpuBruteForceMatcher : public FeatureMatcher {
   void RemoveImage(image_t image_id) override {
     const auto it = images_.find(image_id);
     if (it == images_.end()) return;
-    used_ -= it->second.memory.bytes();
+    used_ -= it->second.bytes;
     images_.erase(it);
   }
 
@@ -93,7 +97,8 @@ class GpuBruteForceMatcher : public FeatureMatcher {
 
  private:
   struct Image {
-    DeviceBuffer memory;
+    PooledDeviceBlock memory;
+    size_t bytes = 0;
     int rows = 0;
   };
   const Image& Find(image_t image_id) const {
@@ -110,7 +115,9 @@ class GpuBruteForceMatcher : public FeatureMatcher {
   size_t used_ = 0;
   cudaStream_t stream_ = nullptr;
   std::unique_ptr<BruteForceKernels> kernels_;
+  DeviceBlockPool image_pool_;  // before images_: outlives their blocks
   std::unordered_map<image_t, Image> images_;
+  PinnedUploadRing uploads_;
 };
 
 }  // namespace

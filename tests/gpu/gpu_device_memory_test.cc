@@ -1,7 +1,7 @@
-// The device block pool that holds the GPU matcher's images, and the
-// matcher's images through it: blocks are reused by size, and images added
-// again after removal (their blocks recycled, their uploads staged through
-// pinned memory without a wait) match as before.
+// The device block pool that holds the GPU matchers' images, the pinned ring
+// that uploads them, and both backends' images through them: blocks are
+// reused by size, staged uploads arrive intact, and images added again
+// after removal (their blocks recycled) match as before.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -35,7 +35,38 @@ TEST(DeviceBlockPool, BlocksAreDistinctAlignedAndReusedBySize) {
   EXPECT_EQ(back, host);
 }
 
-TEST(GpuCascadeImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
+TEST(PinnedUploadRing, MoreUploadsThanSlotsArriveIntact) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  cudaStream_t stream = nullptr;
+  ASSERT_EQ(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), cudaSuccess);
+  cuda::DeviceBlockPool pool;
+  std::vector<void*> blocks;
+  std::vector<std::vector<uint8_t>> sent;
+  {
+    cuda::PinnedUploadRing ring;
+    for (int k = 0; k < 3 * cuda::PinnedUploadRing::kSlots + 1; ++k) {
+      const size_t bytes = 1000 + 4096 * static_cast<size_t>(k % 3);  // slots grow and are reused
+      std::vector<uint8_t> host(bytes);
+      for (size_t i = 0; i < bytes; ++i) host[i] = static_cast<uint8_t>(31 * k + i);
+      sent.push_back(host);
+      blocks.push_back(pool.Acquire(bytes, "test"));
+      ring.Upload(host.data(), bytes, blocks.back(), stream);
+      host.assign(bytes, 0xff);  // the ring has its own copy: the caller's may change at once
+    }
+  }
+  ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+  for (size_t k = 0; k < blocks.size(); ++k) {
+    std::vector<uint8_t> back(sent[k].size());
+    ASSERT_EQ(cudaMemcpy(back.data(), blocks[k], back.size(), cudaMemcpyDeviceToHost), cudaSuccess);
+    EXPECT_EQ(back, sent[k]) << "upload " << k;
+  }
+  cudaStreamDestroy(stream);
+}
+
+// Both GPU backends keep their images in a pool and upload them staged.
+class GpuImages : public ::testing::TestWithParam<MatcherType> {};
+
+TEST_P(GpuImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
   SKIP_WITHOUT_CUDA_DEVICE();
   std::mt19937 rng(11);
   std::vector<std::vector<uint8_t>> base;
@@ -54,7 +85,9 @@ TEST(GpuCascadeImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
   for (image_t i = 0; i < 6; ++i)
     for (image_t j = i + 1; j < 6; ++j) pairs.emplace_back(i, j);
 
-  auto matcher = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+  CasHashOptions cashash;
+  cashash.matcher = GetParam();
+  auto matcher = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cashash, mean, 0);
   for (image_t i = 0; i < 6; ++i) matcher->AddImage(i, images[i]);
   const std::vector<FeatureMatches> first = matcher->MatchPairs(pairs);
   size_t total = 0;
@@ -68,6 +101,8 @@ TEST(GpuCascadeImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
   matcher->AddImage(3, images[3]);
   EXPECT_EQ(matcher->MatchPairs(pairs), first);
 }
+
+INSTANTIATE_TEST_SUITE_P(Backends, GpuImages, ::testing::Values(MatcherType::kCascade, MatcherType::kBruteForce));
 
 }  // namespace
 }  // namespace cashash
