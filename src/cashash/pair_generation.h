@@ -41,8 +41,9 @@ std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_id
 // two groups a snake), and each group pair starts on a block the previous
 // one ended on, so every chunk after the first shares a block with the one
 // before it: the matcher never needs more than three blocks at once. The
-// run ends on a chunk of two blocks apart rather than a diagonal one, which
-// is the slowest to verify (see BlockPairOrder::Diagonal).
+// last group's last four blocks go as a band, then their far pairs, so
+// that the run does not end on a diagonal chunk, the slowest to verify
+// (see BlockPairOrder::Diagonal).
 std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
                                            int blocks_per_group);
 
