@@ -50,6 +50,22 @@ class IdentityMatcher : public FeatureMatcher {
   std::string Name() const override { return "identity"; }
 };
 
+// An IdentityMatcher that is still choosing its backend during its first
+// `choosing_calls` MatchPairs calls (auto probing) and counts its calls.
+class ChoosingMatcher : public IdentityMatcher {
+ public:
+  explicit ChoosingMatcher(int choosing_calls) : choosing_calls_(choosing_calls) {}
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    ++calls;
+    return IdentityMatcher::MatchPairs(pairs);
+  }
+  bool ChoosingBackend() const override { return calls < choosing_calls_; }
+  std::atomic<int> calls{0};
+
+ private:
+  const int choosing_calls_;
+};
+
 // Marks every pair UNCALIBRATED with its first match as the only inlier and
 // records the batch sizes and what it was shown.
 class RecordingVerifier : public BatchVerifier {
@@ -220,6 +236,63 @@ TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChun
   size_t written_pairs = 0;
   for (size_t c = 0; c < sink.first_pairs.size(); ++c) written_pairs += chunks[c].pairs.size();
   EXPECT_EQ(sink.configs.size(), written_pairs);
+}
+
+// While the matcher times its backends nothing is verified: the probe has
+// the device to itself. Verification starts after the call that chose.
+TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {
+  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
+  ASSERT_GE(chunks.size(), 4u);
+  PointSource source;
+  ChoosingMatcher matcher(2);
+  Sink sink;
+  std::vector<int> matcher_calls_at_verify;
+  std::mutex mutex;
+  class GatedVerifier : public RecordingVerifier {
+   public:
+    GatedVerifier(ChoosingMatcher* m, std::vector<int>* seen, std::mutex* mu) : m_(m), seen_(seen), mu_(mu) {}
+    std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+      {
+        std::lock_guard<std::mutex> lock(*mu_);
+        seen_->push_back(m_->calls.load());
+      }
+      return RecordingVerifier::Verify(pairs);
+    }
+
+   private:
+    ChoosingMatcher* m_;
+    std::vector<int>* seen_;
+    std::mutex* mu_;
+  } verifier(&matcher, &matcher_calls_at_verify, &mutex);
+  PipelineOptions options;
+  options.num_threads = 2;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  pipeline.SetBatchVerifier(&verifier);
+  const PipelineStats stats = pipeline.Run(chunks);
+  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+  ASSERT_EQ(matcher_calls_at_verify.size(), chunks.size());
+  for (int calls : matcher_calls_at_verify) EXPECT_GE(calls, 2);
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+}
+
+// A matcher that never chooses (one pair, or a run too short to time)
+// cannot stall the run: the gate opens before the queue would block
+// matching, and when matching ends.
+TEST(BatchVerifierPipeline, AMatcherThatNeverChoosesStillFinishes) {
+  for (const size_t block : {size_t{2}, size_t{20}}) {
+    const std::vector<PairChunk> chunks = Chunks(12, block);
+    PointSource source;
+    ChoosingMatcher matcher(1 << 30);
+    Sink sink;
+    ConcurrentVerifier verifier;
+    PipelineOptions options;
+    options.num_threads = 2;
+    MatchingPipeline pipeline(options, &source, &matcher, &sink);
+    pipeline.SetBatchVerifier(&verifier);
+    const PipelineStats stats = pipeline.Run(chunks);
+    EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+    EXPECT_EQ(sink.configs.size(), NumPairs(chunks));
+  }
 }
 
 }  // namespace

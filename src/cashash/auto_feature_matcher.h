@@ -101,6 +101,7 @@ class AutoFeatureMatcher : public FeatureMatcher {
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   // The winner's name once decided; "auto(cascade name|brute-force name)" before.
   std::string Name() const override;
+  bool ChoosingBackend() const override { return winner_ == nullptr; }
   bool SupportsEpipolarGuidance() const override;
   std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override;
 

@@ -52,6 +52,10 @@ class FeatureMatcher {
   virtual std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) = 0;
   // A short name for logs: "cpu-cascade", "gpu-bruteforce", ...
   virtual std::string Name() const = 0;
+  // True while the matcher still times its backends to choose one (auto):
+  // other work on the same device would distort the timing, so the
+  // pipeline holds verification back meanwhile. Wrappers forward it.
+  virtual bool ChoosingBackend() const { return false; }
 
   // Whether MatchPairsGuided is implemented (the cascade backends).
   virtual bool SupportsEpipolarGuidance() const { return false; }

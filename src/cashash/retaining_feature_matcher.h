@@ -39,6 +39,7 @@ class RetainingFeatureMatcher : public FeatureMatcher {
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   std::string Name() const override;
+  bool ChoosingBackend() const override { return inner_->ChoosingBackend(); }
 
   const RetainingStats& stats() const { return stats_; }
 
