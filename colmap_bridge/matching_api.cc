@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <future>
 #include <iomanip>
 #include <iostream>
 #include <mutex>
@@ -43,16 +44,29 @@ namespace {
 // the database, so that a huge database is not read twice for it.
 constexpr size_t kMaxImagesForMean = 100;
 
-MeanDescriptor ComputeDatabaseMean(DatabaseFeatureSource& source, const std::vector<image_t>& image_ids) {
+MeanDescriptor ComputeDatabaseMean(const Database& database, const std::vector<image_t>& image_ids) {
   std::vector<FeatureDescriptors> sample;
   const size_t n = image_ids.size();
   const size_t count = std::min(n, kMaxImagesForMean);
   for (size_t k = 0; k < count; ++k) {
-    sample.push_back(source.database().ReadDescriptors(image_ids[k * n / count]));
+    sample.push_back(database.ReadDescriptors(image_ids[k * n / count]));
   }
   std::vector<const FeatureDescriptors*> pointers;
   for (const FeatureDescriptors& d : sample) pointers.push_back(&d);
   return ComputeMeanDescriptor(pointers);
+}
+
+// The mean on a thread of its own, through a read-only connection of its
+// own, started before the GPU is: reading its 100 images (about 0.14 s for
+// 8,192 features each) then overlaps starting the device and sizing the run,
+// which the user otherwise waits for one after the other.
+std::shared_future<MeanDescriptor> StartDatabaseMean(DatabaseFeatureSource& source,
+                                                     std::vector<image_t> image_ids) {
+  return std::async(std::launch::async, [path = source.database().path(), ids = std::move(image_ids)]() {
+           const Database database(path, /*read_only=*/true);
+           return ComputeDatabaseMean(database, ids);
+         })
+      .share();
 }
 
 #ifdef CASHASH_WITH_CUDA
@@ -222,7 +236,7 @@ int GpuIndexForRun(const MatcherCommandOptions& options);
 MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
                             const std::vector<image_t>& image_ids, std::vector<PairChunk> chunks,
                             size_t num_pairs_requested, bool cache_groups, size_t matcher_keep_bytes,
-                            const MatchingCallbacks& callbacks) {
+                            std::shared_future<MeanDescriptor> mean_of_database, const MatchingCallbacks& callbacks) {
   const int rank = MpiRank(), num_ranks = MpiSize();
   MatchingSummary summary;
   summary.pairs_requested = num_pairs_requested;
@@ -265,7 +279,7 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   }
 #endif
   GpuMemorySampler gpu_memory(GpuIndexForRun(run_options));
-  const MeanDescriptor mean = ComputeDatabaseMean(source, image_ids);
+  const MeanDescriptor mean = mean_of_database.get();
   const auto rematch_counts = std::make_shared<ExactRematchCounts>();
   std::unique_ptr<FeatureMatcher> matcher =
       CreateMatcherForOptions(run_options, mean, [&](const std::string& text) { Warn(callbacks, text); },
@@ -511,10 +525,11 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
   const size_t block = static_cast<size_t>(options.block_size);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
   const std::vector<image_t> image_ids = ImagesOfPairs(pairs);
+  std::shared_future<MeanDescriptor> mean = StartDatabaseMean(source, image_ids);
   const MatcherCommandOptions resolved = ResolveOptionsForRun(
       options, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
   return MatchChunks(resolved, source, image_ids, std::move(chunks), pairs.size(), /*cache_groups=*/false,
-                     /*matcher_keep_bytes=*/0, callbacks);
+                     /*matcher_keep_bytes=*/0, std::move(mean), callbacks);
 }
 
 }  // namespace
@@ -661,13 +676,14 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
                           (image_ids.size() == 1 ? "" : "s") + "; nothing to match");
       return MatchingSummary();
     }
+    std::shared_future<MeanDescriptor> mean = StartDatabaseMean(source, image_ids);
     const MatcherCommandOptions resolved = ResolveOptionsForRun(
         checked, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
     const ScheduleSizes sizes = ChooseSizesForRun(resolved, source, image_ids, callbacks);
     std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
     const size_t n = image_ids.size();
     return MatchChunks(resolved, source, image_ids, std::move(chunks), n * (n - 1) / 2, /*cache_groups=*/true,
-                       sizes.matcher_keep_bytes, callbacks);
+                       sizes.matcher_keep_bytes, std::move(mean), callbacks);
   });
 }
 
