@@ -269,6 +269,14 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     return summary;
   }
   if (rank == 0) WarnAboutSmallImages(source, image_ids, callbacks);
+  const std::vector<PairChunk> my_chunks = num_ranks > 1 ? ChunksOfRank(chunks, rank, num_ranks) : chunks;
+  // The cache's loading thread reads `source` from here on (this thread no
+  // longer does), so it is made before the GPU, the matcher and the verifier:
+  // the first chunk's features are read while they start, instead of after
+  // (device run 27: the matching thread's first wait for features was
+  // 0.05-0.14 s at 300 images, and the setup 0.3 s).
+  std::unique_ptr<GroupFeatureCache> cache;
+  if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, my_chunks);
 
   MatcherCommandOptions run_options = options;
 #ifdef CASHASH_WITH_CUDA
@@ -314,7 +322,6 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
     retaining = keeping.get();
     matcher = std::move(keeping);
   }
-  const std::vector<PairChunk> my_chunks = num_ranks > 1 ? ChunksOfRank(chunks, rank, num_ranks) : chunks;
 
   // Rank 0 alone opens the database for writing (and takes the writer
   // lock); the other ranks send their results to it.
@@ -337,9 +344,6 @@ MatchingSummary MatchChunks(const MatcherCommandOptions& options, DatabaseFeatur
   pipeline_options.num_threads = options.sift.num_threads;
   pipeline_options.skip_geometric_verification = options.skip_geometric_verification;
   pipeline_options.two_view = options.two_view;
-  // Made last: its loading thread reads the database from here on.
-  std::unique_ptr<GroupFeatureCache> cache;
-  if (cache_groups) cache = std::make_unique<GroupFeatureCache>(&source, my_chunks);
   FeatureSource* features = cache ? static_cast<FeatureSource*>(cache.get()) : &source;
   if (keypoint_source) {
     keypoint_source->SetInner(features);
