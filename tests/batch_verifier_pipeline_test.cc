@@ -149,6 +149,18 @@ std::vector<ImagePair> FirstPairs(const std::vector<PairChunk>& chunks) {
   return first;
 }
 
+// Runs `chunks` through a pipeline of two threads from a PointSource, with
+// `matcher`, `verifier` and `sink`; what Run throws passes through.
+PipelineStats RunPipeline(const std::vector<PairChunk>& chunks, FeatureMatcher* matcher, BatchVerifier* verifier,
+                          Sink* sink) {
+  PointSource source;
+  PipelineOptions options;
+  options.num_threads = 2;
+  MatchingPipeline pipeline(options, &source, matcher, sink);
+  pipeline.SetBatchVerifier(verifier);
+  return pipeline.Run(chunks);
+}
+
 TEST(BatchVerifierPipeline, WholeChunksGoToTheGivenVerifier) {
   const std::vector<PairChunk> chunks = Chunks(9, 4);
   const size_t num_pairs = NumPairs(chunks);
@@ -193,15 +205,10 @@ TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
   const std::vector<PairChunk> chunks = Chunks(16, 3);
   ASSERT_GE(chunks.size(), 10u);
   const size_t num_pairs = NumPairs(chunks);
-  PointSource source;
   IdentityMatcher matcher;
   Sink sink;
   ConcurrentVerifier verifier;
-  PipelineOptions options;
-  options.num_threads = 2;
-  MatchingPipeline pipeline(options, &source, &matcher, &sink);
-  pipeline.SetBatchVerifier(&verifier);
-  const PipelineStats stats = pipeline.Run(chunks);
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
   EXPECT_EQ(stats.verification_threads, 3);
   EXPECT_EQ(stats.pairs_done, num_pairs);
   EXPECT_EQ(stats.verified_pairs, num_pairs);
@@ -215,16 +222,11 @@ TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
 
 TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChunk) {
   const std::vector<PairChunk> chunks = Chunks(16, 3);
-  PointSource source;
   IdentityMatcher matcher;
   Sink sink;
   ConcurrentVerifier verifier(/*fail_at=*/4);
-  PipelineOptions options;
-  options.num_threads = 2;
-  MatchingPipeline pipeline(options, &source, &matcher, &sink);
-  pipeline.SetBatchVerifier(&verifier);
   try {
-    pipeline.Run(chunks);
+    RunPipeline(chunks, &matcher, &verifier, &sink);
     FAIL() << "the verifier's error was not rethrown";
   } catch (const std::runtime_error& e) {
     EXPECT_STREQ(e.what(), "verifier failed on purpose");
@@ -243,7 +245,6 @@ TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChun
 TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {
   const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
   ASSERT_GE(chunks.size(), 4u);
-  PointSource source;
   ChoosingMatcher matcher(2);
   Sink sink;
   std::vector<int> matcher_calls_at_verify;
@@ -264,11 +265,7 @@ TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {
     std::vector<int>* seen_;
     std::mutex* mu_;
   } verifier(&matcher, &matcher_calls_at_verify, &mutex);
-  PipelineOptions options;
-  options.num_threads = 2;
-  MatchingPipeline pipeline(options, &source, &matcher, &sink);
-  pipeline.SetBatchVerifier(&verifier);
-  const PipelineStats stats = pipeline.Run(chunks);
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
   EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
   ASSERT_EQ(matcher_calls_at_verify.size(), chunks.size());
   for (int calls : matcher_calls_at_verify) EXPECT_GE(calls, 2);
@@ -281,15 +278,10 @@ TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {
 TEST(BatchVerifierPipeline, AMatcherThatNeverChoosesStillFinishes) {
   for (const size_t block : {size_t{2}, size_t{20}}) {
     const std::vector<PairChunk> chunks = Chunks(12, block);
-    PointSource source;
     ChoosingMatcher matcher(1 << 30);
     Sink sink;
     ConcurrentVerifier verifier;
-    PipelineOptions options;
-    options.num_threads = 2;
-    MatchingPipeline pipeline(options, &source, &matcher, &sink);
-    pipeline.SetBatchVerifier(&verifier);
-    const PipelineStats stats = pipeline.Run(chunks);
+    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
     EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
     EXPECT_EQ(sink.configs.size(), NumPairs(chunks));
   }
