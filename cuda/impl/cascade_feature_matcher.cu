@@ -13,7 +13,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -144,7 +143,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
       const DeviceImageLayout layout(n, options_.num_tables, options_.bits_per_table);
       Reserve(layout.total, "image " + std::to_string(image_id));
       image.memory = PooledDeviceBlock(&image_pool_, layout.total, "image features");
-      image.bytes = layout.total;
       image.parts = layout.Parts(image.memory.as<void>(), image.num_features);
       // On the stream that hashes: the upload and the zeroed counts are
       // ordered before the hash launch (the streams do not sync with the
@@ -159,7 +157,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
   void RemoveImage(image_t image_id) override {
     const auto it = images_.find(image_id);
     if (it == images_.end()) return;
-    used_ -= it->second.bytes;
+    used_ -= it->second.memory.bytes();
     images_.erase(it);
     pending_.erase(std::remove(pending_.begin(), pending_.end(), image_id), pending_.end());
   }
@@ -303,7 +301,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
     PooledDeviceBlock memory;
     DeviceImageParts parts;
     uint32_t num_features = 0;
-    size_t bytes = 0;
   };
 
   const Image& Find(image_t image_id) const {

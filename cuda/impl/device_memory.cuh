@@ -144,6 +144,7 @@ class PooledDeviceBlock {
   PooledDeviceBlock& operator=(const PooledDeviceBlock&) = delete;
   template <typename T>
   T* as() const { return static_cast<T*>(ptr_); }
+  size_t bytes() const { return bytes_; }
 
  private:
   void Reset() {

@@ -61,7 +61,6 @@ class GpuBruteForceMatcher : public FeatureMatcher {
       // From the pool, through pinned staging, on the stream the kernels
       // use: no cudaMalloc, no wait (as the cascade's images).
       image.memory = PooledDeviceBlock(&image_pool_, bytes, "image descriptors");
-      image.bytes = bytes;
       uploads_.Upload(descriptors.data.data(), bytes, image.memory.as<uint8_t>(), stream_);
       used_ += bytes;
     }
@@ -71,7 +70,7 @@ class GpuBruteForceMatcher : public FeatureMatcher {
   void RemoveImage(image_t image_id) override {
     const auto it = images_.find(image_id);
     if (it == images_.end()) return;
-    used_ -= it->second.bytes;
+    used_ -= it->second.memory.bytes();
     images_.erase(it);
   }
 
@@ -98,7 +97,6 @@ class GpuBruteForceMatcher : public FeatureMatcher {
  private:
   struct Image {
     PooledDeviceBlock memory;
-    size_t bytes = 0;
     int rows = 0;
   };
   const Image& Find(image_t image_id) const {
