@@ -103,6 +103,18 @@ struct Harness {
   }
 };
 
+// The H200's times per pair at 8,192 features (device run 24).
+constexpr double kGpuCascadePerPair = 0.000015, kGpuBruteForcePerPair = 0.000051;
+
+// The GPU's rounds (64 pairs first, then doubling), each backend's share in
+// slices of `slice_pairs` (0: back to back).
+AutoMatcherOptions GpuRounds(size_t slice_pairs) {
+  AutoMatcherOptions options;
+  options.min_batch_pairs = 64;
+  options.interleave_slice_pairs = slice_pairs;
+  return options;
+}
+
 std::vector<ImagePair> AllPairs(int first, int last) {
   std::vector<ImagePair> pairs;
   for (int i = first; i < last; ++i)
@@ -190,15 +202,13 @@ TEST(AutoFeatureMatcher, ADecisiveGapEndsTheProbeOnAShortBatch) {
   // force 0.051 ms (3.4x). Rounds of 64, 128 and 256 pairs: the 256-pair
   // round's 13 ms of brute force passes min_decisive_seconds, so the probe
   // stops there, long before min_probe_seconds.
-  AutoMatcherOptions options;
-  options.min_batch_pairs = 64;
-  Harness h(0.000015, 0.000051, options);
+  Harness h(kGpuCascadePerPair, kGpuBruteForcePerPair, GpuRounds(0));
   RunChunks(&h, 80, 2500);
   ASSERT_TRUE(h.matcher->decision().decided);
   EXPECT_TRUE(h.matcher->decision().cascade_won);
   EXPECT_EQ(h.brute_force.matched.size(), 64u + 128u + 256u);
   // A 2x gap is not decisive: the probe goes on until min_probe_seconds.
-  Harness close(0.000025, 0.000051, options);
+  Harness close(0.000025, kGpuBruteForcePerPair, GpuRounds(0));
   RunChunks(&close, 100, 2500);
   ASSERT_TRUE(close.matcher->decision().decided);
   EXPECT_TRUE(close.matcher->decision().cascade_won);
@@ -211,17 +221,13 @@ TEST(AutoFeatureMatcher, ALoadThatEndsMidRoundDoesNotDecide) {
   // brute force's, right after, its unloaded 3.3 ms, so that round alone
   // says brute force is 5.9x faster. It is one slice each and does not
   // decide; the next round, two slices each, does, for the cascade.
-  AutoMatcherOptions options;
-  options.min_batch_pairs = 64;
-  options.interleave_slice_pairs = 64;
-  Harness h(0.000015, 0.000051, options, 0, 20.0);
+  Harness h(kGpuCascadePerPair, kGpuBruteForcePerPair, GpuRounds(64), 0, 20.0);
   h.busy_until = 0.019;
   RunChunks(&h, 80, 2500);
   ASSERT_TRUE(h.matcher->decision().decided);
   EXPECT_TRUE(h.matcher->decision().cascade_won);
   // Without turns the first round decides, wrongly.
-  options.interleave_slice_pairs = 0;
-  Harness once(0.000015, 0.000051, options, 0, 20.0);
+  Harness once(kGpuCascadePerPair, kGpuBruteForcePerPair, GpuRounds(0), 0, 20.0);
   once.busy_until = 0.019;
   RunChunks(&once, 80, 2500);
   ASSERT_TRUE(once.matcher->decision().decided);
@@ -230,10 +236,7 @@ TEST(AutoFeatureMatcher, ALoadThatEndsMidRoundDoesNotDecide) {
 
 TEST(AutoFeatureMatcher, TurnsSplitARoundIntoEqualSlices) {
   // Rounds of 64, 128, 256 pairs: 1, 2 and 4 slices a backend.
-  AutoMatcherOptions options;
-  options.min_batch_pairs = 64;
-  options.interleave_slice_pairs = 64;
-  Harness h(0.000015, 0.000051, options);
+  Harness h(kGpuCascadePerPair, kGpuBruteForcePerPair, GpuRounds(64));
   RunChunks(&h, 80, 2500);
   ASSERT_TRUE(h.matcher->decision().decided);
   EXPECT_EQ(h.brute_force.matched.size(), 64u + 128u + 256u);
