@@ -9,9 +9,9 @@ include(CMakePackageConfigHelpers)
 
 set(CASHASH_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/cashash)
 
-# Headers keep their folder names (cashash/, colmap_bridge/, cashash_cuda/)
+# Headers keep their folder names (cashash/, colmap_bridge/api/, cashash_cuda/)
 # so that the same #include lines work in the tree and once installed.
-set(CASHASH_EXPORTED_TARGETS cashash_core cashash_bridge)
+set(CASHASH_EXPORTED_TARGETS cashash_core cashash_distributed cashash_bridge)
 target_include_directories(cashash_core INTERFACE $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
 if(CASHASH_WITH_CUDA)
   list(APPEND CASHASH_EXPORTED_TARGETS cashash_cuda)
@@ -35,8 +35,8 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/src/cashash DESTINATION ${CMAKE_INSTALL_
         COMPONENT devel FILES_MATCHING PATTERN "*.h")
 # Only the bridge headers the library API needs; the database internals stay
 # private.
-install(FILES ${PROJECT_SOURCE_DIR}/colmap_bridge/matching_api.h ${PROJECT_SOURCE_DIR}/colmap_bridge/command_options.h
-        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/colmap_bridge COMPONENT devel)
+install(FILES ${PROJECT_SOURCE_DIR}/colmap_bridge/api/matching_api.h ${PROJECT_SOURCE_DIR}/colmap_bridge/api/command_options.h
+        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/colmap_bridge/api COMPONENT devel)
 if(CASHASH_WITH_CUDA)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/cuda/cashash_cuda DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
           COMPONENT devel FILES_MATCHING PATTERN "*.h")

@@ -13,7 +13,7 @@
 
 #include <Eigen/Core>
 
-#include "cashash/types.h"
+#include "cashash/base/types.h"
 
 namespace cashash {
 namespace colmap {

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <limits>
 
-#include "cashash/pair_id.h"
+#include "cashash/base/pair_id.h"
 #include "colmap_bridge/database.h"
 
 namespace cashash {

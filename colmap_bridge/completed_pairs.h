@@ -13,8 +13,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "cashash/pair_generation.h"
-#include "cashash/types.h"
+#include "cashash/pipeline/pair_generation.h"
+#include "cashash/base/types.h"
 
 namespace cashash {
 namespace colmap {

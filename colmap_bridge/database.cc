@@ -1,6 +1,6 @@
 // COLMAP database access. What COLMAP itself stores was checked against
 // databases written by COLMAP 3.8 (exhaustive_matcher) and pycolmap 4.2.1
-// (Database.write_*), see tests/database_test.cc:
+// (Database.write_*), see tests/colmap_bridge/database_test.cc:
 // - F, E, H are 9 float64 row-major; qvec is [w, x, y, z].
 // - Empty match sets: rows = 0, cols = 2, data NULL (both versions).
 // - 3.8, pair with inliers: F, E, H, qvec, tvec are all written, unset
@@ -20,7 +20,7 @@
 #include <sqlite3.h>
 #include <unistd.h>
 
-#include "cashash/pair_id.h"
+#include "cashash/base/pair_id.h"
 #include "colmap_bridge/blob_codec.h"
 #include "colmap_bridge/pair_id_runs.h"
 #include "colmap_bridge/sqlite_statement.h"

@@ -9,8 +9,8 @@
 #include <unordered_set>
 #include <vector>
 
-#include "cashash/two_view_geometry.h"
-#include "cashash/types.h"
+#include "cashash/geometry/two_view_geometry.h"
+#include "cashash/base/types.h"
 
 struct sqlite3;
 

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <iostream>
 
-#include "cashash/camera_models.h"
-#include "cashash/pair_id.h"
+#include "cashash/geometry/camera_models.h"
+#include "cashash/base/pair_id.h"
 
 namespace cashash {
 namespace colmap {

@@ -10,7 +10,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include "cashash/matching_pipeline.h"
+#include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_writer_lock.h"
 

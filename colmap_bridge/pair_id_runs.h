@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "cashash/types.h"
+#include "cashash/base/types.h"
 
 namespace cashash {
 namespace colmap {

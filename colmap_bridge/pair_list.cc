@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <unordered_set>
 
-#include "cashash/pair_id.h"
+#include "cashash/base/pair_id.h"
 
 namespace cashash {
 namespace colmap {

@@ -7,7 +7,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "cashash/types.h"
+#include "cashash/base/types.h"
 
 namespace cashash {
 namespace colmap {

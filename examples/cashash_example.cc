@@ -5,8 +5,8 @@
 #include <iostream>
 #include <random>
 
-#include "cashash/pair_matching.h"
-#include "colmap_bridge/matching_api.h"
+#include "cashash/matching/pair_matching.h"
+#include "colmap_bridge/api/matching_api.h"
 
 namespace {
 

@@ -11,10 +11,10 @@
 #include <optional>
 #include <stdexcept>
 
-#include "cashash/camera_models.h"
-#include "cashash/pair_matching.h"
-#include "cashash/table_shape.h"
-#include "colmap_bridge/matching_api.h"
+#include "cashash/geometry/camera_models.h"
+#include "cashash/matching/pair_matching.h"
+#include "cashash/matching/table_shape.h"
+#include "colmap_bridge/api/matching_api.h"
 
 namespace py = pybind11;
 

@@ -26,12 +26,12 @@
 #include <unordered_map>
 #include <vector>
 
-#include "cashash/batch_verifier.h"
-#include "cashash/brute_force_matcher.h"
-#include "cashash/cascade_hashing.h"
-#include "cashash/cascade_matcher.h"
-#include "cashash/thread_pool.h"
-#include "cashash/two_view_geometry.h"
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/matching/brute_force_matcher.h"
+#include "cashash/matching/cascade_hashing.h"
+#include "cashash/matching/cascade_matcher.h"
+#include "cashash/pipeline/thread_pool.h"
+#include "cashash/geometry/two_view_geometry.h"
 #include "colmap_bridge/database.h"
 
 namespace {

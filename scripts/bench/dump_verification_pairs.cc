@@ -1,12 +1,12 @@
 // Writes the raw matches of a matched COLMAP database as a verification
-// pairs file (src/cashash/verification_pairs_file.h), so verification can be
+// pairs file (src/cashash/pipeline/verification_pairs_file.h), so verification can be
 // benchmarked and tested on machines without the database.
 // Usage: dump_verification_pairs DB OUT.bin [min_matches]
 #include <cstdlib>
 #include <iostream>
 #include <unordered_map>
 
-#include "cashash/verification_pairs_file.h"
+#include "cashash/pipeline/verification_pairs_file.h"
 #include "colmap_bridge/database.h"
 
 int main(int argc, char** argv) {

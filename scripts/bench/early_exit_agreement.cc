@@ -17,10 +17,10 @@
 #include <string>
 #include <vector>
 
-#include "cashash/batch_verifier.h"
-#include "cashash/thread_pool.h"
-#include "cashash/two_view_geometry.h"
-#include "cashash/verification_pairs_file.h"
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/pipeline/thread_pool.h"
+#include "cashash/geometry/two_view_geometry.h"
+#include "cashash/pipeline/verification_pairs_file.h"
 
 namespace {
 

@@ -4,7 +4,7 @@
 // beside the trials per second `GPU verification:` reports for E.
 //
 // Samples are drawn as RANSAC draws them, from synthetic calibrated pairs
-// (tests/synthetic_two_view.h) with a share of outliers: five distinct
+// (tests/support/synthetic_two_view.h) with a share of outliers: five distinct
 // correspondences at random, in normalised camera coordinates.
 //
 // Usage: five_point_bench_gpu [--samples N] [--outliers R] [--repeats K]
@@ -16,10 +16,10 @@
 #include <random>
 #include <vector>
 
-#include "../../tests/synthetic_two_view.h"
-#include "cashash/five_point_solver.h"
-#include "cashash/two_view_geometry.h"
-#include "impl/ransac_kernels.cuh"
+#include "../../tests/support/synthetic_two_view.h"
+#include "cashash/geometry/five_point_solver.h"
+#include "cashash/geometry/two_view_geometry.h"
+#include "cashash_cuda/geometry/ransac.cuh"
 
 namespace {
 

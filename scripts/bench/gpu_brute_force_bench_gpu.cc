@@ -20,8 +20,8 @@
 #include <thread>
 #include <vector>
 
-#include "impl/brute_force_kernels.cuh"
-#include "utils/cuda_check.cuh"
+#include "cashash_cuda/matching/brute_force_matcher.cuh"
+#include "cashash_cuda/utils/cuda_check.cuh"
 
 namespace {
 

@@ -24,10 +24,10 @@
 #include <string>
 #include <vector>
 
-#include "cashash/cascade_hashing.h"
-#include "cashash/cascade_matcher.h"
-#include "cashash/feature_matcher.h"
-#include "cashash_cuda/gpu_feature_matcher.h"
+#include "cashash/matching/cascade_hashing.h"
+#include "cashash/matching/cascade_matcher.h"
+#include "cashash/matchers/feature_matcher.h"
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
 
 namespace {
 

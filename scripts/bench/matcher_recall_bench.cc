@@ -26,12 +26,12 @@
 #include <string>
 #include <vector>
 
-#include "cashash/brute_force_matcher.h"
-#include "cashash/cascade_hashing.h"
-#include "cashash/cascade_matcher.h"
-#include "cashash/feature_matcher.h"
-#include "cashash/table_shape.h"
-#include "cashash/thread_pool.h"
+#include "cashash/matching/brute_force_matcher.h"
+#include "cashash/matching/cascade_hashing.h"
+#include "cashash/matching/cascade_matcher.h"
+#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matching/table_shape.h"
+#include "cashash/pipeline/thread_pool.h"
 
 namespace {
 

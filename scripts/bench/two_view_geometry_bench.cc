@@ -12,7 +12,7 @@
 #include <iostream>
 #include <vector>
 
-#include "cashash/two_view_geometry.h"
+#include "cashash/geometry/two_view_geometry.h"
 
 int main(int argc, char** argv) {
   if (argc < 2) {

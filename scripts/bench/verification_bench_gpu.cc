@@ -17,13 +17,13 @@
 #include <string>
 #include <vector>
 
-#include "../../tests/synthetic_two_view.h"
-#include "cashash/batch_verifier.h"
-#include "cashash/pair_id.h"
-#include "cashash/thread_pool.h"
-#include "cashash/verification_pairs_file.h"
-#include "cashash_cuda/gpu_feature_matcher.h"
-#include "cashash_cuda/gpu_two_view_geometry.h"
+#include "../../tests/support/synthetic_two_view.h"
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/base/pair_id.h"
+#include "cashash/pipeline/thread_pool.h"
+#include "cashash/pipeline/verification_pairs_file.h"
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/geometry/two_view_geometry.h"
 
 namespace {
 

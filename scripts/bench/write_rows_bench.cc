@@ -19,8 +19,8 @@
 #include <iostream>
 #include <string>
 
-#include "cashash/pair_generation.h"
-#include "cashash/random_sampler.h"
+#include "cashash/pipeline/pair_generation.h"
+#include "cashash/geometry/random_sampler.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
 

@@ -8,7 +8,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "cashash/pair_id.h"
+#include "cashash/base/pair_id.h"
 #include "colmap_bridge/pair_list.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

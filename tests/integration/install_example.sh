@@ -16,7 +16,7 @@ trap 'rm -rf "$WORK"' EXIT
 
 cmake --install "$BUILD" --prefix "$WORK/prefix" --component devel > "$WORK/install.log"
 test -f "$WORK/prefix/lib/cmake/cashash/cashashConfig.cmake"
-test -f "$WORK/prefix/include/colmap_bridge/matching_api.h"
+test -f "$WORK/prefix/include/colmap_bridge/api/matching_api.h"
 
 launcher=()
 if command -v ccache > /dev/null; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi

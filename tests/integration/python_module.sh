@@ -28,6 +28,14 @@ start=$SECONDS
   --target "$WORK/site" .) > "$WORK/pip.log" 2>&1 || { tail -40 "$WORK/pip.log"; exit 1; }
 echo "pip install .: $((SECONDS - start)) s"
 
+# The module must load where no MPI library is installed (most pip users):
+# only the cashash executable links MPI.
+module="$(find "$WORK/site/cashash" -name '_core*.so' | head -n 1)"
+if readelf -d "$module" | grep -i 'NEEDED.*libmpi'; then
+  echo "FAIL: $module needs an MPI library"
+  exit 1
+fi
+
 export PYTHONPATH="$WORK/site"
 if [[ -n "$SHARED" ]]; then export CASHASH_SHARED_DATA="$SHARED"; fi
 set +e

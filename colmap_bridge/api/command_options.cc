@@ -1,0 +1,196 @@
+#include "colmap_bridge/api/command_options.h"
+
+#include <iostream>
+#include <sstream>
+
+#include <boost/program_options.hpp>
+
+#include "cashash/pipeline/schedule_sizing.h"
+
+namespace po = boost::program_options;
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+template <typename T>
+std::string DefaultText(const T& value) {
+  std::ostringstream out;
+  out << std::boolalpha << value;
+  return out.str();
+}
+
+// Binds one variable to several option names (COLMAP 3.8 and 4.x spell the
+// same setting differently). No boost default is registered: a default would
+// be "given" under every name and could override the name the user typed.
+class OptionTable {
+ public:
+  explicit OptionTable(po::options_description* description) : description_(description) {}
+
+  template <typename T>
+  void Add(const std::vector<std::string>& names, T* value, const std::string& help) {
+    const std::string text = help + " (=" + DefaultText(*value) + ")";
+    for (size_t i = 0; i < names.size(); ++i) {
+      const std::string alias_note = i == 0 ? "" : " [alias of --" + names[0] + "]";
+      description_->add_options()(names[i].c_str(), po::value<T>(value), (text + alias_note).c_str());
+    }
+  }
+
+ private:
+  po::options_description* description_;
+};
+
+}  // namespace
+
+ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
+                                        MatcherCommandOptions* options) {
+  po::options_description description("cashash " + command + " options");
+  description.add_options()("help,h", "Print this help");
+  OptionTable table(&description);
+  MatcherCommandOptions& o = *options;
+  table.Add({"database_path"}, &o.database_path, "COLMAP database to read features from and write matches to");
+  if (command == "matches_importer") {
+    table.Add({"match_list_path"}, &o.match_list_path, "Text file with one 'name1 name2' pair per line");
+    table.Add({"match_type"}, &o.match_type, "Only 'pairs' is supported: match and verify the listed pairs");
+  }
+  table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
+  table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
+  table.Add({"write_empty_pairs"}, &o.write_empty_pairs,
+            "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
+            "them in table cashash_empty_pairs only, so that a rerun skips them)");
+
+  table.Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o.sift.num_threads,
+            "CPU threads, -1 for all cores");
+  table.Add({"FeatureMatching.use_gpu", "SiftMatching.use_gpu"}, &o.use_gpu,
+            "Match on the GPU (falls back to the CPU with a warning where there is none)");
+  table.Add({"FeatureMatching.gpu_index", "SiftMatching.gpu_index"}, &o.gpu_index,
+            "CUDA device index, -1 for the first device; a list (0,1) matches on several devices, each block pair split among them");
+  table.Add({"FeatureMatching.max_num_matches", "SiftMatching.max_num_matches"}, &o.sift.max_num_matches,
+            "Features per image considered (first rows)");
+  table.Add({"FeatureMatching.guided_matching", "SiftMatching.guided_matching"}, &o.guided_matching,
+            "COLMAP's guided matching (not supported)");
+  table.Add({"FeatureMatching.skip_geometric_verification"}, &o.skip_geometric_verification,
+            "Write raw matches only, no two_view_geometries");
+  table.Add({"SiftMatching.max_ratio"}, &o.sift.max_ratio, "Lowe's ratio test on descriptor angles");
+  table.Add({"SiftMatching.max_distance"}, &o.sift.max_distance, "Largest descriptor angle (radians) accepted");
+  table.Add({"SiftMatching.cross_check"}, &o.sift.cross_check, "Keep mutual best matches only");
+
+  table.Add({"TwoViewGeometry.min_num_inliers", "SiftMatching.min_num_inliers"}, &o.two_view.min_num_inliers,
+            "Fewest inliers of a verified pair");
+  table.Add({"TwoViewGeometry.max_error", "SiftMatching.max_error"}, &o.two_view.max_error,
+            "RANSAC threshold in pixels");
+  table.Add({"TwoViewGeometry.confidence", "SiftMatching.confidence"}, &o.two_view.confidence,
+            "RANSAC confidence");
+  table.Add({"TwoViewGeometry.min_num_trials"}, &o.two_view.min_num_trials, "RANSAC minimum trials");
+  table.Add({"TwoViewGeometry.max_num_trials", "SiftMatching.max_num_trials"}, &o.two_view.max_num_trials,
+            "RANSAC maximum trials");
+  table.Add({"TwoViewGeometry.min_inlier_ratio", "SiftMatching.min_inlier_ratio"}, &o.two_view.min_inlier_ratio,
+            "RANSAC minimum inlier ratio");
+  table.Add({"TwoViewGeometry.min_E_F_inlier_ratio"}, &o.two_view.min_E_F_inlier_ratio,
+            "E inliers / F inliers above which a calibrated pair keeps E");
+  table.Add({"TwoViewGeometry.max_H_inlier_ratio"}, &o.two_view.max_H_inlier_ratio,
+            "H inliers / F inliers above which a pair is planar or panoramic");
+  table.Add({"TwoViewGeometry.watermark_min_inlier_ratio"}, &o.two_view.watermark_min_inlier_ratio,
+            "Share of border inliers explained by a translation that marks a watermark");
+  table.Add({"TwoViewGeometry.watermark_border_size"}, &o.two_view.watermark_border_size,
+            "Border band for the watermark test, relative to the image diagonal");
+  table.Add({"TwoViewGeometry.detect_watermark"}, &o.two_view.detect_watermark, "Run the watermark test");
+  table.Add({"TwoViewGeometry.early_exit"}, &o.two_view.early_exit,
+            "Stop RANSAC early on pairs whose matches look like chance (0 = COLMAP's full trial budget)");
+  table.Add({"TwoViewGeometry.early_exit_max_risk"}, &o.two_view.early_exit_max_risk,
+            "Largest chance, under the fitted chance model, that the full budget would have verified a stopped pair");
+
+  table.Add({"ExhaustiveMatching.block_size"}, &o.block_size,
+            "Images per block (default: from the memory caps, at most 50)");
+  table.Add({"max_host_memory"}, &o.max_host_memory,
+            "Host memory for features, e.g. 16G or 4096 (MiB); default half the physical memory");
+  table.Add({"max_gpu_memory"}, &o.max_gpu_memory,
+            "GPU memory for matching, e.g. 8G or 4096 (MiB); default the device's free memory");
+
+  std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
+  table.Add({"CasHash.matcher"}, &matcher_name,
+            "auto (times both on the first pairs, keeps the faster) | cascade | bruteforce (exact reference)");
+  table.Add({"CasHash.num_tables"}, &o.cashash.num_tables,
+            "First-level hash tables; 0 = chosen with the bits from the features per image (8 x 7 below 16384, "
+            "8 x 8 from there)");
+  table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table,
+            "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
+  table.Add({"CasHash.tau"}, &o.cashash.tau, "Largest 128-bit remap Hamming distance ranked");
+  table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
+  table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
+            "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's)");
+
+  if (command == "guided_matcher") o.guided.enabled = true;
+  table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
+            "Ga-CasHash: match the top-scale features first, then exactly only the pairs that show overlap (within "
+            "the epipolar bands where F explains them)");
+  table.Add({"GuidedMatching.top_scale_fraction"}, &o.guided.top_scale_fraction,
+            "Share of each image's features (largest scales) matched in stage 1");
+  table.Add({"GuidedMatching.min_num_matches"}, &o.guided.min_num_matches,
+            "Fewest stage-1 matches for which F is estimated");
+  table.Add({"GuidedMatching.min_inlier_ratio"}, &o.guided.min_inlier_ratio,
+            "Smallest share of stage-1 matches that are F inliers for a pair to be matched in stage 2");
+  table.Add({"GuidedMatching.max_epipolar_distance"}, &o.guided.max_epipolar_distance,
+            "Half-width in pixels of the band around the stage-1 epipolar lines that stage-2 matches must lie in "
+            "(0: 16 for the filter of exact matches, 4 for the paper's search within the band)");
+  table.Add({"GuidedMatching.unguided_fallback"}, &o.guided.unguided_fallback,
+            "Match pairs that stage 1 cannot guide but that have at least fallback_min_num_matches stage-1 "
+            "matches exactly, without the band (not in the paper)");
+  table.Add({"GuidedMatching.fallback_min_num_matches"}, &o.guided.fallback_min_num_matches,
+            "Fewest stage-1 matches for which a pair that is not guided is matched without the band");
+  table.Add({"GuidedMatching.restrict_search_to_band"}, &o.guided.restrict_search_to_band,
+            "The paper's stage 2: search candidates within the band only (accepts matches that are ambiguous in "
+            "the whole image); 0 filters exact matches by the band");
+
+  po::variables_map vm;
+  try {
+    po::store(po::command_line_parser(argc, argv).options(description).run(), vm);
+    po::notify(vm);
+  } catch (const po::error& e) {
+    std::cerr << "ERROR: " << e.what() << " (see cashash " << command << " --help)" << std::endl;
+    return ParseOutcome::kError;
+  }
+  if (vm.count("help")) {
+    std::cout << description << std::endl;
+    return ParseOutcome::kHelpShown;
+  }
+  if (!MatcherTypeFromString(matcher_name, &o.cashash.matcher)) {
+    std::cerr << "ERROR: --CasHash.matcher must be 'auto', 'cascade' or 'bruteforce', got '" << matcher_name << "'"
+              << std::endl;
+    return ParseOutcome::kError;
+  }
+  o.block_size_from_memory = vm.count("ExhaustiveMatching.block_size") == 0;
+  o.cashash.random_seed = o.random_seed;
+  o.two_view.random_seed = o.random_seed;
+  return ParseOutcome::kRun;
+}
+
+std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
+  if (o.database_path.empty()) return "--database_path is required";
+  if (o.block_size < 2) return "--ExhaustiveMatching.block_size must be >= 2";
+  for (const auto& [name, text] : {std::make_pair("--max_host_memory", &o.max_host_memory),
+                                   std::make_pair("--max_gpu_memory", &o.max_gpu_memory)}) {
+    size_t bytes = 0;
+    if (!text->empty() && !ParseMemorySize(*text, &bytes)) {
+      return std::string(name) + " must be a size such as 16G, 512M or 4096 (MiB), got '" + *text + "'";
+    }
+  }
+  if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
+  std::string message = o.sift.Check();
+  if (!message.empty()) return message;
+  message = o.cashash.Check();
+  if (!message.empty()) return message;
+  if (o.guided.enabled) {
+    message = o.guided.Check();
+    if (!message.empty()) return message;
+    // auto resolves to the cascade (ResolveOptionsForRun).
+    if (o.cashash.matcher == MatcherType::kBruteForce) {
+      return "--GuidedMatching.enabled needs --CasHash.matcher cascade or auto (the band filter is part of the "
+             "cascade)";
+    }
+  }
+  return o.two_view.Check();
+}
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,99 @@
+// The library entry points behind `cashash exhaustive_matcher` and
+// `cashash matches_importer`: match the pairs of a COLMAP database and write
+// matches and two_view_geometries. The command line and the Python module
+// both call these, so they behave and fail alike.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "cashash/matchers/exact_rematch_feature_matcher.h"
+#include "cashash/matchers/feature_matcher.h"
+#include "cashash/pipeline/matching_pipeline.h"
+#include "colmap_bridge/api/command_options.h"
+
+namespace cashash {
+namespace colmap {
+
+// Called from the writer thread after each chunk of pairs is committed.
+using ProgressCallback = std::function<void(const PipelineProgress&)>;
+
+// Everything a caller may want to hear about a run besides the result. Unset
+// members are skipped, except `warning`, which then goes to stderr.
+struct MatchingCallbacks {
+  ProgressCallback progress;
+  // Once the database is open, before anything is matched (the command line
+  // prints its heading here).
+  std::function<void()> database_opened;
+  // Informational lines, e.g. "Nothing to match." or "Matcher: cpu-cascade".
+  std::function<void(const std::string&)> info;
+  // Warnings without a "WARNING: " prefix (images without features, CPU
+  // fallback when no GPU can be used).
+  std::function<void(const std::string&)> warning;
+  // When it becomes true the run finishes the chunks in flight, commits them
+  // and returns with summary.pipeline.stopped set.
+  const std::atomic<bool>* stop = nullptr;
+};
+
+struct MatchingSummary {
+  size_t pairs_requested = 0;  // pairs asked for, including those skipped
+  size_t pairs_skipped = 0;    // already in the database and not overwritten
+  std::string matcher_name;    // "" when nothing was matched
+  PipelineStats pipeline;
+  // Memory of the GPU the run matched on (gpu_index -1: none or not
+  // queryable), from cudaMemGetInfo before the run and after each committed
+  // block; the whole device is counted, other processes included.
+  int gpu_index = -1;
+  size_t gpu_total_bytes = 0;
+  size_t gpu_used_before_bytes = 0;  // in use before the matcher was made
+  size_t gpu_peak_used_bytes = 0;    // most in use at a sample
+};
+
+// Matches every pair of images of the database (options.database_path is
+// ignored). Throws std::invalid_argument when an option is out of range and
+// std::runtime_error (DatabaseError included) for unusable input, with the
+// messages the command line prints after "ERROR: ".
+MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& callbacks = {});
+
+// Matches the given pairs of image names (as in table images). Repeated pairs,
+// in either order, are matched once.
+MatchingSummary MatchPairs(const std::string& database_path,
+                           const std::vector<std::pair<std::string, std::string>>& image_name_pairs,
+                           const MatcherCommandOptions& options, const MatchingCallbacks& callbacks = {});
+
+// Matches the pairs listed in a matches_importer pair file ("name1 name2" per
+// line).
+MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
+                              const MatcherCommandOptions& options, const MatchingCallbacks& callbacks = {});
+
+// The matcher backend the options ask for: the GPU one when use_gpu is set
+// and a device is usable, else the CPU one (reporting why through `warning`).
+//
+// --CasHash.matcher auto (the default) gives an AutoFeatureMatcher over one
+// cascade and one brute-force backend on the same device(s), which reports
+// its choice through `info`; with guided matching, the cascade alone. With
+// --CasHash.exact_rematch_min_matches > 0 (runs' default 12) the cascade
+// backend is an ExactRematchFeatureMatcher: pairs that may verify are
+// matched again by brute force, from the descriptors the cascade holds.
+std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        const std::function<void(const std::string&)>& info = nullptr,
+                                                        const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
+
+// The options a run matches with, decided once from the feature rows of its
+// images: the hash tables chosen for their median size where
+// --CasHash.num_tables / --CasHash.bits_per_table are 0 (table_shape.h), and
+// auto resolved to the cascade for guided matching. Says what it chose
+// through `info`.
+MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
+                                           const std::vector<size_t>& rows_per_image,
+                                           const std::function<void(const std::string&)>& info);
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,63 @@
+#include "colmap_bridge/api/verifier_selection.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <stdexcept>
+
+#ifdef CASHASH_WITH_CUDA
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/matching/guided_matching.h"
+#include "cashash_cuda/geometry/two_view_geometry.h"
+#endif
+
+namespace cashash {
+namespace colmap {
+
+std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
+                                                             const std::function<void(const std::string&)>& warning) {
+  // CASHASH_VERIFIER=cpu verifies on the CPU while matching on the GPU (to
+  // compare the two verifiers within one run configuration).
+  const char* forced = std::getenv("CASHASH_VERIFIER");
+  if (forced != nullptr && std::string(forced) == "cpu") {
+    return CreateCpuBatchVerifier(options.two_view, options.sift.num_threads);
+  }
+  if (options.use_gpu) {
+#ifdef CASHASH_WITH_CUDA
+    int gpu_index = 0;
+    try {
+      gpu_index = std::max(0, std::stoi(options.gpu_index.substr(0, options.gpu_index.find(','))));
+    } catch (const std::exception&) {
+      throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+                                  options.gpu_index + "'");
+    }
+    std::string reason;
+    if (cuda::CudaDeviceUsable(gpu_index, &reason)) {
+      return cuda::CreateGpuBatchVerifier(options.two_view, gpu_index, options.sift.num_threads);
+    }
+    if (warning) warning("no usable CUDA device (" + reason + "); verifying on the CPU");
+#else
+    if (warning) warning("cashash was built without CUDA; verifying on the CPU");
+#endif
+  }
+  return CreateCpuBatchVerifier(options.two_view, options.sift.num_threads);
+}
+
+std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options) {
+#ifdef CASHASH_WITH_CUDA
+  if (options.use_gpu) {
+    int gpu_index = 0;
+    try {
+      gpu_index = std::max(0, std::stoi(options.gpu_index.substr(0, options.gpu_index.find(','))));
+    } catch (const std::exception&) {
+      gpu_index = 0;  // CreateBatchVerifierForOptions reports the bad value
+    }
+    if (cuda::CudaDeviceUsable(gpu_index, nullptr)) {
+      return cuda::CreateGpuFundamentalEstimator(options.two_view, gpu_index);
+    }
+  }
+#endif
+  return CreateCpuFundamentalEstimator(options.two_view, options.sift.num_threads);
+}
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,24 @@
+// Which BatchVerifier a run uses: the GPU one when use_gpu is set, CUDA was
+// built and a device is usable, else the CPU thread pool.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/matching/guided_matching.h"
+#include "colmap_bridge/api/command_options.h"
+
+namespace cashash {
+namespace colmap {
+
+// `warning` hears why the GPU was not used when it was asked for.
+std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
+                                                             const std::function<void(const std::string&)>& warning);
+
+// The F estimator of guided matching's stage 1, chosen the same way.
+std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options);
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,49 @@
+// cashash: Cascade Hashing feature matching for COLMAP databases.
+#include <cstdlib>
+#include <iostream>
+#include <string>
+
+#include "colmap_bridge/commands/matching_commands.h"
+#include "colmap_bridge/commands/verify_command.h"
+#include "synthetic/generate_database_command.h"
+#ifdef CASHASH_WITH_MPI
+#include "distributed/mpi_process_group.h"
+#endif
+
+namespace {
+
+void PrintUsage() {
+  std::cout << "cashash -- Cascade Hashing feature matching for COLMAP databases\n\n"
+               "Usage:\n"
+               "  cashash exhaustive_matcher --database_path DB [options]\n"
+               "  cashash guided_matcher --database_path DB [options]   (two-stage Ga-CasHash, all pairs)\n"
+               "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
+               "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n"
+               "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n\n"
+               "Run 'cashash COMMAND --help' for the options of a command (COLMAP's option names\n"
+               "of 3.8 and 4.x are accepted, plus --CasHash.*)."
+            << std::endl;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+#ifdef CASHASH_WITH_MPI
+  // Only the executable links MPI; the library sees it through this group.
+  cashash::distributed::InstallProcessGroup(cashash::distributed::CreateMpiProcessGroup());
+#endif
+  if (argc < 2 || std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help" ||
+      std::string(argv[1]) == "help") {
+    PrintUsage();
+    return argc < 2 ? EXIT_FAILURE : EXIT_SUCCESS;
+  }
+  const std::string command = argv[1];
+  if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
+  if (command == "guided_matcher") return cashash::colmap::RunGuidedMatcher(argc - 1, argv + 1);
+  if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
+  if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
+  if (command == "generate_database") return cashash::colmap::RunGenerateDatabase(argc - 1, argv + 1);
+  std::cerr << "ERROR: unknown command '" << command << "'" << std::endl;
+  PrintUsage();
+  return EXIT_FAILURE;
+}

@@ -1,0 +1,491 @@
+// Batched LO-RANSAC for F, H and E. Per pair (one block), per round: every
+// thread draws its own sample from a stream keyed by (pair seed, trial
+// index), solves it and scores its models over all correspondences (the
+// hypotheses in parallel); then the block walks the round's trials in trial
+// order exactly as the CPU loop walks its trials: a trial that beats the
+// best so far (more inliers, then a smaller residual sum) becomes the best
+// and the block refits it on its inliers (8-point or DLT, the CPU path's
+// local optimisation; 5-point least-squares refits for E, which may give
+// several models, each scored) while the inlier set grows. COLMAP's adaptive
+// stopping rule is evaluated after each round. Every decision depends on
+// the trial order only, never on timing, so a seed gives one result.
+#include "cashash_cuda/geometry/ransac.cuh"
+
+#include <algorithm>
+#include <cfloat>
+
+#include "cashash/geometry/five_point_solver.h"
+#include "cashash_cuda/geometry/ransac_solvers.cuh"
+#include "cashash_cuda/utils/cuda_check.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+using namespace ransac;  // NOLINT: the solvers of this kernel
+
+constexpr int kMaxLocalIterations = 10;
+constexpr int kMaxLocalModels = five_point::kMaxSolutions;  // models of one local refit
+
+struct FundamentalModel {
+  static constexpr int kSampleSize = 7;
+  static constexpr int kMaxModels = 3;
+  static constexpr int kMinLocalSize = 8;
+  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
+    return FundamentalSevenPoint(sample, models);
+  }
+  __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
+  __device__ static void AddRows(float4 p, double* upper) {
+    double row[9];
+    EpipolarRow(p, row);
+    AddOuter(row, upper);
+  }
+  // Smallest eigenvector of the normal matrix by inverse iteration from the
+  // model being refined (a full Jacobi decomposition where the factorisation
+  // breaks down), projected to rank 2.
+  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+    if (!SmallestEigenvectorNear(upper, start, models[0])) {
+      double full[81];
+      ExpandNormalMatrix(upper, full);
+      SmallestEigenvector<9>(full, models[0]);
+    }
+    return ProjectRankTwo(models[0]) ? 1 : 0;
+  }
+};
+
+struct HomographyModel {
+  static constexpr int kSampleSize = 4;
+  static constexpr int kMaxModels = 1;
+  static constexpr int kMinLocalSize = 4;
+  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
+    return HomographyFourPoint(sample, models[0]) ? 1 : 0;
+  }
+  __device__ static float Residual(const float* m, float4 p) { return TransferSquared(m, p); }
+  __device__ static void AddRows(float4 p, double* upper) {
+    double r1[9], r2[9];
+    HomographyRows(p, r1, r2);
+    AddOuter(r1, upper);
+    AddOuter(r2, upper);
+  }
+  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+    if (!SmallestEigenvectorNear(upper, start, models[0])) {
+      double full[81];
+      ExpandNormalMatrix(upper, full);
+      SmallestEigenvector<9>(full, models[0]);
+    }
+    return NormalizeModel(models[0]) ? 1 : 0;
+  }
+};
+
+// E on normalised camera coordinates (x2^T E x1 = 0): 5-point hypotheses,
+// Sampson residuals as F, and the CPU path's local refit, the 5-point solver
+// on the least-squares null space of all inliers (up to 10 models).
+struct EssentialModel {
+  static constexpr int kSampleSize = 5;
+  static constexpr int kMaxModels = five_point::kMaxSolutions;
+  static constexpr int kMinLocalSize = 5;
+  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
+    double pairs[20];
+    for (int k = 0; k < 5; ++k) {
+      pairs[4 * k] = sample[k].x;
+      pairs[4 * k + 1] = sample[k].y;
+      pairs[4 * k + 2] = sample[k].z;
+      pairs[4 * k + 3] = sample[k].w;
+    }
+    return five_point::EssentialFromFivePoints(pairs, models);
+  }
+  __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
+  __device__ static void AddRows(float4 p, double* upper) {
+    double row[9];
+    EpipolarRow(p, row);
+    AddOuter(row, upper);
+  }
+  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+    double basis[4][9];
+    if (!five_point::LeastSquaresNullSpace(upper, basis)) return 0;
+    return five_point::SolveFromBasis(basis, models);
+  }
+};
+
+// Orders supports: more inliers first, then the smaller residual sum
+// (non-negative floats order as their bit patterns). 0 = no model.
+__device__ inline unsigned long long SupportKey(int count, float sum) {
+  return (static_cast<unsigned long long>(count) << 32) |
+         (0xFFFFFFFFull - static_cast<unsigned long long>(__float_as_uint(sum)));
+}
+
+template <int Threads>
+struct BlockScratch {
+  static constexpr int kWarps = Threads / 32;
+  unsigned long long keys[Threads];  // each trial's best support this round
+  double models[Threads][9];         // and its model
+  int warp_count[kWarps];
+  double warp_sum[kWarps];
+  double warp_upper[kWarps][45];
+  double upper[45];
+  double best_model[9];
+  double local_models[kMaxLocalModels][9];
+  unsigned long long best_key;
+  int best_count;
+  int num_local;
+  int num_local_refits;
+  // Early exit (ransac_early_exit.h): supports of the window's hypotheses,
+  // hypotheses so far, and the decision.
+  double window_support_sum;
+  int window_hypotheses;
+  int hypotheses;
+  int exit_early;
+};
+
+// Inlier count and residual sum of one model over the pair, by the block.
+template <typename Model, int Threads>
+__device__ void BlockScore(const float* m, const float4* points, int n, float threshold, BlockScratch<Threads>& s,
+                           int* count, float* sum) {
+  int c = 0;
+  float r_sum = 0;
+  for (int i = threadIdx.x; i < n; i += Threads) {
+    const float r = Model::Residual(m, points[i]);
+    if (r <= threshold) {
+      ++c;
+      r_sum += r;
+    }
+  }
+  double d_sum = r_sum;
+  for (int offset = 16; offset > 0; offset >>= 1) {
+    c += __shfl_down_sync(0xffffffffu, c, offset);
+    d_sum += __shfl_down_sync(0xffffffffu, d_sum, offset);
+  }
+  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
+  if (lane == 0) {
+    s.warp_count[warp] = c;
+    s.warp_sum[warp] = d_sum;
+  }
+  __syncthreads();
+  int total = 0;
+  double total_sum = 0;
+  for (int w = 0; w < BlockScratch<Threads>::kWarps; ++w) {
+    total += s.warp_count[w];
+    total_sum += s.warp_sum[w];
+  }
+  __syncthreads();  // the scratch may be reused at once
+  *count = total;
+  *sum = static_cast<float>(total_sum);
+}
+
+// Least-squares refit of the best model on its inliers: the block sums the
+// normal matrix, thread 0 solves it (s.num_local models in s.local_models).
+template <typename Model, int Threads>
+__device__ void BlockLocalSolve(const float* best, const float4* points, int n, float threshold,
+                                BlockScratch<Threads>& s) {
+  double upper[45];
+  for (int k = 0; k < 45; ++k) upper[k] = 0;
+  for (int i = threadIdx.x; i < n; i += Threads) {
+    const float4 p = points[i];
+    if (Model::Residual(best, p) <= threshold) Model::AddRows(p, upper);
+  }
+  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
+  for (int k = 0; k < 45; ++k) {
+    double v = upper[k];
+    for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
+    if (lane == 0) s.warp_upper[warp][k] = v;
+  }
+  __syncthreads();
+  if (threadIdx.x < 45) {
+    double v = 0;
+    for (int w = 0; w < BlockScratch<Threads>::kWarps; ++w) v += s.warp_upper[w][threadIdx.x];
+    s.upper[threadIdx.x] = v;
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    s.num_local = Model::LocalSolve(s.upper, s.best_model, s.local_models);
+    ++s.num_local_refits;
+  }
+  __syncthreads();
+}
+
+template <typename Model, int Threads>
+__device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cached_points, BlockScratch<Threads>& s) {
+  const RansacPairInput input = launch.pairs[pair];
+  const int n = input.count;
+  const float threshold = input.squared_threshold;
+  const float4* points = launch.points + input.offset;
+  if (n <= launch.shared_points) {
+    for (int i = threadIdx.x; i < n; i += Threads) cached_points[i] = points[i];
+    points = cached_points;
+  }
+  if (threadIdx.x == 0) {
+    s.best_key = 0;
+    s.best_count = 0;
+    s.num_local_refits = 0;
+    s.window_support_sum = 0;
+    s.window_hypotheses = 0;
+    s.hypotheses = 0;
+    s.exit_early = 0;
+  }
+  __syncthreads();
+  RansacPairOutput* output = launch.outputs + pair;
+  if (n < Model::kSampleSize) {
+    if (threadIdx.x == 0) {
+      output->success = 0;
+      output->num_inliers = 0;
+      output->num_trials = 0;
+      output->num_local_refits = 0;
+      output->early_exit = 0;
+    }
+    return;
+  }
+
+  int dyn_max_trials = launch.max_trials;
+  int trials_done = 0;
+  const RansacEarlyExitOptions& early = launch.early_exit;
+  // Fewest inliers that can change the decision (H after F) and the trials
+  // after which such a model would have been found: the CPU's
+  // RansacOptions::relevant_inliers.
+  int relevant = 0, relevant_trials = launch.max_trials;
+  if (launch.relevance != nullptr) {
+    const RansacPairOutput& f = launch.relevance[pair];
+    const int num_f = f.success ? f.num_inliers : 0;
+    relevant = RelevantInliers(launch.relevance_ratio, num_f, launch.relevance_min_inliers);
+    relevant_trials = max(launch.min_trials, RequiredTrials(relevant, n, launch.confidence, launch.trials_multiplier,
+                                                            Model::kSampleSize));
+  }
+  for (int round = 0;; ++round) {
+    const int trial = round * Threads + threadIdx.x;
+    // Window trials are scored in full: their supports fit the chance model.
+    const bool in_window = early.min_num_inliers > 0 && trial < early.window;
+    const int must_reach = in_window ? 0 : s.best_count;
+    int my_hypotheses = 0, my_support_sum = 0;
+    unsigned long long my_key = 0;
+    double models[Model::kMaxModels][9];
+    int my_model = -1;
+    if (trial < launch.max_trials) {
+      DeviceSplitMix64 rng = TrialRng(input.seed, static_cast<uint32_t>(trial));
+      int idx[Model::kSampleSize];
+      SampleDistinct<Model::kSampleSize>(rng, static_cast<uint32_t>(n), idx);
+      float4 sample[Model::kSampleSize];
+      for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
+      const int num_models = Model::Minimal(sample, models);
+      my_hypotheses = num_models;
+      for (int m = 0; m < num_models; ++m) {
+        float f[9];
+        for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
+        int count = 0;
+        float sum = 0;
+        bool gave_up = false;
+        for (int i = 0; i < n; ++i) {
+          const float r = Model::Residual(f, points[i]);
+          if (r <= threshold) {
+            ++count;
+            sum += r;
+          }
+          // Give up once the pair's best so far is out of reach.
+          if ((i & 63) == 63 && count + (n - 1 - i) < must_reach) {
+            gave_up = true;
+            break;
+          }
+        }
+        if (gave_up) continue;
+        if (in_window) my_support_sum += count;
+        const unsigned long long key = SupportKey(count, sum);
+        if (key > my_key) {
+          my_key = key;
+          my_model = m;
+        }
+      }
+    }
+    // Publish every trial's best model, then walk the round in trial order
+    // as the CPU loop would: each trial that beats the best so far becomes
+    // the best and is refined at once (refining only the round's winner
+    // would refine lucky wide-band models that a least-squares refit cannot
+    // improve, and lose inliers against the CPU).
+    s.keys[threadIdx.x] = my_key;
+    if (early.min_num_inliers > 0) {
+      if (my_hypotheses > 0) atomicAdd(&s.hypotheses, my_hypotheses);
+      if (in_window && my_hypotheses > 0) {
+        atomicAdd(&s.window_hypotheses, my_hypotheses);
+        atomicAdd(&s.window_support_sum, static_cast<double>(my_support_sum));
+      }
+    }
+    if (my_model >= 0) {
+      for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[my_model][k];
+    }
+    __syncthreads();
+    unsigned long long best_key = s.best_key;
+    __syncthreads();  // everyone has read the best before thread 0 may change it
+    for (int t = 0; t < Threads; ++t) {
+      if (s.keys[t] <= best_key) continue;  // same decision in every thread
+      if (threadIdx.x == 0) {
+        for (int k = 0; k < 9; ++k) s.best_model[k] = s.models[t][k];
+        s.best_key = s.keys[t];
+        s.best_count = static_cast<int>(s.keys[t] >> 32);
+      }
+      __syncthreads();
+      // Local optimisation, as the CPU path: refit while the inlier set grows.
+      if (s.best_count > Model::kSampleSize && s.best_count >= Model::kMinLocalSize) {
+        for (int it = 0; it < kMaxLocalIterations; ++it) {
+          const int previous = s.best_count;
+          float f[9];
+          for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
+          BlockLocalSolve<Model, Threads>(f, points, n, threshold, s);
+          // Each model of the refit in turn, as the CPU loop compares them.
+          for (int l = 0; l < s.num_local; ++l) {
+            float lf[9];
+            for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_models[l][k]);
+            int count;
+            float sum;
+            BlockScore<Model, Threads>(lf, points, n, threshold, s, &count, &sum);
+            // Only thread 0 reads the best here (others would race with its write).
+            if (threadIdx.x == 0) {
+              const unsigned long long key = SupportKey(count, sum);
+              if (key > s.best_key) {
+                for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_models[l][k];
+                s.best_key = key;
+                s.best_count = count;
+              }
+            }
+          }
+          __syncthreads();
+          if (s.best_count <= previous) break;
+        }
+      }
+      dyn_max_trials = RequiredTrials(s.best_count, n, launch.confidence, launch.trials_multiplier,
+                                      Model::kSampleSize);
+      best_key = s.best_key;
+      __syncthreads();  // everyone has read the best before thread 0 may change it
+    }
+    trials_done = min((round + 1) * Threads, launch.max_trials);
+    const bool irrelevant = relevant > 0 && s.best_count < relevant && trials_done >= relevant_trials;
+    const bool stop = trials_done >= launch.max_trials ||
+                      (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant;
+    if (irrelevant && threadIdx.x == 0) s.exit_early = 1;
+    if (!stop && threadIdx.x == 0 && RansacEarlyExitCheckpoint(early, trials_done) &&
+        RansacShouldExitEarly(early, n, Model::kSampleSize, s.window_support_sum, s.window_hypotheses,
+                              s.best_count, s.hypotheses, trials_done, launch.max_trials - trials_done)) {
+      s.exit_early = 1;
+    }
+    __syncthreads();
+    if (stop || s.exit_early) break;
+  }
+
+  const bool success = s.best_key != 0 && s.best_count >= Model::kSampleSize;
+  uint8_t* mask = launch.masks + input.offset;
+  float f[9];
+  for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
+  for (int i = threadIdx.x; i < n; i += Threads) {
+    mask[i] = success && Model::Residual(f, points[i]) <= threshold ? 1 : 0;
+  }
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < 9; ++k) output->model[k] = s.best_model[k];
+    output->success = success ? 1 : 0;
+    output->num_inliers = s.best_count;
+    output->num_trials = trials_done;
+    output->num_local_refits = s.num_local_refits;
+    output->early_exit = s.exit_early;
+  }
+}
+
+// F blocks first, then H blocks, in one grid: no tail between two launches.
+__global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaunch F, RansacLaunch H) {
+  extern __shared__ float4 cached_points[];
+  __shared__ BlockScratch<kRansacThreads> s;
+  const int block = static_cast<int>(blockIdx.x);
+  if (block < F.num_pairs) {
+    LoRansacBlock<FundamentalModel, kRansacThreads>(F, block, cached_points, s);
+  } else {
+    LoRansacBlock<HomographyModel, kRansacThreads>(H, block - F.num_pairs, cached_points, s);
+  }
+}
+
+// E blocks: a kernel of their own, so the 5-point solver's registers and
+// stack do not weigh on the F/H kernel's occupancy. It takes 255 registers,
+// so an SM holds 256 of its threads either way: two blocks of 128 or one of
+// 256 (E.block_threads). The larger block runs twice the trials per round,
+// so a pair that needs thousands of trials takes half as many rounds: those
+// pairs are what a chunk waits for once the others are done.
+template <int Threads>
+__global__ void __launch_bounds__(Threads) EssentialRansacKernel(RansacLaunch E) {
+  extern __shared__ float4 cached_points[];
+  __shared__ BlockScratch<Threads> s;
+  LoRansacBlock<EssentialModel, Threads>(E, static_cast<int>(blockIdx.x), cached_points, s);
+}
+
+template <int Threads>
+void LaunchEssentialKernel(const RansacLaunch& E, size_t shared_bytes, cudaStream_t stream) {
+  static const cudaError_t opt_in =
+      cudaFuncSetAttribute(EssentialRansacKernel<Threads>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
+  CUDA_CHECK(opt_in);
+  EssentialRansacKernel<Threads><<<E.num_pairs, Threads, shared_bytes, stream>>>(E);
+  CUDA_CHECK_LAUNCH();
+}
+
+// One thread per 5-point sample (tests).
+__global__ void EssentialFivePointKernel(const float4* samples, int num_samples, double* models, int* counts) {
+  const int i = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (i >= num_samples) return;
+  double out[five_point::kMaxSolutions][9];
+  const int n = EssentialModel::Minimal(samples + 5 * i, out);
+  counts[i] = n;
+  for (int m = 0; m < n; ++m)
+    for (int k = 0; k < 9; ++k) models[(i * five_point::kMaxSolutions + m) * 9 + k] = out[m][k];
+}
+
+}  // namespace
+
+void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
+  if (E.num_pairs == 0) return;
+  const size_t shared_bytes = static_cast<size_t>(E.shared_points) * sizeof(float4);
+  if (E.block_threads == kEssentialLargeBlockThreads) {
+    LaunchEssentialKernel<kEssentialLargeBlockThreads>(E, shared_bytes, stream);
+  } else {
+    LaunchEssentialKernel<kRansacThreads>(E, shared_bytes, stream);
+  }
+}
+
+float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {
+  if (num_samples <= 0) return 0.f;
+  float4* d_samples = nullptr;
+  double* d_models = nullptr;
+  int* d_counts = nullptr;
+  const size_t model_doubles = static_cast<size_t>(num_samples) * five_point::kMaxSolutions * 9;
+  CUDA_CHECK(cudaMalloc(&d_samples, sizeof(float4) * 5 * num_samples));
+  CUDA_CHECK(cudaMalloc(&d_models, sizeof(double) * model_doubles));
+  CUDA_CHECK(cudaMalloc(&d_counts, sizeof(int) * num_samples));
+  CUDA_CHECK(cudaMemcpy(d_samples, samples, sizeof(float4) * 5 * num_samples, cudaMemcpyHostToDevice));
+  CUDA_CHECK(cudaMemset(d_models, 0, sizeof(double) * model_doubles));
+  cudaEvent_t start = nullptr, stop = nullptr;
+  CUDA_CHECK(cudaEventCreate(&start));
+  CUDA_CHECK(cudaEventCreate(&stop));
+  CUDA_CHECK(cudaEventRecord(start));
+  EssentialFivePointKernel<<<(num_samples + 127) / 128, 128>>>(d_samples, num_samples, d_models, d_counts);
+  CUDA_CHECK_LAUNCH();
+  CUDA_CHECK(cudaEventRecord(stop));
+  CUDA_CHECK(cudaEventSynchronize(stop));
+  float kernel_ms = 0.f;
+  CUDA_CHECK(cudaEventElapsedTime(&kernel_ms, start, stop));
+  cudaEventDestroy(start);
+  cudaEventDestroy(stop);
+  CUDA_CHECK(cudaMemcpy(models, d_models, sizeof(double) * model_doubles, cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(counts, d_counts, sizeof(int) * num_samples, cudaMemcpyDeviceToHost));
+  cudaFree(d_samples);
+  cudaFree(d_models);
+  cudaFree(d_counts);
+  return kernel_ms;
+}
+
+void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream) {
+  const int blocks = F.num_pairs + H.num_pairs;
+  if (blocks == 0) return;
+  const int shared_points = std::max(F.shared_points, H.shared_points);
+  const size_t shared_bytes = static_cast<size_t>(shared_points) * sizeof(float4);
+  // The point cache plus the static scratch may pass the default 48 KiB.
+  static const cudaError_t opt_in =
+      cudaFuncSetAttribute(TwoViewRansacKernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
+  CUDA_CHECK(opt_in);
+  TwoViewRansacKernel<<<blocks, kRansacThreads, shared_bytes, stream>>>(F, H);
+  CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace cuda
+}  // namespace cashash

@@ -1,0 +1,82 @@
+// Launch interface of the batched LO-RANSAC kernels (plain structs, so the
+// host side can be ordinary C++): one thread block per pair, each thread one
+// hypothesis per round, the block scoring the local refits together.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "cashash/geometry/ransac_early_exit.h"
+
+namespace cashash {
+namespace cuda {
+
+// One pair's correspondences: points[offset, offset + count) as
+// (x1, y1, x2, y2) in the pair's normalised coordinates.
+struct RansacPairInput {
+  int offset = 0;
+  int count = 0;
+  float squared_threshold = 0;  // compared against float residuals, as on the CPU
+  int unused = 0;
+  uint64_t seed = 0;            // DeriveSeed(pair seed, model tag)
+};
+
+struct RansacPairOutput {
+  double model[9];              // row-major, unit norm, normalised coordinates
+  int success;
+  int num_inliers;
+  int num_trials;
+  int num_local_refits;
+  int early_exit;  // 1 when the chance test stopped the pair
+};
+
+struct RansacLaunch {
+  const float4* points = nullptr;
+  const RansacPairInput* pairs = nullptr;
+  RansacPairOutput* outputs = nullptr;
+  uint8_t* masks = nullptr;     // one byte per correspondence, same offsets as points
+  int num_pairs = 0;
+  int max_trials = 0;           // RansacMaxTrials of the CPU path
+  int min_trials = 0;
+  double confidence = 0.999;
+  double trials_multiplier = 3.0;
+  int shared_points = 0;        // pairs with at most this many points are cached in shared memory
+  RansacEarlyExitOptions early_exit;  // the CPU path's chance test; off when min_num_inliers is 0
+  // H after F (TwoViewRelevantHomographyInliers): F's outputs of the same
+  // pairs, read by the H blocks to stop once no H that could change the
+  // decision exists; nullptr keeps COLMAP's loop.
+  const RansacPairOutput* relevance = nullptr;
+  double relevance_ratio = 0;
+  int relevance_min_inliers = 0;
+  // Threads per block (trials per round): kRansacThreads, or for E also
+  // kEssentialLargeBlockThreads.
+  int block_threads = 128;
+};
+
+constexpr int kRansacThreads = 128;
+constexpr int kEssentialLargeBlockThreads = 256;
+
+// Largest shared-memory point cache a launch may ask for (48 KiB of float4).
+constexpr int kRansacMaxSharedPoints = 3072;
+
+// F of F.num_pairs pairs and H of H.num_pairs pairs in one grid (F blocks
+// first; callers put the largest pairs first so the tail is short). With
+// H.relevance set, H needs F's outputs: call it twice on one stream, F
+// alone (H.num_pairs 0), then H alone (F.num_pairs 0).
+void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream);
+
+// E (5-point LO-RANSAC on normalised camera coordinates) of E.num_pairs
+// pairs, in a kernel of its own (the 5-point solver needs far more registers
+// and stack than F and H).
+void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream);
+
+// Tests and benchmarks: the device 5-point solver on num_samples samples of 5
+// correspondences (x1, y1, x2, y2 floats, 20 per sample); up to 10 row-major
+// models (90 doubles) and their count per sample. Synchronous; returns the
+// kernel's milliseconds (transfers excluded), one thread per sample, 128 per
+// block as in the RANSAC kernel.
+float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts);
+
+}  // namespace cuda
+}  // namespace cashash

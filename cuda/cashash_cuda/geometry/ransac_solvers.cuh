@@ -1,0 +1,452 @@
+// Per-thread solvers and residuals of the GPU RANSAC, in double (solvers)
+// and float (residuals, as the CPU path scores): the 7-point fundamental
+// matrix, the 4-point homography, a small Jacobi eigen solver for the
+// least-squares refits, and the counter-based sampler.
+#pragma once
+
+#include <cstdint>
+
+#include "cashash/base/host_device.h"
+
+namespace cashash {
+namespace cuda {
+namespace ransac {
+
+// --- Random samples --------------------------------------------------------
+
+// SplitMix64, as the CPU sampler; every trial gets its own stream derived
+// from the pair's seed and the trial index, so results do not depend on
+// which thread runs which trial.
+struct DeviceSplitMix64 {
+  uint64_t state;
+  __device__ uint64_t Next() {
+    uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  __device__ uint32_t Below(uint32_t n) { return static_cast<uint32_t>(__umul64hi(Next(), n)); }
+};
+
+__device__ inline DeviceSplitMix64 TrialRng(uint64_t seed, uint32_t trial) {
+  DeviceSplitMix64 rng{seed ^ ((static_cast<uint64_t>(trial) + 1) * 0xD1B54A32D192ED03ull)};
+  rng.Next();
+  return rng;
+}
+
+template <int K>
+__device__ inline void SampleDistinct(DeviceSplitMix64& rng, uint32_t n, int* out) {
+  for (int i = 0; i < K; ++i) {
+    for (;;) {
+      const int candidate = static_cast<int>(rng.Below(n));
+      bool taken = false;
+      for (int j = 0; j < i; ++j) taken |= out[j] == candidate;
+      if (!taken) {
+        out[i] = candidate;
+        break;
+      }
+    }
+  }
+}
+
+// COLMAP's adaptive trial count (RansacRequiredTrials of ransac.h).
+__device__ inline int RequiredTrials(int num_inliers, int num_samples, double confidence, double multiplier,
+                                     int sample_size) {
+  const double inlier_ratio = static_cast<double>(num_inliers) / static_cast<double>(num_samples);
+  const double nom = 1.0 - confidence;
+  if (nom <= 0) return 0x7fffffff;
+  const double denom = 1.0 - pow(inlier_ratio, static_cast<double>(sample_size));
+  if (denom <= 0) return 1;
+  if (denom == 1.0) return 0x7fffffff;
+  const double trials = ceil(log(nom) / log(denom) * multiplier);
+  return trials >= 2147483647.0 ? 0x7fffffff : static_cast<int>(trials);
+}
+
+// --- Residuals (float, the CPU path's formulas) ----------------------------
+
+__device__ inline float SampsonSquared(const float* f, float4 p) {
+  const float a = f[0] * p.x + f[1] * p.y + f[2];
+  const float b = f[3] * p.x + f[4] * p.y + f[5];
+  const float c = f[6] * p.x + f[7] * p.y + f[8];
+  const float d = f[0] * p.z + f[3] * p.w + f[6];
+  const float e = f[1] * p.z + f[4] * p.w + f[7];
+  const float num = p.z * a + p.w * b + c;
+  return num * num / (a * a + b * b + d * d + e * e);
+}
+
+__device__ inline float TransferSquared(const float* h, float4 p) {
+  const float w = h[6] * p.x + h[7] * p.y + h[8];
+  const float inv_w = 1.0f / w;
+  const float du = (h[0] * p.x + h[1] * p.y + h[2]) * inv_w - p.z;
+  const float dv = (h[3] * p.x + h[4] * p.y + h[5]) * inv_w - p.w;
+  return du * du + dv * dv;
+}
+
+// --- Small dense linear algebra (double) -----------------------------------
+
+__device__ inline double Det3(const double* m) {
+  return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+         m[2] * (m[3] * m[7] - m[4] * m[6]);
+}
+
+// Inverse of a row-major 3x3; false when singular.
+__device__ inline bool Inverse3(const double* m, double* inv) {
+  const double det = Det3(m);
+  if (det == 0 || !isfinite(det)) return false;
+  const double r = 1.0 / det;
+  inv[0] = (m[4] * m[8] - m[5] * m[7]) * r;
+  inv[1] = (m[2] * m[7] - m[1] * m[8]) * r;
+  inv[2] = (m[1] * m[5] - m[2] * m[4]) * r;
+  inv[3] = (m[5] * m[6] - m[3] * m[8]) * r;
+  inv[4] = (m[0] * m[8] - m[2] * m[6]) * r;
+  inv[5] = (m[2] * m[3] - m[0] * m[5]) * r;
+  inv[6] = (m[3] * m[7] - m[4] * m[6]) * r;
+  inv[7] = (m[1] * m[6] - m[0] * m[7]) * r;
+  inv[8] = (m[0] * m[4] - m[1] * m[3]) * r;
+  return true;
+}
+
+__device__ inline void Mul3(const double* a, const double* b, double* out) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) out[3 * r + c] = a[3 * r] * b[c] + a[3 * r + 1] * b[3 + c] + a[3 * r + 2] * b[6 + c];
+}
+
+// Scales to unit Frobenius norm; false when zero or not finite.
+__device__ inline bool NormalizeModel(double* m) {
+  double s = 0;
+  for (int i = 0; i < 9; ++i) s += m[i] * m[i];
+  const double norm = sqrt(s);
+  if (!(norm > 0) || !isfinite(norm)) return false;
+  for (int i = 0; i < 9; ++i) m[i] /= norm;
+  return true;
+}
+
+// Cyclic Jacobi on a symmetric row-major N x N matrix `a` (destroyed);
+// writes the unit eigenvector of the smallest eigenvalue to `out`.
+template <int N>
+__device__ void SmallestEigenvector(double* a, double* out) {
+  double v[N * N];
+  for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
+  for (int sweep = 0; sweep < 40; ++sweep) {
+    double off = 0, diag = 0;
+    for (int p = 0; p < N; ++p) {
+      diag += a[p * N + p] * a[p * N + p];
+      for (int q = p + 1; q < N; ++q) off += a[p * N + q] * a[p * N + q];
+    }
+    if (off <= 1e-30 * diag || off == 0) break;
+    for (int p = 0; p < N - 1; ++p) {
+      for (int q = p + 1; q < N; ++q) {
+        const double apq = a[p * N + q];
+        if (apq == 0) continue;
+        const double theta = (a[q * N + q] - a[p * N + p]) / (2 * apq);
+        const double t = fabs(theta) > 1e150 ? 0.5 / theta
+                                              : copysign(1.0, theta) / (fabs(theta) + sqrt(theta * theta + 1));
+        const double c = 1 / sqrt(t * t + 1), s = t * c;
+        for (int k = 0; k < N; ++k) {  // columns p, q
+          const double akp = a[k * N + p], akq = a[k * N + q];
+          a[k * N + p] = c * akp - s * akq;
+          a[k * N + q] = s * akp + c * akq;
+        }
+        for (int k = 0; k < N; ++k) {  // rows p, q
+          const double apk = a[p * N + k], aqk = a[q * N + k];
+          a[p * N + k] = c * apk - s * aqk;
+          a[q * N + k] = s * apk + c * aqk;
+        }
+        for (int k = 0; k < N; ++k) {
+          const double vkp = v[k * N + p], vkq = v[k * N + q];
+          v[k * N + p] = c * vkp - s * vkq;
+          v[k * N + q] = s * vkp + c * vkq;
+        }
+      }
+    }
+  }
+  int best = 0;
+  for (int i = 1; i < N; ++i) {
+    if (a[i * N + i] < a[best * N + best]) best = i;
+  }
+  for (int k = 0; k < N; ++k) out[k] = v[k * N + best];
+}
+
+// The unit eigenvector of the smallest eigenvalue of the symmetric positive
+// semi-definite 9 x 9 matrix given by its 45 upper-triangle entries, by
+// inverse iteration from `start` (the model being refined, which lies close
+// to it): each step solves (A + shift I) x = x_prev by Cholesky. The ratio
+// of the two smallest eigenvalues of a refit's normal matrix is tiny, so a
+// few steps converge to what a full eigen decomposition gives, at a small
+// fraction of a Jacobi sweep's cost on one thread. False when the
+// factorisation breaks down (non-finite input).
+__device__ inline bool SmallestEigenvectorNear(const double* upper, const double* start, double* out) {
+  double L[45];  // lower-triangular Cholesky factor, packed by rows: L(i, j) at i (i + 1) / 2 + j
+  double trace = 0;
+  {
+    int k = 0;
+#pragma unroll
+    for (int i = 0; i < 9; ++i) {
+      trace += upper[k];
+      k += 9 - i;
+    }
+  }
+  const double shift = 1e-13 * trace + 1e-300;
+#pragma unroll
+  for (int i = 0; i < 9; ++i) {
+#pragma unroll
+    for (int j = 0; j <= i; ++j) {
+      // A(i, j) from the upper-triangle packing (row j, column i, j <= i).
+      const int upper_index = j * 9 - j * (j - 1) / 2 + (i - j);
+      double sum = upper[upper_index] + (i == j ? shift : 0.0);
+#pragma unroll
+      for (int k = 0; k < j; ++k) sum -= L[i * (i + 1) / 2 + k] * L[j * (j + 1) / 2 + k];
+      if (i == j) {
+        if (!(sum > 0)) return false;
+        L[i * (i + 1) / 2 + i] = sqrt(sum);
+      } else {
+        L[i * (i + 1) / 2 + j] = sum / L[j * (j + 1) / 2 + j];
+      }
+    }
+  }
+  double x[9];
+#pragma unroll
+  for (int i = 0; i < 9; ++i) x[i] = start[i];
+  for (int iteration = 0; iteration < 4; ++iteration) {
+    double y[9];
+#pragma unroll
+    for (int i = 0; i < 9; ++i) {  // L y = x
+      double sum = x[i];
+#pragma unroll
+      for (int k = 0; k < i; ++k) sum -= L[i * (i + 1) / 2 + k] * y[k];
+      y[i] = sum / L[i * (i + 1) / 2 + i];
+    }
+#pragma unroll
+    for (int i = 8; i >= 0; --i) {  // L^T x = y
+      double sum = y[i];
+#pragma unroll
+      for (int k = i + 1; k < 9; ++k) sum -= L[k * (k + 1) / 2 + i] * x[k];
+      x[i] = sum / L[i * (i + 1) / 2 + i];
+    }
+    double norm = 0;
+#pragma unroll
+    for (int i = 0; i < 9; ++i) norm += x[i] * x[i];
+    norm = sqrt(norm);
+    if (!(norm > 0) || !isfinite(norm)) return false;
+#pragma unroll
+    for (int i = 0; i < 9; ++i) x[i] /= norm;
+  }
+#pragma unroll
+  for (int i = 0; i < 9; ++i) out[i] = x[i];
+  return true;
+}
+
+// Expands the 45 upper-triangle sums (row-major order over i <= j) of a
+// normal matrix into the full 9 x 9.
+__device__ inline void ExpandNormalMatrix(const double* upper, double* full) {
+  int k = 0;
+  for (int i = 0; i < 9; ++i)
+    for (int j = i; j < 9; ++j) {
+      full[i * 9 + j] = full[j * 9 + i] = upper[k++];
+    }
+}
+
+__device__ inline void AddOuter(const double* row, double* upper) {
+  int k = 0;
+  for (int i = 0; i < 9; ++i)
+    for (int j = i; j < 9; ++j) upper[k++] += row[i] * row[j];
+}
+
+// --- Real roots of a cubic (as polynomial_roots.cc) -------------------------
+
+__device__ inline int QuadraticRoots(double a, double b, double c, double* roots) {
+  if (a == 0) {
+    if (b == 0) return 0;
+    roots[0] = -c / b;
+    return 1;
+  }
+  const double disc = b * b - 4 * a * c;
+  if (disc < 0) return 0;
+  const double q = -0.5 * (b + copysign(sqrt(disc), b));
+  if (q == 0) {
+    roots[0] = 0;
+    return 1;
+  }
+  roots[0] = q / a;
+  roots[1] = c / q;
+  return 2;
+}
+
+__device__ inline int CubicRoots(double c3, double c2, double c1, double c0, double* roots) {
+  const double scale = fabs(c2) + fabs(c1) + fabs(c0);
+  if (fabs(c3) <= 1e-14 * scale) return QuadraticRoots(c2, c1, c0, roots);
+  const double a = c2 / c3, b = c1 / c3, c = c0 / c3;
+  const double a_third = a / 3.0;
+  const double p = b - a * a_third;
+  const double q = 2.0 * a_third * a_third * a_third - a_third * b + c;
+  const double disc = 0.25 * q * q + p * p * p / 27.0;
+  int n = 0;
+  if (disc > 0) {
+    const double s = sqrt(disc);
+    roots[n++] = cbrt(-0.5 * q + s) + cbrt(-0.5 * q - s) - a_third;
+  } else if (p == 0) {
+    roots[n++] = -a_third;
+  } else {
+    const double r = sqrt(-p / 3.0);
+    const double arg = fmax(-1.0, fmin(1.0, -0.5 * q / (r * r * r)));
+    const double phi = acos(arg) / 3.0;
+    for (int k = 0; k < 3; ++k) roots[n++] = 2.0 * r * cos(phi - 2.0 * 3.14159265358979323846 * k / 3.0) - a_third;
+  }
+  for (int i = 0; i < n; ++i) {  // two Newton steps polish the closed form
+    double x = roots[i];
+    for (int it = 0; it < 2; ++it) {
+      const double f = ((x + a) * x + b) * x + c;
+      const double df = (3 * x + 2 * a) * x + b;
+      if (df == 0) break;
+      x -= f / df;
+    }
+    roots[i] = x;
+  }
+  return n;
+}
+
+// --- Fundamental matrix ----------------------------------------------------
+
+// Coefficients of x2^T F x1 in the row-major entries of F, for a packed
+// correspondence (x1, y1, x2, y2).
+__device__ inline void EpipolarRow(float4 p, double* row) { EpipolarCoefficients(p.x, p.y, p.z, p.w, row); }
+
+// Two vectors spanning the null space of the 7 x 9 system, by Gauss-Jordan
+// elimination with full pivoting; false when the sample is degenerate
+// (rank below 7).
+__device__ inline bool SevenPointNullSpace(const float4* sample, double* n1, double* n2) {
+  double A[7][9];
+  for (int i = 0; i < 7; ++i) EpipolarRow(sample[i], A[i]);
+  int col[9];
+  for (int j = 0; j < 9; ++j) col[j] = j;
+  double max_abs = 0;
+  for (int i = 0; i < 7; ++i)
+    for (int j = 0; j < 9; ++j) max_abs = fmax(max_abs, fabs(A[i][j]));
+  for (int r = 0; r < 7; ++r) {
+    int pr = r, pc = r;
+    double best = -1;
+    for (int i = r; i < 7; ++i)
+      for (int j = r; j < 9; ++j) {
+        const double v = fabs(A[i][col[j]]);
+        if (v > best) {
+          best = v;
+          pr = i;
+          pc = j;
+        }
+      }
+    if (!(best > 1e-12 * max_abs)) return false;
+    if (pr != r)
+      for (int j = 0; j < 9; ++j) {
+        const double t = A[r][j];
+        A[r][j] = A[pr][j];
+        A[pr][j] = t;
+      }
+    const int tc = col[r];
+    col[r] = col[pc];
+    col[pc] = tc;
+    const int c = col[r];
+    const double inv = 1.0 / A[r][c];
+    for (int j = 0; j < 9; ++j) A[r][j] *= inv;
+    for (int i = 0; i < 7; ++i) {
+      if (i == r) continue;
+      const double f = A[i][c];
+      if (f == 0) continue;
+      for (int j = 0; j < 9; ++j) A[i][j] -= f * A[r][j];
+    }
+  }
+  // Pivot variables x[col[r]] = -A[r][free] for each free column set to 1.
+  double* out[2] = {n1, n2};
+  for (int f = 0; f < 2; ++f) {
+    const int free_col = col[7 + f];
+    for (int j = 0; j < 9; ++j) out[f][j] = 0;
+    out[f][free_col] = 1;
+    for (int r = 0; r < 7; ++r) out[f][col[r]] = -A[r][free_col];
+  }
+  return true;
+}
+
+// Up to 3 rank-2 F (unit norm) through 7 normalised correspondences.
+__device__ inline int FundamentalSevenPoint(const float4* sample, double (*models)[9]) {
+  double F1[9], F2[9];
+  if (!SevenPointNullSpace(sample, F1, F2)) return 0;
+  double G[9], P[9];
+  for (int i = 0; i < 9; ++i) {
+    G[i] = F1[i] - F2[i];
+    P[i] = F2[i] - G[i];
+  }
+  // det(F2 + a G) = c0 + c1 a + c2 a^2 + c3 a^3, from a = 0, 1, -1 and det(G).
+  const double c0 = Det3(F2), c3 = Det3(G), p1 = Det3(F1), pm1 = Det3(P);
+  const double c2 = 0.5 * (p1 + pm1) - c0;
+  const double c1 = 0.5 * (p1 - pm1) - c3;
+  double roots[3];
+  const int num_roots = CubicRoots(c3, c2, c1, c0, roots);
+  int n = 0;
+  for (int k = 0; k < num_roots; ++k) {
+    for (int i = 0; i < 9; ++i) models[n][i] = F2[i] + roots[k] * G[i];
+    if (NormalizeModel(models[n])) ++n;
+  }
+  return n;
+}
+
+// The closest rank-2 matrix: F (I - v v^T) with v the right singular vector
+// of the smallest singular value (smallest eigenvector of F^T F).
+__device__ inline bool ProjectRankTwo(double* f) {
+  double FtF[9];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) FtF[3 * r + c] = f[r] * f[c] + f[3 + r] * f[3 + c] + f[6 + r] * f[6 + c];
+  double v[3];
+  SmallestEigenvector<3>(FtF, v);
+  for (int r = 0; r < 3; ++r) {
+    const double fv = f[3 * r] * v[0] + f[3 * r + 1] * v[1] + f[3 * r + 2] * v[2];
+    for (int c = 0; c < 3; ++c) f[3 * r + c] -= fv * v[c];
+  }
+  return NormalizeModel(f);
+}
+
+// --- Homography ------------------------------------------------------------
+
+// The projective map sending the basis to p0, p1, p2 and (1,1,1) to p3
+// (homogeneous points, row-major result); false when three are collinear.
+__device__ inline bool BasisToPoints(const double (*p)[3], double* M) {
+  double A[9] = {p[0][0], p[1][0], p[2][0], p[0][1], p[1][1], p[2][1], p[0][2], p[1][2], p[2][2]};
+  if (fabs(Det3(A)) < 1e-10) return false;
+  double inv[9];
+  if (!Inverse3(A, inv)) return false;
+  double l[3];
+  for (int r = 0; r < 3; ++r) {
+    l[r] = inv[3 * r] * p[3][0] + inv[3 * r + 1] * p[3][1] + inv[3 * r + 2] * p[3][2];
+    if (fabs(l[r]) < 1e-10) return false;
+  }
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) M[3 * r + c] = A[3 * r + c] * l[c];
+  return true;
+}
+
+__device__ inline bool HomographyFourPoint(const float4* sample, double* h) {
+  double p1[4][3], p2[4][3];
+  for (int i = 0; i < 4; ++i) {
+    p1[i][0] = sample[i].x;
+    p1[i][1] = sample[i].y;
+    p1[i][2] = 1;
+    p2[i][0] = sample[i].z;
+    p2[i][1] = sample[i].w;
+    p2[i][2] = 1;
+  }
+  double M1[9], M2[9], M1_inv[9];
+  if (!BasisToPoints(p1, M1) || !BasisToPoints(p2, M2) || !Inverse3(M1, M1_inv)) return false;
+  Mul3(M2, M1_inv, h);
+  return NormalizeModel(h);
+}
+
+// The two DLT rows of a correspondence.
+__device__ inline void HomographyRows(float4 p, double* r1, double* r2) {
+  const double x1 = p.x, y1 = p.y, x2 = p.z, y2 = p.w;
+  r1[0] = -x1; r1[1] = -y1; r1[2] = -1; r1[3] = 0; r1[4] = 0; r1[5] = 0;
+  r1[6] = x2 * x1; r1[7] = x2 * y1; r1[8] = x2;
+  r2[0] = 0; r2[1] = 0; r2[2] = 0; r2[3] = -x1; r2[4] = -y1; r2[5] = -1;
+  r2[6] = y2 * x1; r2[7] = y2 * y1; r2[8] = y2;
+}
+
+}  // namespace ransac
+}  // namespace cuda
+}  // namespace cashash

@@ -1,0 +1,493 @@
+// Host side of the GPU verification: packs a batch of pairs' normalised
+// correspondences (and calibrated pairs' normalised camera coordinates),
+// runs the F/H and E kernels, and turns their outputs into the estimates the
+// CPU path's decision reads.
+#include "cashash_cuda/geometry/two_view_geometry.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+
+#include "cashash/geometry/random_sampler.h"
+#include "cashash/geometry/ransac.h"
+#include "cashash/pipeline/thread_pool.h"
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/utils/device_memory.cuh"
+#include "cashash_cuda/geometry/ransac.cuh"
+#include "cashash_cuda/utils/cuda_check.cuh"
+#include "cashash_cuda/utils/stream_priority.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+// Grow buffers geometrically so that chunk after chunk reuses them.
+void Reserve(DeviceBuffer* buffer, size_t bytes, const char* what) {
+  if (buffer->bytes() >= bytes) return;
+  buffer->Allocate(bytes + bytes / 2, what);
+}
+
+void Reserve(PinnedBuffer* buffer, size_t bytes) {
+  if (buffer->bytes() >= bytes) return;
+  buffer->Allocate(bytes + bytes / 2, /*mapped=*/false, "RANSAC host staging");
+}
+
+Eigen::Matrix3d FromRowMajor(const double* v) {
+  Eigen::Matrix3d m;
+  m << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
+  return m;
+}
+
+}  // namespace
+
+struct GpuTwoViewRansac::Impl {
+  TwoViewGeometryOptions options;
+  int device = 0;
+  cudaStream_t stream = nullptr, stream_E = nullptr;
+  cudaEvent_t start = nullptr, stop = nullptr, uploaded = nullptr, done_E = nullptr;
+  DeviceBuffer points, inputs, outputs, masks;
+  PinnedBuffer host_points, host_outputs, host_masks;
+  GpuRansacStats stats;
+};
+
+GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index)
+    : impl_(std::make_unique<Impl>()) {
+  std::string reason;
+  if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+  impl_->options = options;
+  impl_->device = gpu_index;
+  CUDA_CHECK(cudaSetDevice(gpu_index));
+  impl_->stream = CreateStageStream(StreamRole::kVerification);
+  impl_->stream_E = CreateStageStream(StreamRole::kVerification);
+  CUDA_CHECK(cudaEventCreate(&impl_->start));
+  CUDA_CHECK(cudaEventCreate(&impl_->stop));
+  CUDA_CHECK(cudaEventCreateWithFlags(&impl_->uploaded, cudaEventDisableTiming));
+  CUDA_CHECK(cudaEventCreateWithFlags(&impl_->done_E, cudaEventDisableTiming));
+}
+
+GpuTwoViewRansac::~GpuTwoViewRansac() {
+  cudaSetDevice(impl_->device);
+  for (cudaEvent_t event : {impl_->start, impl_->stop, impl_->uploaded, impl_->done_E}) {
+    if (event != nullptr) cudaEventDestroy(event);
+  }
+  if (impl_->stream_E != nullptr) cudaStreamDestroy(impl_->stream_E);
+  if (impl_->stream != nullptr) cudaStreamDestroy(impl_->stream);
+}
+
+const GpuRansacStats& GpuTwoViewRansac::stats() const { return impl_->stats; }
+
+void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
+                                std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,
+                                const std::function<void()>& while_running) {
+  Estimate(pairs, seeds, {}, F, H, nullptr, while_running);
+}
+
+void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
+                                const std::vector<const EssentialPoints*>& essential,
+                                std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,
+                                std::vector<TwoViewModelEstimate>* E, const std::function<void()>& while_running) {
+  if (seeds.size() != pairs.size()) throw std::invalid_argument("GpuTwoViewRansac::Estimate: one seed per pair");
+  if (!essential.empty() && (essential.size() != pairs.size() || E == nullptr)) {
+    throw std::invalid_argument("GpuTwoViewRansac::Estimate: E needs one entry per pair and an output");
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  Impl& d = *impl_;
+  CUDA_CHECK(cudaSetDevice(d.device));
+  const size_t num_pairs = pairs.size();
+  F->assign(num_pairs, TwoViewModelEstimate());
+  H->assign(num_pairs, TwoViewModelEstimate());
+  if (E != nullptr) E->assign(num_pairs, TwoViewModelEstimate());
+  if (num_pairs == 0) {
+    if (while_running) while_running();
+    return;
+  }
+
+  // Inputs: F's pairs first, then H's, over one shared point array, largest
+  // pairs first (blocks start roughly in order; big ones last would leave a
+  // long tail). Slot j holds pair order[j]. E's pairs (their own points, in
+  // normalised camera coordinates) follow, again largest first: slot
+  // 2 num_pairs + j holds pair order_E[j].
+  std::vector<size_t> order(num_pairs);
+  for (size_t k = 0; k < num_pairs; ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return pairs[a]->normalized.size() > pairs[b]->normalized.size();
+  });
+  std::vector<size_t> order_E;
+  for (size_t j = 0; j < essential.size(); ++j) {
+    if (essential[order[j]] != nullptr) order_E.push_back(order[j]);
+  }
+  const size_t num_E = order_E.size();
+  std::vector<RansacPairInput> inputs(2 * num_pairs + num_E);
+  size_t total = 0;
+  int max_count = 0;
+  for (size_t j = 0; j < num_pairs; ++j) {
+    const size_t k = order[j];
+    const size_t n = pairs[k]->normalized.size();
+    if (total + n > static_cast<size_t>(INT32_MAX)) throw std::runtime_error("GPU verification batch too large");
+    RansacPairInput& f = inputs[j];
+    f.offset = static_cast<int>(total);
+    f.count = static_cast<int>(n);
+    f.squared_threshold = static_cast<float>(NormalizedSquaredThreshold(*pairs[k], d.options));
+    f.seed = DeriveSeed(seeds[k], kSeedF);
+    RansacPairInput& h = inputs[num_pairs + j];
+    h = f;
+    h.seed = DeriveSeed(seeds[k], kSeedH);
+    total += n;
+    max_count = std::max(max_count, f.count);
+  }
+  // E's points follow F/H's in the point array (offsets from the array's
+  // start); its masks follow F's and H's.
+  size_t total_E = 0;
+  int max_count_E = 0;
+  for (size_t j = 0; j < num_E; ++j) {
+    const EssentialPoints& e = *essential[order_E[j]];
+    const size_t n = e.world.size();
+    if (total + total_E + n > static_cast<size_t>(INT32_MAX)) {
+      throw std::runtime_error("GPU verification batch too large");
+    }
+    RansacPairInput& in = inputs[2 * num_pairs + j];
+    in.offset = static_cast<int>(total + total_E);
+    in.count = static_cast<int>(n);
+    // As LoRansac compares: float residuals against float(max_error^2).
+    in.squared_threshold = static_cast<float>(e.max_error * e.max_error);
+    in.seed = DeriveSeed(seeds[order_E[j]], kSeedE);
+    total_E += n;
+    max_count_E = std::max(max_count_E, in.count);
+  }
+  const size_t all_points = total + total_E;
+  // Packing and unpacking run on all cores: at tens of thousands of pairs
+  // per second they would otherwise cost as much as the kernels.
+  Reserve(&d.host_points, all_points * sizeof(float4));
+  float4* host_points = d.host_points.host<float4>();
+  ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
+    const PointPairs& p = j < num_pairs ? pairs[order[j]]->normalized : essential[order_E[j - num_pairs]]->world;
+    float4* out = host_points + inputs[j < num_pairs ? j : num_pairs + j].offset;
+    for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
+  });
+
+  Reserve(&d.points, all_points * sizeof(float4), "RANSAC points");
+  Reserve(&d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
+  Reserve(&d.outputs, inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
+  Reserve(&d.masks, 2 * total + total_E, "RANSAC inlier masks");
+
+  CUDA_CHECK(cudaEventRecord(d.start, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points, all_points * sizeof(float4),
+                             cudaMemcpyHostToDevice, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.inputs.as<RansacPairInput>(), inputs.data(), inputs.size() * sizeof(RansacPairInput),
+                             cudaMemcpyHostToDevice, d.stream));
+  RansacOptions ransac;
+  ransac.confidence = d.options.confidence;
+  ransac.min_num_trials = d.options.min_num_trials;
+  ransac.max_num_trials = d.options.max_num_trials;
+  ransac.min_inlier_ratio = d.options.min_inlier_ratio;
+  RansacLaunch F_launch;
+  F_launch.points = d.points.as<float4>();
+  F_launch.num_pairs = static_cast<int>(num_pairs);
+  F_launch.min_trials = d.options.min_num_trials;
+  F_launch.confidence = d.options.confidence;
+  F_launch.trials_multiplier = ransac.num_trials_multiplier;
+  F_launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
+  F_launch.early_exit = TwoViewEarlyExitOptions(d.options);
+  RansacLaunch H_launch = F_launch;
+  RansacLaunch E_launch = F_launch;
+  F_launch.pairs = d.inputs.as<RansacPairInput>();
+  F_launch.outputs = d.outputs.as<RansacPairOutput>();
+  F_launch.masks = d.masks.as<uint8_t>();
+  F_launch.max_trials = RansacMaxTrials(ransac, 7);
+  H_launch.pairs = d.inputs.as<RansacPairInput>() + num_pairs;
+  H_launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
+  H_launch.masks = d.masks.as<uint8_t>() + total;
+  H_launch.max_trials = RansacMaxTrials(ransac, 4);
+  if (d.options.early_exit) {
+    // H only matters above a share of F's inliers: it runs after F and
+    // stops once no model that could change the decision exists.
+    H_launch.relevance = F_launch.outputs;
+    H_launch.relevance_ratio = TwoViewRelevantHomographyRatio(d.options);
+    H_launch.relevance_min_inliers = std::max(0, d.options.min_num_inliers);
+  }
+  // E's masks sit at 2 total + (offset - total): the kernel indexes masks by
+  // the pair's point offset, so its base is shifted back by `total`.
+  E_launch.num_pairs = static_cast<int>(num_E);
+  E_launch.pairs = d.inputs.as<RansacPairInput>() + 2 * num_pairs;
+  E_launch.outputs = d.outputs.as<RansacPairOutput>() + 2 * num_pairs;
+  E_launch.masks = d.masks.as<uint8_t>() + total;
+  E_launch.max_trials = RansacMaxTrials(ransac, 5);
+  E_launch.block_threads = EssentialBlockThreadsFromEnvironment();
+  E_launch.shared_points = std::min(max_count_E, kRansacMaxSharedPoints);
+  if (num_E > 0) {
+    // E (the longest) starts first on its own stream; F and H run beside it.
+    CUDA_CHECK(cudaEventRecord(d.uploaded, d.stream));
+    CUDA_CHECK(cudaStreamWaitEvent(d.stream_E, d.uploaded, 0));
+    LaunchEssentialRansac(E_launch, d.stream_E);
+    CUDA_CHECK(cudaEventRecord(d.done_E, d.stream_E));
+  }
+  if (H_launch.relevance != nullptr) {
+    RansacLaunch no_H = H_launch, no_F = F_launch;
+    no_H.num_pairs = 0;
+    no_F.num_pairs = 0;
+    LaunchTwoViewRansac(F_launch, no_H, d.stream);
+    LaunchTwoViewRansac(no_F, H_launch, d.stream);
+  } else {
+    LaunchTwoViewRansac(F_launch, H_launch, d.stream);
+  }
+  if (num_E > 0) CUDA_CHECK(cudaStreamWaitEvent(d.stream, d.done_E, 0));
+
+  const size_t num_outputs = inputs.size();
+  Reserve(&d.host_outputs, num_outputs * sizeof(RansacPairOutput));
+  Reserve(&d.host_masks, 2 * total + total_E);
+  const RansacPairOutput* outputs = d.host_outputs.host<RansacPairOutput>();
+  const uint8_t* masks = d.host_masks.host<uint8_t>();
+  CUDA_CHECK(cudaMemcpyAsync(d.host_outputs.host<RansacPairOutput>(), d.outputs.as<RansacPairOutput>(),
+                             num_outputs * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
+  CUDA_CHECK(cudaMemcpyAsync(d.host_masks.host<uint8_t>(), d.masks.as<uint8_t>(), 2 * total + total_E,
+                             cudaMemcpyDeviceToHost, d.stream));
+  CUDA_CHECK(cudaEventRecord(d.stop, d.stream));
+  // Pinned copies are asynchronous: the host works while the kernels run.
+  if (while_running) while_running();
+  CUDA_CHECK(cudaStreamSynchronize(d.stream));
+  float gpu_ms = 0;
+  CUDA_CHECK(cudaEventElapsedTime(&gpu_ms, d.start, d.stop));
+
+  ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
+    if (j >= num_pairs) {
+      const size_t slot = 2 * num_pairs + (j - num_pairs);
+      const RansacPairOutput& out = outputs[slot];
+      TwoViewModelEstimate& e = (*E)[order_E[j - num_pairs]];
+      e.success = out.success != 0;
+      e.num_inliers = e.success ? out.num_inliers : 0;
+      e.num_trials = out.num_trials;
+      e.early_exit = out.early_exit != 0;
+      if (e.success) {
+        e.model = FromRowMajor(out.model);  // normalised camera coordinates, as the CPU's
+        const uint8_t* mask = masks + total + inputs[slot].offset;
+        e.inlier_mask.assign(mask, mask + inputs[slot].count);
+      }
+      return;
+    }
+    const size_t k = order[j];
+    for (int model = 0; model < 2; ++model) {
+      const RansacPairOutput& out = outputs[model * num_pairs + j];
+      TwoViewModelEstimate& e = model == 0 ? (*F)[k] : (*H)[k];
+      e.success = out.success != 0;
+      e.num_inliers = e.success ? out.num_inliers : 0;
+      e.num_trials = out.num_trials;
+      e.early_exit = out.early_exit != 0;
+      if (e.success) {
+        const Eigen::Matrix3d m = FromRowMajor(out.model);
+        e.model = model == 0 ? FundamentalToPixels(m, pairs[k]->norm) : HomographyToPixels(m, pairs[k]->norm);
+        const uint8_t* mask = masks + model * total + inputs[j].offset;
+        e.inlier_mask.assign(mask, mask + inputs[j].count);
+      }
+    }
+  });
+  for (size_t j = 0; j < 2 * num_pairs; ++j) {
+    (j < num_pairs ? d.stats.trials_F : d.stats.trials_H) += outputs[j].num_trials;
+    (j < num_pairs ? d.stats.local_refits_F : d.stats.local_refits_H) += outputs[j].num_local_refits;
+    (j < num_pairs ? d.stats.early_exits_F : d.stats.early_exits_H) += outputs[j].early_exit;
+  }
+  for (size_t j = 0; j < num_E; ++j) {
+    d.stats.trials_E += outputs[2 * num_pairs + j].num_trials;
+    d.stats.local_refits_E += outputs[2 * num_pairs + j].num_local_refits;
+    d.stats.early_exits_E += outputs[2 * num_pairs + j].early_exit;
+  }
+  d.stats.pairs += num_pairs;
+  d.stats.pairs_E += num_E;
+  d.stats.points += total;
+  d.stats.seconds_gpu += gpu_ms / 1000.0;
+  d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+int EssentialBlockThreadsFromEnvironment() {
+  static const int threads = [] {
+    const char* text = std::getenv("CASHASH_ESSENTIAL_BLOCK_THREADS");
+    if (text == nullptr) return kDefaultEssentialBlockThreads;
+    return std::string(text) == std::to_string(kEssentialLargeBlockThreads) ? kEssentialLargeBlockThreads
+                                                                              : kRansacThreads;
+  }();
+  return threads;
+}
+
+int GpuVerificationsInFlightFromEnvironment() {
+  static const int calls = [] {
+    const char* text = std::getenv("CASHASH_GPU_VERIFICATIONS_IN_FLIGHT");
+    const int value = text == nullptr ? kDefaultGpuVerificationsInFlight : std::atoi(text);
+    return std::min(std::max(value, 1), 8);
+  }();
+  return calls;
+}
+
+bool GpuEssentialFromEnvironment() {
+  const char* where = std::getenv("CASHASH_GPU_ESSENTIAL");
+  return where == nullptr || std::string(where) != "cpu";
+}
+
+namespace {
+
+class GpuBatchVerifier : public BatchVerifier {
+ public:
+  GpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index, int num_threads)
+      : options_(options),
+        num_threads_(num_threads),
+        gpu_index_(gpu_index),
+        max_calls_(GpuVerificationsInFlightFromEnvironment()),
+        essential_on_gpu_(GpuEssentialFromEnvironment()) {
+    // The first estimator now, so that an unusable device fails here.
+    estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index));
+    free_.push_back(estimators_.back().get());
+  }
+
+  std::string Name() const override { return "gpu"; }
+
+  int MaxConcurrentCalls() const override { return max_calls_; }
+
+  std::string StatsSummary() const override {
+    const GpuRansacStats st = SummedStats();
+    if (st.pairs == 0) return {};
+    auto per_pair = [](long long value, size_t pairs) { return pairs ? static_cast<double>(value) / pairs : 0.0; };
+    char line[512];
+    std::snprintf(line, sizeof(line),
+                  "GPU verification: %zu pairs (%zu with E), device busy %.3f s of %.3f s (summed over up to %d "
+                  "chunks at once, E blocks of %d threads); trials per pair F %.0f, "
+                  "H %.0f, E %.0f; stopped early (chance, or H below what could change the decision) F %lld, "
+                  "H %lld, E %lld",
+                  st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, max_calls_,
+                  EssentialBlockThreadsFromEnvironment(), per_pair(st.trials_F, st.pairs),
+                  per_pair(st.trials_H, st.pairs), per_pair(st.trials_E, st.pairs_E), st.early_exits_F,
+                  st.early_exits_H, st.early_exits_E);
+    return line;
+  }
+
+  std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+    const size_t n = pairs.size();
+    std::vector<TwoViewGeometry> geometries(n);
+    std::vector<TwoViewPoints> points(n);
+    std::vector<EssentialPoints> essential_points(essential_on_gpu_ ? n : 0);
+    std::vector<char> estimated(n, 0), calibrated(n, 0);
+    ParallelFor(n, num_threads_, [&](size_t k) {
+      const VerificationPair& pair = pairs[k];
+      if (TooFewMatchesForTwoView(pair.matches->size(), options_)) return;
+      points[k] = PrepareTwoViewPoints(*pair.points1, *pair.points2, *pair.matches);
+      estimated[k] = 1;
+      calibrated[k] = TwoViewIsCalibrated(*pair.camera1, *pair.camera2);
+      if (calibrated[k] && essential_on_gpu_) {
+        essential_points[k] = PrepareEssentialPoints(*pair.camera1, *pair.camera2, points[k].pixels, options_);
+      }
+    });
+    std::vector<size_t> batch;
+    std::vector<const TwoViewPoints*> batch_points;
+    std::vector<const EssentialPoints*> batch_essential;
+    std::vector<uint64_t> batch_seeds;
+    std::vector<size_t> calibrated_pairs;
+    for (size_t k = 0; k < n; ++k) {
+      if (!estimated[k]) continue;
+      batch.push_back(k);
+      batch_points.push_back(&points[k]);
+      batch_seeds.push_back(pairs[k].random_seed);
+      if (essential_on_gpu_) batch_essential.push_back(calibrated[k] ? &essential_points[k] : nullptr);
+      if (calibrated[k]) calibrated_pairs.push_back(k);
+    }
+    std::vector<TwoViewModelEstimate> F, H, E_batch, E(n);
+    EstimatorLease ransac(this);
+    if (essential_on_gpu_) {
+      ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
+      for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
+    } else {
+      // E (calibrated pairs) on the CPU while the GPU estimates F and H.
+      ransac->Estimate(batch_points, batch_seeds, &F, &H, [&]() {
+        ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
+          const size_t k = calibrated_pairs[i];
+          E[k] = EstimateEssential(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, PairOptions(pairs[k]));
+        });
+      });
+    }
+    ParallelFor(batch.size(), num_threads_, [&](size_t i) {
+      const size_t k = batch[i];
+      geometries[k] = DecideTwoViewGeometry(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels,
+                                            *pairs[k].matches, calibrated[k] != 0, F[i], H[i], E[k],
+                                            PairOptions(pairs[k]));
+    });
+    for (size_t k = 0; k < n; ++k) {
+      if (!estimated[k]) geometries[k].config = kDegenerate;
+    }
+    return geometries;
+  }
+
+ private:
+  TwoViewGeometryOptions PairOptions(const VerificationPair& pair) const {
+    TwoViewGeometryOptions options = options_;
+    options.random_seed = pair.random_seed;
+    return options;
+  }
+
+  // One estimator (streams and buffers) per Verify call in flight, made on
+  // first need and handed back when the call returns.
+  class EstimatorLease {
+   public:
+    explicit EstimatorLease(GpuBatchVerifier* owner) : owner_(owner) {
+      std::unique_lock<std::mutex> lock(owner_->mutex_);
+      if (owner_->free_.empty()) {
+        owner_->estimators_.push_back(std::make_unique<GpuTwoViewRansac>(owner_->options_, owner_->gpu_index_));
+        owner_->free_.push_back(owner_->estimators_.back().get());
+      }
+      estimator_ = owner_->free_.back();
+      owner_->free_.pop_back();
+    }
+    ~EstimatorLease() {
+      std::lock_guard<std::mutex> lock(owner_->mutex_);
+      owner_->free_.push_back(estimator_);
+    }
+    EstimatorLease(const EstimatorLease&) = delete;
+    EstimatorLease& operator=(const EstimatorLease&) = delete;
+    GpuTwoViewRansac* operator->() const { return estimator_; }
+
+   private:
+    GpuBatchVerifier* owner_;
+    GpuTwoViewRansac* estimator_ = nullptr;
+  };
+
+  GpuRansacStats SummedStats() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    GpuRansacStats sum;
+    for (const auto& estimator : estimators_) {
+      const GpuRansacStats& st = estimator->stats();
+      sum.pairs += st.pairs;
+      sum.points += st.points;
+      sum.seconds_total += st.seconds_total;
+      sum.seconds_gpu += st.seconds_gpu;
+      sum.trials_F += st.trials_F;
+      sum.trials_H += st.trials_H;
+      sum.local_refits_F += st.local_refits_F;
+      sum.local_refits_H += st.local_refits_H;
+      sum.pairs_E += st.pairs_E;
+      sum.trials_E += st.trials_E;
+      sum.local_refits_E += st.local_refits_E;
+      sum.early_exits_F += st.early_exits_F;
+      sum.early_exits_H += st.early_exits_H;
+      sum.early_exits_E += st.early_exits_E;
+    }
+    return sum;
+  }
+
+  TwoViewGeometryOptions options_;
+  int num_threads_;
+  int gpu_index_;
+  int max_calls_;
+  bool essential_on_gpu_;
+  mutable std::mutex mutex_;
+  std::vector<std::unique_ptr<GpuTwoViewRansac>> estimators_;
+  std::vector<GpuTwoViewRansac*> free_;
+};
+
+}  // namespace
+
+std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
+                                                      int num_threads) {
+  return std::make_unique<GpuBatchVerifier>(options, gpu_index, num_threads);
+}
+
+}  // namespace cuda
+}  // namespace cashash

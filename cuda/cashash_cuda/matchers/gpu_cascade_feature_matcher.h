@@ -1,0 +1,19 @@
+// Factory of the GPU Cascade Hashing FeatureMatcher (used by
+// CreateGpuFeatureMatcher). Plain C++ header.
+#pragma once
+
+#include <memory>
+
+#include "cashash/matchers/feature_matcher.h"
+
+namespace cashash {
+namespace cuda {
+
+// Throws std::invalid_argument for options the GPU path does not support and
+// std::runtime_error when the device cannot be used.
+std::unique_ptr<FeatureMatcher> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean, int gpu_index);
+
+}  // namespace cuda
+}  // namespace cashash

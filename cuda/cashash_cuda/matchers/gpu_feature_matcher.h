@@ -1,0 +1,25 @@
+// The GPU matching backend: Cascade Hashing and exact brute force on CUDA,
+// behind the same FeatureMatcher interface as the CPU backends.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "cashash/matchers/feature_matcher.h"
+
+namespace cashash {
+namespace cuda {
+
+// Number of usable CUDA devices (0 when there is no driver or no device).
+int NumCudaDevices();
+
+// True if device gpu_index can be used; otherwise *reason says why.
+bool CudaDeviceUsable(int gpu_index, std::string* reason);
+
+// Throws std::runtime_error when the device cannot be used.
+std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean, int gpu_index);
+
+}  // namespace cuda
+}  // namespace cashash

@@ -1,0 +1,455 @@
+// Kernels of the exact GPU brute-force matcher (see brute_force_matcher.cuh
+// and docs/gpu_brute_force_design.md for the design and its floor).
+//
+// BestTwoKernel: one thread block takes 256 query rows of one problem; each of
+// its 4 warps keeps the u8 fragments of its 64 rows in registers for the whole
+// run and sweeps every row of b, 128 at a time, through a double-buffered
+// shared-memory tile. Per 8 columns a warp issues 16 m16n8k32 u8 mma (K = 128
+// exactly: the dot products are exact in s32) and folds the 64x8 dots into its
+// rows' running best two with packed (score, position) keys, three min/max per
+// dot. The two directions of a pair are two problems of the same launch.
+//
+// MutualMatchKernel: one block per pair applies COLMAP's acceptance rule via a
+// table of the host's own acos values (so the GPU decides exactly as the CPU)
+// and the cross-check, and compacts the matches in idx1 order.
+#include "cashash_cuda/matching/brute_force_matcher.cuh"
+
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "cashash/matching/descriptor_distance.h"
+#include "cashash_cuda/utils/cuda_check.cuh"
+#include "cashash_cuda/utils/tensor_core_u8.cuh"
+#include "cashash_cuda/utils/warp_best_two.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+constexpr int kThreads = 128;
+constexpr int kWarpRows = 64;                        // 4 m16 tiles per warp
+constexpr int kBlockRows = kWarpRows * kThreads / 32;  // 256
+constexpr int kTileCols = 128;                       // b rows per shared tile
+constexpr int kRowBytes = 128;
+constexpr int kSmemStride = 144;  // 128 + 16: conflict-free ldmatrix rows
+constexpr int kTileBytes = kTileCols * kSmemStride;
+static_assert(kTileCols <= PackedBestTwo::kPositions, "tile positions must fit the packed key");
+
+// Dots at or above 512^2 all have angle 0 (the cosine is clamped to 1).
+constexpr int kAngleTableMaxDot = 512 * 512;
+
+// Variants measured on an H100 (docs/gpu_brute_force_design.md): 2 blocks per
+// SM with the strip loop unrolled twice was the fastest.
+#ifndef CASHASH_BF_MIN_BLOCKS
+#define CASHASH_BF_MIN_BLOCKS 2  // blocks per SM the register budget is sized for
+#endif
+#ifndef CASHASH_BF_STRIP_UNROLL
+#define CASHASH_BF_STRIP_UNROLL 2  // 8-column strips per unrolled step
+#endif
+constexpr int kStripUnroll = CASHASH_BF_STRIP_UNROLL;
+
+__global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
+    BestTwoKernel(const BestTwoProblem* __restrict__ problems, const int2* __restrict__ items, int key_scale) {
+  __shared__ __align__(128) uint8_t tiles[2][kTileBytes];
+
+  const int2 item = items[blockIdx.x];
+  const BestTwoProblem p = problems[item.x];
+  const int lane = threadIdx.x & 31;
+  const int warp = threadIdx.x >> 5;
+  const int g = lane >> 2;  // mma group: fragment row
+  const int t = lane & 3;   // thread in group: fragment column pair
+  const int warp_row0 = item.y * kBlockRows + warp * kWarpRows;
+
+  // A fragments of the warp's 64 rows, all of K: [m tile][k step][register].
+  // Register r holds row g (+8 for r odd) and bytes 4t..4t+3 (+16 for r >= 2)
+  // of the k step, the m16n8k32 row-major layout.
+  uint32_t a[4][4][4];
+#pragma unroll
+  for (int i = 0; i < 4; ++i) {
+    const int row_lo = warp_row0 + 16 * i + g;
+    const int row_hi = row_lo + 8;
+    const uint32_t* lo = reinterpret_cast<const uint32_t*>(p.a + static_cast<size_t>(row_lo) * kRowBytes);
+    const uint32_t* hi = reinterpret_cast<const uint32_t*>(p.a + static_cast<size_t>(row_hi) * kRowBytes);
+    const bool lo_ok = row_lo < p.n_a;
+    const bool hi_ok = row_hi < p.n_a;
+#pragma unroll
+    for (int s = 0; s < 4; ++s) {
+      a[i][s][0] = lo_ok ? __ldg(lo + 8 * s + t) : 0u;
+      a[i][s][1] = hi_ok ? __ldg(hi + 8 * s + t) : 0u;
+      a[i][s][2] = lo_ok ? __ldg(lo + 8 * s + 4 + t) : 0u;
+      a[i][s][3] = hi_ok ? __ldg(hi + 8 * s + 4 + t) : 0u;
+    }
+  }
+
+  // Rows of b past n_b are zero-filled: their dot 0 never beats a real column
+  // (which has a lower index) and equals the default second best.
+  auto load_tile = [&](int tile, int stage) {
+    const int col0 = tile * kTileCols;
+    const uint32_t base = SharedAddress(&tiles[stage][0]);
+#pragma unroll
+    for (int q = 0; q < kTileCols * kRowBytes / 16 / kThreads; ++q) {
+      const int chunk = threadIdx.x + q * kThreads;
+      const int row = chunk >> 3;
+      const int part = chunk & 7;
+      const bool valid = col0 + row < p.n_b;
+      const uint8_t* src = valid ? p.b + static_cast<size_t>(col0 + row) * kRowBytes + part * 16 : p.b;
+      CopyAsync16(base + row * kSmemStride + part * 16, src, valid);
+    }
+  };
+
+  // Slot 2i + h: row 16i + g + 8h of the warp.
+  PackedBestTwo window[8];
+  IndexedBestTwo best[8];
+
+  const int num_tiles = (p.n_b + kTileCols - 1) / kTileCols;
+  if (num_tiles > 0) load_tile(0, 0);
+  CopyAsyncCommit();
+  // ldmatrix x4: lanes 8m..8m+7 address rows 0..7 of matrix m, which is the
+  // 16-byte column block m of the 8 b rows (k steps 2 per x4).
+  const uint32_t lane_offset = (lane & 7) * kSmemStride + (lane >> 3) * 16;
+
+  for (int tile = 0; tile < num_tiles; ++tile) {
+    if (tile + 1 < num_tiles) load_tile(tile + 1, (tile + 1) & 1);
+    CopyAsyncCommit();
+    CopyAsyncWait<1>();
+    __syncthreads();
+
+    const uint32_t stage = SharedAddress(&tiles[tile & 1][0]) + lane_offset;
+#pragma unroll(kStripUnroll)
+    for (int n = 0; n < kTileCols / 8; ++n) {
+      uint32_t b[8];
+      {
+        uint32_t r[4];
+        LoadMatrixX4(stage + n * 8 * kSmemStride, r);
+        b[0] = r[0]; b[1] = r[1]; b[2] = r[2]; b[3] = r[3];
+        LoadMatrixX4(stage + n * 8 * kSmemStride + 64, r);
+        b[4] = r[0]; b[5] = r[1]; b[6] = r[2]; b[7] = r[3];
+      }
+      int acc[4][4];
+#pragma unroll
+      for (int i = 0; i < 4; ++i) acc[i][0] = acc[i][1] = acc[i][2] = acc[i][3] = 0;
+#pragma unroll
+      for (int s = 0; s < 4; ++s) {
+#pragma unroll
+        for (int i = 0; i < 4; ++i) MmaU8(acc[i], a[i][s], b[2 * s], b[2 * s + 1]);
+      }
+      // Accumulator j of tile i: row 16i + g (+8 for j >= 2), column
+      // n*8 + 2t + (j & 1). key = dot * 256 + (255 - column in tile); the
+      // scale comes in as a kernel argument so the multiply stays an IMAD
+      // (FMA pipe) instead of a shift on the min/max (ALU) pipe.
+      const int position_key = PackedBestTwo::kPositions - 1 - (n * 8 + 2 * t);
+#ifdef CASHASH_BF_PROBE_MMA_ONLY
+      // Timing probe only (wrong results): the tensor-core part without the
+      // best-two selection, one add per dot to keep the products alive.
+#pragma unroll
+      for (int i = 0; i < 4; ++i) window[2 * i].best += acc[i][0] + acc[i][1] + acc[i][2] + acc[i][3];
+      (void)position_key;
+#else
+#pragma unroll
+      for (int i = 0; i < 4; ++i) {
+        window[2 * i].Push(acc[i][0] * key_scale + position_key);
+        window[2 * i].Push(acc[i][1] * key_scale + position_key - 1);
+        window[2 * i + 1].Push(acc[i][2] * key_scale + position_key);
+        window[2 * i + 1].Push(acc[i][3] * key_scale + position_key - 1);
+      }
+#endif
+    }
+    const int col0 = tile * kTileCols;
+#pragma unroll
+    for (int slot = 0; slot < 8; ++slot) {
+      best[slot].Merge(window[slot].BestScore(), col0 + window[slot].BestPosition(), window[slot].SecondScore());
+      window[slot].Reset();
+    }
+    __syncthreads();  // the stage is refilled by the next iteration's load
+  }
+
+#pragma unroll
+  for (int slot = 0; slot < 8; ++slot) {
+    best[slot].WarpGroupMerge<4>();
+    const int row = warp_row0 + 16 * (slot >> 1) + g + 8 * (slot & 1);
+    if (t == 0 && row < p.n_a) {
+      const bool found = best[slot].best > 0;
+      p.best_dot[row] = found ? best[slot].best : 0;
+      p.best_idx[row] = found ? best[slot].index : -1;
+      p.second_dot[row] = best[slot].second;
+    }
+  }
+}
+
+__device__ __forceinline__ bool AcceptOnDevice(int dot, int second, int index, const float* __restrict__ angle,
+                                               float max_ratio, float max_distance) {
+  if (index < 0) return false;
+  const float best_angle = __ldg(angle + min(dot, kAngleTableMaxDot));
+  if (best_angle > max_distance) return false;
+  const float second_angle = __ldg(angle + min(second, kAngleTableMaxDot));
+  return best_angle < __fmul_rn(max_ratio, second_angle);
+}
+
+constexpr int kMatchThreads = 256;
+
+__global__ void __launch_bounds__(kMatchThreads)
+    MutualMatchKernel(const MutualMatchProblem* __restrict__ problems, const float* __restrict__ angle,
+                      MatchThresholds thresholds) {
+  __shared__ int warp_counts[kMatchThreads / 32];
+  const MutualMatchProblem p = problems[blockIdx.x];
+  const int lane = threadIdx.x & 31;
+  const int warp = threadIdx.x >> 5;
+  int written = 0;
+  for (int base = 0; base < p.n1; base += kMatchThreads) {
+    const int i = base + threadIdx.x;
+    int j = -1;
+    bool keep = false;
+    if (i < p.n1) {
+      j = p.best_idx12[i];
+      keep = AcceptOnDevice(p.best_dot12[i], p.second_dot12[i], j, angle, thresholds.max_ratio,
+                            thresholds.max_distance);
+      if (keep && thresholds.cross_check) {
+        keep = j < p.n2 && p.best_idx21[j] == i &&
+               AcceptOnDevice(p.best_dot21[j], p.second_dot21[j], i, angle, thresholds.max_ratio,
+                              thresholds.max_distance);
+      }
+    }
+    const unsigned ballot = __ballot_sync(0xffffffffu, keep);
+    if (lane == 0) warp_counts[warp] = __popc(ballot);
+    __syncthreads();
+    int offset = written;
+    int total = 0;
+#pragma unroll
+    for (int w = 0; w < kMatchThreads / 32; ++w) {
+      offset += w < warp ? warp_counts[w] : 0;
+      total += warp_counts[w];
+    }
+    if (keep) {
+      const int slot = offset + __popc(ballot & ((1u << lane) - 1u));
+      p.matches[2 * slot] = static_cast<uint32_t>(i);
+      p.matches[2 * slot + 1] = static_cast<uint32_t>(j);
+    }
+    written += total;
+    __syncthreads();  // warp_counts is rewritten by the next round
+  }
+  if (threadIdx.x == 0) *p.num_matches = written;
+}
+
+// Device or pinned host memory that only grows; growing waits for the stream
+// first, since queued work may still read the old block.
+class GrowingBuffer {
+ public:
+  GrowingBuffer(bool pinned_host) : pinned_host_(pinned_host) {}
+  ~GrowingBuffer() { Free(); }
+  GrowingBuffer(const GrowingBuffer&) = delete;
+  GrowingBuffer& operator=(const GrowingBuffer&) = delete;
+
+  void* Reserve(size_t bytes, cudaStream_t stream) {
+    if (bytes <= bytes_) return ptr_;
+    CUDA_CHECK(cudaStreamSynchronize(stream));
+    Free();
+    const size_t grown = std::max(bytes, bytes_ * 3 / 2);
+    if (pinned_host_) {
+      CUDA_CHECK(cudaMallocHost(&ptr_, grown));
+    } else {
+      CUDA_CHECK(cudaMalloc(&ptr_, grown));
+    }
+    bytes_ = grown;
+    return ptr_;
+  }
+
+ private:
+  void Free() {
+    if (ptr_ != nullptr) {
+      if (pinned_host_) cudaFreeHost(ptr_);
+      else cudaFree(ptr_);
+    }
+    ptr_ = nullptr;
+    bytes_ = 0;
+  }
+  bool pinned_host_;
+  void* ptr_ = nullptr;
+  size_t bytes_ = 0;
+};
+
+}  // namespace
+
+struct BruteForceKernels::Scratch {
+  GrowingBuffer angle_table{false};
+  GrowingBuffer problems{false};  // BestTwoProblem[] then int2 items[]
+  GrowingBuffer mutual{false};    // MutualMatchProblem[]
+  GrowingBuffer results{false};   // MatchPairs: best-two outputs, matches, counts
+  GrowingBuffer host_counts{true};
+  GrowingBuffer host_matches{true};
+  const float* angle = nullptr;
+};
+
+BruteForceKernels::BruteForceKernels(cudaStream_t stream) : stream_(stream), scratch_(new Scratch) {
+  try {
+    // The host's own angle of every dot that can differ from angle 0, so the
+    // device's decisions are bit-identical to AcceptSiftMatch on the CPU.
+    std::vector<float> table(kAngleTableMaxDot + 1);
+    for (int dot = 0; dot <= kAngleTableMaxDot; ++dot) table[dot] = DescriptorDotToAngle(dot);
+    void* device_table = scratch_->angle_table.Reserve(table.size() * sizeof(float), stream_);
+    CUDA_CHECK(cudaMemcpyAsync(device_table, table.data(), table.size() * sizeof(float), cudaMemcpyHostToDevice,
+                               stream_));
+    CUDA_CHECK(cudaStreamSynchronize(stream_));
+    scratch_->angle = static_cast<const float*>(device_table);
+  } catch (...) {
+    delete scratch_;
+    throw;
+  }
+}
+
+BruteForceKernels::~BruteForceKernels() {
+  if (scratch_ != nullptr) cudaStreamSynchronize(stream_);
+  delete scratch_;
+}
+
+void BruteForceKernels::EnqueueBestTwo(const std::vector<BestTwoProblem>& problems) {
+  std::vector<int2> items;
+  for (size_t k = 0; k < problems.size(); ++k) {
+    const BestTwoProblem& p = problems[k];
+    if (p.n_a < 0 || p.n_b < 0 || (p.n_a > 0 && p.a == nullptr) || (p.n_b > 0 && p.b == nullptr)) {
+      throw std::invalid_argument("EnqueueBestTwo: bad problem " + std::to_string(k));
+    }
+    if ((reinterpret_cast<uintptr_t>(p.a) | reinterpret_cast<uintptr_t>(p.b)) % 16 != 0) {
+      throw std::invalid_argument("EnqueueBestTwo: descriptors must be 16-byte aligned");
+    }
+    for (int block = 0; block * kBlockRows < p.n_a; ++block) items.push_back(make_int2(static_cast<int>(k), block));
+  }
+  if (items.empty()) return;
+  const size_t problem_bytes = (problems.size() * sizeof(BestTwoProblem) + 15) / 16 * 16;
+  const size_t item_bytes = items.size() * sizeof(int2);
+  std::vector<uint8_t> staged(problem_bytes + item_bytes);
+  std::memcpy(staged.data(), problems.data(), problems.size() * sizeof(BestTwoProblem));
+  std::memcpy(staged.data() + problem_bytes, items.data(), item_bytes);
+  uint8_t* device = static_cast<uint8_t*>(scratch_->problems.Reserve(staged.size(), stream_));
+  CUDA_CHECK(cudaMemcpyAsync(device, staged.data(), staged.size(), cudaMemcpyHostToDevice, stream_));
+  BestTwoKernel<<<static_cast<unsigned>(items.size()), kThreads, 0, stream_>>>(
+      reinterpret_cast<const BestTwoProblem*>(device), reinterpret_cast<const int2*>(device + problem_bytes),
+      PackedBestTwo::kPositions);
+  CUDA_CHECK_LAUNCH();
+}
+
+void BruteForceKernels::EnqueueMutualMatches(const std::vector<MutualMatchProblem>& problems,
+                                             const MatchThresholds& thresholds) {
+  if (problems.empty()) return;
+  const size_t bytes = problems.size() * sizeof(MutualMatchProblem);
+  void* device = scratch_->mutual.Reserve(bytes, stream_);
+  CUDA_CHECK(cudaMemcpyAsync(device, problems.data(), bytes, cudaMemcpyHostToDevice, stream_));
+  MutualMatchKernel<<<static_cast<unsigned>(problems.size()), kMatchThreads, 0, stream_>>>(
+      static_cast<const MutualMatchProblem*>(device), scratch_->angle, thresholds);
+  CUDA_CHECK_LAUNCH();
+}
+
+size_t BruteForceKernels::MatchPairsScratchBytes(int n1, int n2) {
+  // 3 ints per row each way, 2 uint32 per possible match, one count.
+  return (3 * static_cast<size_t>(n1) + 3 * static_cast<size_t>(n2) + 2 * static_cast<size_t>(n1) + 1) * 4;
+}
+
+std::vector<FeatureMatches> BruteForceKernels::MatchPairs(
+    const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs, const MatchThresholds& thresholds) {
+  std::vector<FeatureMatches> result(pairs.size());
+  if (pairs.empty()) return result;
+  size_t total = 0;
+  for (const auto& pair : pairs) total += MatchPairsScratchBytes(pair.first.rows, pair.second.rows) / 4;
+  int* base = static_cast<int*>(scratch_->results.Reserve(total * 4, stream_));
+  int* counts = base;  // one per pair, first
+  int* cursor = base + pairs.size();
+
+  std::vector<BestTwoProblem> best_two;
+  std::vector<MutualMatchProblem> mutual;
+  best_two.reserve(2 * pairs.size());
+  mutual.reserve(pairs.size());
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    const DeviceDescriptors& d1 = pairs[k].first;
+    const DeviceDescriptors& d2 = pairs[k].second;
+    auto take = [&cursor](int n) {
+      int* p = cursor;
+      cursor += n;
+      return p;
+    };
+    BestTwoProblem p12, p21;
+    p12.a = p21.b = d1.data;
+    p12.b = p21.a = d2.data;
+    p12.n_a = p21.n_b = d1.rows;
+    p12.n_b = p21.n_a = d2.rows;
+    p12.best_dot = take(d1.rows);
+    p12.second_dot = take(d1.rows);
+    p12.best_idx = take(d1.rows);
+    p21.best_dot = take(d2.rows);
+    p21.second_dot = take(d2.rows);
+    p21.best_idx = take(d2.rows);
+    best_two.push_back(p12);
+    if (thresholds.cross_check) best_two.push_back(p21);
+    MutualMatchProblem m;
+    m.best_dot12 = p12.best_dot;
+    m.second_dot12 = p12.second_dot;
+    m.best_idx12 = p12.best_idx;
+    m.best_dot21 = p21.best_dot;
+    m.second_dot21 = p21.second_dot;
+    m.best_idx21 = p21.best_idx;
+    m.matches = reinterpret_cast<uint32_t*>(take(2 * d1.rows));
+    m.num_matches = counts + k;
+    m.n1 = d1.rows;
+    m.n2 = d2.rows;
+    mutual.push_back(m);
+  }
+  EnqueueBestTwo(best_two);
+  EnqueueMutualMatches(mutual, thresholds);
+
+  int* host_counts = static_cast<int*>(scratch_->host_counts.Reserve(pairs.size() * sizeof(int), stream_));
+  CUDA_CHECK(cudaMemcpyAsync(host_counts, counts, pairs.size() * sizeof(int), cudaMemcpyDeviceToHost, stream_));
+  CUDA_CHECK(cudaStreamSynchronize(stream_));
+  size_t num_matches = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) num_matches += static_cast<size_t>(host_counts[k]);
+  std::vector<int> counts_copy(host_counts, host_counts + pairs.size());
+  FeatureMatch* host_matches = static_cast<FeatureMatch*>(
+      scratch_->host_matches.Reserve(std::max<size_t>(num_matches, 1) * sizeof(FeatureMatch), stream_));
+  size_t offset = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    if (counts_copy[k] == 0) continue;
+    CUDA_CHECK(cudaMemcpyAsync(host_matches + offset, mutual[k].matches, counts_copy[k] * sizeof(FeatureMatch),
+                               cudaMemcpyDeviceToHost, stream_));
+    offset += counts_copy[k];
+  }
+  CUDA_CHECK(cudaStreamSynchronize(stream_));
+  offset = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    result[k].assign(host_matches + offset, host_matches + offset + counts_copy[k]);
+    offset += counts_copy[k];
+  }
+  return result;
+}
+
+std::vector<FeatureMatches> MatchPairsInBatches(BruteForceKernels* kernels,
+                                                const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
+                                                const MatchThresholds& thresholds) {
+  // Scratch of the brute-force kernels allowed for one batch of pairs.
+  constexpr size_t kBatchScratchBytes = size_t{1} << 30;
+  std::vector<FeatureMatches> results(pairs.size());
+  std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> batch;
+  std::vector<size_t> batch_pairs;
+  size_t scratch = 0;
+  const auto flush = [&]() {
+    if (batch.empty()) return;
+    std::vector<FeatureMatches> matches = kernels->MatchPairs(batch, thresholds);
+    for (size_t k = 0; k < batch.size(); ++k) results[batch_pairs[k]] = std::move(matches[k]);
+    batch.clear();
+    batch_pairs.clear();
+    scratch = 0;
+  };
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const DeviceDescriptors& a = pairs[i].first;
+    const DeviceDescriptors& b = pairs[i].second;
+    if (a.rows == 0 || b.rows == 0) continue;
+    const size_t bytes = BruteForceKernels::MatchPairsScratchBytes(a.rows, b.rows);
+    if (!batch.empty() && scratch + bytes > kBatchScratchBytes) flush();
+    batch.push_back(pairs[i]);
+    batch_pairs.push_back(i);
+    scratch += bytes;
+  }
+  flush();
+  return results;
+}
+
+}  // namespace cuda
+}  // namespace cashash

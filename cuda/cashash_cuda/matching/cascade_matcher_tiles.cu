@@ -1,0 +1,247 @@
+// Kernels of cascade_matcher_tiles.cuh.
+//
+// Cost model (8192 features per image, 8 tables x 7 bits, tau 43, real
+// SIFT): a pair has ~6M (a, b, table) candidate pairs in ~8k tiles of
+// 32 x 32, ~10 % of them within tau (~600k survivors, each appended to two
+// lists). Per tile: eight single-bit tensor-core products give the 1024
+// distances, ~100 lane instructions turn them into one 32-bit tau mask per
+// A row, and the survivors are queued so that all 32 lanes share their work
+// (duplicate test, exact distance, ranks, two appends).
+//
+// History (same benchmark; H200 figures from one run, docs/gpu_cascade_design.md):
+// per-table lists kept in order by replacing the largest key spent most of
+// the time on list upkeep; append-only lists with one lane per A row and
+// 32 x 32 lane popcounts (each lane walking its own survivors, so the warp
+// ran as many steps as its busiest lane: ~8 for ~3.5 on average) reached
+// 28.0k pairs/s, these tensor-core tiles 31.1k. Per-(feature, table) lists
+// filled without global atomics (one warp owns each) were tried and dropped:
+// 32 keys per table overflowed for so many features that the per-query
+// fallback halved the rate (15.4k).
+#include "cashash_cuda/matching/cascade_matcher_tiles.cuh"
+
+#include "cashash_cuda/utils/bit_mma.cuh"
+#include "cashash_cuda/utils/cuda_check.cuh"
+#include "cashash_cuda/utils/warp_primitives.cuh"
+
+namespace cashash {
+namespace cuda {
+namespace {
+
+// One warp per block: tiles differ in size by orders of magnitude, and a
+// block's resources are only freed when its last warp ends, so independent
+// one-warp blocks keep the SMs full where 8-warp blocks left them at 16 %
+// occupancy (measured).
+constexpr int kTileThreads = 32;
+
+// Survivors queued per round; a 32 x 32 tile has at most 1024.
+constexpr int kQueueCapacity = 512;
+
+// Shared memory of the warp (~4.3 KB, so 32 one-warp blocks fit an SM).
+struct TileScratch {
+  // Staged A rows (one chunk of 32 of A's bucket) and B entries.
+  uint4 code_a[32];
+  uint64_t signature_a[32];
+  uint32_t index_a[32];
+  uint32_t pop_a[32];   // popcount of the code; 255 past the bucket's end
+  uint32_t kept_a[32];  // survivors of the row in this round (then: its first list slot)
+  uint4 code_b[32];
+  uint64_t signature_b[32];
+  uint32_t index_b[32];
+  uint32_t pop_b[32];
+  uint32_t kept_b[32];
+  // Queued survivors: row | col << 5 on entry; after the duplicate test
+  // row | col << 5 | rank in row << 10 | rank in col << 15 | distance << 20,
+  // or kDropped.
+  uint32_t queue[kQueueCapacity];
+};
+constexpr uint32_t kDropped = 0xffffffffu;
+
+__device__ __forceinline__ uint32_t Popc128(uint4 v) { return __popc(v.x) + __popc(v.y) + __popc(v.z) + __popc(v.w); }
+
+__global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
+                                                                  MatchParams params, CandidateLists lists) {
+  __shared__ TileScratch s;
+  const unsigned lane = LaneId();
+  const unsigned g = lane >> 2, t = lane & 3u;  // MMA fragment coordinates
+  const uint32_t item = blockIdx.x;
+  if (item >= total_items) return;
+
+  const int bits = params.bits_per_table;
+  const uint32_t buckets = 1u << bits;
+  const uint32_t num_tables = static_cast<uint32_t>(params.num_tables);
+  const uint32_t per_task = num_tables * buckets;
+  const uint32_t task_index = item / per_task;
+  const uint32_t table = (item - task_index * per_task) >> bits;
+  const uint32_t bucket = item & (buckets - 1);
+  const PairTask& task = tasks[task_index];
+
+  const uint32_t* offsets_a = task.a.offsets + table * (buckets + 1) + bucket;
+  const uint32_t* offsets_b = task.b.offsets + table * (buckets + 1) + bucket;
+  const uint32_t a_begin = offsets_a[0], a_end = offsets_a[1];
+  const uint32_t b_begin = offsets_b[0], b_end = offsets_b[1];
+  if (a_begin == a_end || b_begin == b_end) return;
+
+  const BucketEntry* entries_a = task.a.entries + size_t(table) * task.a.num_features;
+  const BucketEntry* entries_b = task.b.entries + size_t(table) * task.b.num_features;
+  const size_t rows_a = task.list_offset;
+  const size_t rows_b = size_t(task.list_offset) + task.a.num_features;
+  const uint32_t capacity = static_cast<uint32_t>(lists.capacity);
+  const int tau = min(params.tau, 128);
+  // Duplicate test (see EntryKey in cascade_matcher.cu): fields of the
+  // tables before this one must all differ.
+  const uint64_t below = (uint64_t{1} << (table * bits)) - 1;
+  const uint64_t high_from_t = params.field_high_bits & ~below;
+
+  s.kept_a[lane] = 0;
+  s.kept_b[lane] = 0;
+  for (uint32_t a0 = a_begin; a0 < a_end; a0 += 32) {
+    __syncwarp();
+    {
+      const bool valid = a0 + lane < a_end;
+      const uint4* entry = reinterpret_cast<const uint4*>(entries_a + min(a0 + lane, a_end - 1));
+      const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+      const uint4 meta = __ldg(entry + 1);
+      s.code_a[lane] = code;
+      s.signature_a[lane] = uint64_t(meta.y) << 32 | meta.x;
+      s.index_a[lane] = meta.z;
+      s.pop_a[lane] = valid ? Popc128(code) : 255u;
+    }
+    __syncwarp();
+    // This lane's A fragments (rows mi * 16 + g + 8h, word t) and the
+    // thresholds of its four rows: within tau <=> 2 c - pop_b >= pop_a - tau.
+    const uint32_t* words_a = reinterpret_cast<const uint32_t*>(s.code_a);
+    uint32_t frag_a[4];
+    int row_limit[4];
+#pragma unroll
+    for (int k = 0; k < 4; ++k) {
+      const unsigned row = (k >> 1) * 16 + g + (k & 1) * 8;
+      frag_a[k] = words_a[row * 4 + t];
+      row_limit[k] = static_cast<int>(s.pop_a[row]) - tau;
+    }
+
+    for (uint32_t b0 = b_begin; b0 < b_end; b0 += 32) {
+      {
+        const bool valid = b0 + lane < b_end;
+        const uint4* entry = reinterpret_cast<const uint4*>(entries_b + min(b0 + lane, b_end - 1));
+        const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+        const uint4 meta = __ldg(entry + 1);
+        __syncwarp();  // the previous chunk's queue passes are done with these
+        s.code_b[lane] = code;
+        s.signature_b[lane] = uint64_t(meta.y) << 32 | meta.x;
+        s.index_b[lane] = meta.z;
+        s.pop_b[lane] = valid ? Popc128(code) : 255u;
+      }
+      __syncwarp();
+
+      // Tau masks: bit c of mask[k] set when (row k of this lane, column c)
+      // is within tau, for this lane's columns 2t, 2t + 1 of each n-tile
+      // (shifted into place below).
+      const uint32_t* words_b = reinterpret_cast<const uint32_t*>(s.code_b);
+      uint32_t mask[4] = {0, 0, 0, 0};
+#pragma unroll
+      for (int ni = 0; ni < 4; ++ni) {
+        const uint32_t frag_b = words_b[(ni * 8 + g) * 4 + t];
+        const int pop0 = static_cast<int>(s.pop_b[ni * 8 + 2 * t]);
+        const int pop1 = static_cast<int>(s.pop_b[ni * 8 + 2 * t + 1]);
+#pragma unroll
+        for (int mi = 0; mi < 2; ++mi) {
+          int d[4];
+          BitAndPopcMma16x8x128(frag_a[mi * 2], frag_a[mi * 2 + 1], frag_b, d);
+          const uint32_t bit0 = 1u << (ni * 8), bit1 = 2u << (ni * 8);
+          mask[mi * 2] |= (2 * d[0] - pop0 >= row_limit[mi * 2] ? bit0 : 0u) |
+                          (2 * d[1] - pop1 >= row_limit[mi * 2] ? bit1 : 0u);
+          mask[mi * 2 + 1] |= (2 * d[2] - pop0 >= row_limit[mi * 2 + 1] ? bit0 : 0u) |
+                              (2 * d[3] - pop1 >= row_limit[mi * 2 + 1] ? bit1 : 0u);
+        }
+      }
+      // Whole rows: the four lanes of a group hold disjoint columns.
+#pragma unroll
+      for (int k = 0; k < 4; ++k) {
+        mask[k] <<= 2 * t;
+        mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 1);
+        mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 2);
+      }
+      // Lane r takes row r = 8k + g' from group g' (k = r / 8).
+      const unsigned source = (lane & 7u) << 2;
+      const uint32_t m0 = __shfl_sync(kFullWarpMask, mask[0], source);
+      const uint32_t m1 = __shfl_sync(kFullWarpMask, mask[1], source);
+      const uint32_t m2 = __shfl_sync(kFullWarpMask, mask[2], source);
+      const uint32_t m3 = __shfl_sync(kFullWarpMask, mask[3], source);
+      const unsigned k = lane >> 3;
+      const uint32_t row_mask = k == 0 ? m0 : k == 1 ? m1 : k == 2 ? m2 : m3;
+
+      // Queue positions in row order.
+      const uint32_t count = __popc(row_mask);
+      uint32_t first = count;
+#pragma unroll
+      for (int d = 1; d < 32; d <<= 1) {
+        const uint32_t o = __shfl_up_sync(kFullWarpMask, first, d);
+        if (lane >= static_cast<unsigned>(d)) first += o;
+      }
+      const uint32_t total = __shfl_sync(kFullWarpMask, first, 31);
+      first -= count;
+
+      for (uint32_t round = 0; round < total; round += kQueueCapacity) {
+        const uint32_t in_round = min(total - round, static_cast<uint32_t>(kQueueCapacity));
+        {
+          uint32_t position = first, m = row_mask;
+          while (m != 0 && position < round + in_round) {
+            const uint32_t col = __ffs(m) - 1;
+            m &= m - 1;
+            if (position >= round) s.queue[position - round] = lane | col << 5;
+            ++position;
+          }
+        }
+        __syncwarp();
+        // Duplicate test, distance and ranks, 32 survivors per step.
+        for (uint32_t p = lane; p < in_round; p += 32) {
+          const uint32_t e = s.queue[p];
+          const uint32_t row = e & 31u, col = (e >> 5) & 31u;
+          const uint64_t v = ((s.signature_a[row] ^ s.signature_b[col]) & below) | high_from_t;
+          uint32_t out = kDropped;
+          if (((v - params.field_low_bits) & ~v & params.field_high_bits) == 0) {
+            const uint4 x = s.code_a[row], y = s.code_b[col];
+            const uint32_t distance = __popc(x.x ^ y.x) + __popc(x.y ^ y.y) + __popc(x.z ^ y.z) + __popc(x.w ^ y.w);
+            const uint32_t rank_a = atomicAdd(&s.kept_a[row], 1u);
+            const uint32_t rank_b = atomicAdd(&s.kept_b[col], 1u);
+            out = row | col << 5 | rank_a << 10 | rank_b << 15 | distance << 20;
+          }
+          s.queue[p] = out;
+        }
+        __syncwarp();
+        // One list reservation per row and per column of the round.
+        const uint32_t kept_a = s.kept_a[lane], kept_b = s.kept_b[lane];
+        if (kept_a > 0) s.kept_a[lane] = atomicAdd(lists.counts + rows_a + s.index_a[lane], kept_a);
+        if (kept_b > 0) s.kept_b[lane] = atomicAdd(lists.counts + rows_b + s.index_b[lane], kept_b);
+        __syncwarp();
+        for (uint32_t p = lane; p < in_round; p += 32) {
+          const uint32_t e = s.queue[p];
+          if (e == kDropped) continue;
+          const uint32_t row = e & 31u, col = (e >> 5) & 31u;
+          const uint32_t rank_a = (e >> 10) & 31u, rank_b = (e >> 15) & 31u, distance = e >> 20;
+          const uint32_t index_a = s.index_a[row], index_b = s.index_b[col];
+          const uint32_t slot_a = s.kept_a[row] + rank_a, slot_b = s.kept_b[col] + rank_b;
+          if (slot_a < capacity) lists.keys[(rows_a + index_a) * capacity + slot_a] = distance << 24 | index_b;
+          if (slot_b < capacity) lists.keys[(rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
+        }
+        __syncwarp();
+        s.kept_a[lane] = 0;
+        s.kept_b[lane] = 0;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
+                        cudaStream_t stream) {
+  if (num_tasks == 0) return;
+  const uint64_t items = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
+  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, 0, stream>>>(
+      tasks, static_cast<uint32_t>(items), params, lists);
+  CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace cuda
+}  // namespace cashash

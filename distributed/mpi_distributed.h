@@ -1,0 +1,81 @@
+// Matching split across MPI ranks: each rank matches and verifies every
+// R-th chunk (round-robin, so a block pair's cost does not pile up on one
+// rank); ranks > 0 send their results to rank 0, the only process that
+// writes the database. Rank 0 writes its own chunks from its pipeline's
+// writer thread and the others' from a receiving thread, one transaction
+// per chunk either way, through one locked sink.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "cashash/pipeline/matching_pipeline.h"
+#include "cashash/base/pair_id.h"
+#include "distributed/mpi_result_codec.h"
+
+namespace cashash {
+namespace distributed {
+
+// Chunks k with k % size == rank.
+std::vector<PairChunk> ChunksOfRank(const std::vector<PairChunk>& chunks, int rank, int size);
+
+// A checksum of the chunk list (pairs and their order), so that ranks can
+// check they agree on what to match.
+uint64_t ChunkListChecksum(const std::vector<PairChunk>& chunks);
+
+// Serialises WriteChunk calls from several threads onto one sink and counts
+// the pairs written.
+class LockedSink : public ResultSink {
+ public:
+  explicit LockedSink(ResultSink* sink) : sink_(sink) {}
+  void WriteChunk(const std::vector<PairResult>& results) override;
+  size_t pairs_written() const { return pairs_written_; }
+
+ private:
+  ResultSink* sink_;
+  std::mutex mutex_;
+  std::atomic<size_t> pairs_written_{0};
+};
+
+// The sink of ranks > 0: each chunk goes to rank 0 (in parts of at most
+// 256 MiB). `chunks` are this rank's chunks, to name them in the messages.
+class MpiResultSender : public ResultSink {
+ public:
+  explicit MpiResultSender(const std::vector<PairChunk>& chunks);
+  void WriteChunk(const std::vector<PairResult>& results) override;
+  // Sent once, after the pipeline has finished.
+  static void SendReport(const RankReport& report);
+
+ private:
+  std::unordered_map<pair_t, const PairChunk*> chunk_of_first_pair_;
+};
+
+// Rank 0's receiving thread: writes every chunk the other ranks send into
+// `sink` and calls on_chunk after each; stops once every rank has reported.
+// Errors end the whole job (MpiAbortJob): the others could not be told.
+class MpiResultReceiver {
+ public:
+  using ChunkCallback = std::function<void(const PairChunk& chunk)>;
+  MpiResultReceiver(ResultSink* sink, ChunkCallback on_chunk);
+  ~MpiResultReceiver();
+  // Waits for every rank's report.
+  std::vector<RankReport> Join();
+
+ private:
+  void Loop();
+
+  ResultSink* sink_;
+  ChunkCallback on_chunk_;
+  std::vector<RankReport> reports_;
+  std::thread thread_;
+};
+
+constexpr int kMpiTagChunk = 1;
+constexpr int kMpiTagReport = 2;
+
+}  // namespace distributed
+}  // namespace cashash

@@ -1,0 +1,497 @@
+// The 5-point essential-matrix solver in plain C++ that compiles both for
+// the host and as CUDA device code (one thread per call, double precision,
+// no allocation, no library): the GPU RANSAC runs it per hypothesis, and the
+// CPU tests check the host instantiation against the Eigen solver of
+// essential_matrix.cc (same solutions up to scale and sign).
+//
+// Nister's formulation: E = x E1 + y E2 + z E3 + E4 over a basis of the
+// null space of the epipolar system (Householder QR of the 5 x 9 system for
+// a minimal sample, the four smallest eigenvectors of the normal matrix for
+// a least-squares refit, the smallest being E4 as on the CPU); the ten cubic
+// constraints det(E) = 0 and 2 E E^T E - trace(E E^T) E = 0 as a 10 x 20
+// matrix over the monomials of (x, y, z); Gauss-Jordan elimination of its
+// left 10 x 10 block; the 3 x 3 matrix of polynomials in z left by three
+// row differences, whose determinant is a degree-10 polynomial in z; its
+// real roots isolated with a Sturm sequence and polished by safeguarded
+// Newton steps; x and y from the null vector of the 3 x 3 matrix at each z.
+#pragma once
+
+#include <cmath>
+
+#include "cashash/base/host_device.h"
+
+namespace cashash {
+namespace five_point {
+
+#if !defined(__CUDA_ARCH__)
+// Host pass: the standard overloads (device code gets CUDA's own).
+using std::copysign;
+using std::fabs;
+using std::fmax;
+using std::isfinite;
+using std::pow;
+using std::sqrt;
+#endif
+
+constexpr int kMaxSolutions = 10;
+
+// Coefficients of x2^T E x1 in the row-major entries of E (host_device.h).
+using ::cashash::EpipolarCoefficients;
+
+// Orthonormal basis of the null space of the 5 x 9 system `rows`, as the
+// last four columns of Q in the Householder QR of its 9 x 5 transpose (what
+// the CPU solver takes). False when a column vanishes (not finite input).
+CASHASH_HOST_DEVICE inline bool MinimalNullSpace(const double (*rows)[9], double (*basis)[9]) {
+  double m[5][9];  // m[j] = column j of the 9 x 5 matrix = rows[j]
+  double v[5][9];
+  double beta[5];
+  for (int j = 0; j < 5; ++j)
+    for (int i = 0; i < 9; ++i) m[j][i] = rows[j][i];
+  for (int k = 0; k < 5; ++k) {
+    double norm2 = 0;
+    for (int i = k; i < 9; ++i) norm2 += m[k][i] * m[k][i];
+    const double norm = sqrt(norm2);
+    if (!(norm > 0) || !isfinite(norm)) return false;
+    const double alpha = m[k][k] > 0 ? -norm : norm;
+    for (int i = 0; i < 9; ++i) v[k][i] = i < k ? 0.0 : m[k][i];
+    v[k][k] -= alpha;
+    double vtv = 0;
+    for (int i = k; i < 9; ++i) vtv += v[k][i] * v[k][i];
+    beta[k] = vtv > 0 ? 2.0 / vtv : 0.0;
+    for (int j = k + 1; j < 5; ++j) {
+      double d = 0;
+      for (int i = k; i < 9; ++i) d += v[k][i] * m[j][i];
+      d *= beta[k];
+      for (int i = k; i < 9; ++i) m[j][i] -= d * v[k][i];
+    }
+  }
+  for (int c = 0; c < 4; ++c) {
+    double q[9];
+    for (int i = 0; i < 9; ++i) q[i] = i == 5 + c ? 1.0 : 0.0;
+    for (int k = 4; k >= 0; --k) {  // Q e = H0 H1 H2 H3 H4 e
+      double d = 0;
+      for (int i = k; i < 9; ++i) d += v[k][i] * q[i];
+      d *= beta[k];
+      for (int i = k; i < 9; ++i) q[i] -= d * v[k][i];
+    }
+    for (int i = 0; i < 9; ++i) basis[c][i] = q[i];
+  }
+  return true;
+}
+
+// Cyclic Jacobi on the symmetric n x n matrix `a` (row-major, destroyed):
+// eigenvalues on its diagonal, eigenvectors in the columns of `v`.
+template <int N>
+CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v) {
+  for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
+  for (int sweep = 0; sweep < 50; ++sweep) {
+    double off = 0, diag = 0;
+    for (int p = 0; p < N; ++p) {
+      diag += a[p * N + p] * a[p * N + p];
+      for (int q = p + 1; q < N; ++q) off += a[p * N + q] * a[p * N + q];
+    }
+    if (off <= 1e-32 * diag || off == 0) break;
+    for (int p = 0; p < N - 1; ++p) {
+      for (int q = p + 1; q < N; ++q) {
+        const double apq = a[p * N + q];
+        if (apq == 0) continue;
+        const double theta = (a[q * N + q] - a[p * N + p]) / (2 * apq);
+        const double t = fabs(theta) > 1e150 ? 0.5 / theta
+                                              : copysign(1.0, theta) / (fabs(theta) + sqrt(theta * theta + 1));
+        const double c = 1 / sqrt(t * t + 1), s = t * c;
+        for (int k = 0; k < N; ++k) {
+          const double akp = a[k * N + p], akq = a[k * N + q];
+          a[k * N + p] = c * akp - s * akq;
+          a[k * N + q] = s * akp + c * akq;
+        }
+        for (int k = 0; k < N; ++k) {
+          const double apk = a[p * N + k], aqk = a[q * N + k];
+          a[p * N + k] = c * apk - s * aqk;
+          a[q * N + k] = s * apk + c * aqk;
+        }
+        for (int k = 0; k < N; ++k) {
+          const double vkp = v[k * N + p], vkq = v[k * N + q];
+          v[k * N + p] = c * vkp - s * vkq;
+          v[k * N + q] = s * vkp + c * vkq;
+        }
+      }
+    }
+  }
+}
+
+// Least-squares basis from the 9 x 9 normal matrix of >= 5 epipolar rows,
+// given by its 45 upper-triangle entries (row-major over i <= j): the
+// eigenvectors of the four smallest eigenvalues, the smallest as E4 (the
+// constant term, so the solution sits near (x, y, z) = 0, as on the CPU).
+CASHASH_HOST_DEVICE inline bool LeastSquaresNullSpace(const double* upper, double (*basis)[9]) {
+  double a[81], v[81];
+  int k = 0;
+  for (int i = 0; i < 9; ++i)
+    for (int j = i; j < 9; ++j) a[i * 9 + j] = a[j * 9 + i] = upper[k++];
+  for (int i = 0; i < 81; ++i)
+    if (!isfinite(a[i])) return false;
+  SymmetricJacobi<9>(a, v);
+  // Order the eigenvalues (selection of the four smallest).
+  int order[9];
+  for (int i = 0; i < 9; ++i) order[i] = i;
+  for (int i = 0; i < 4; ++i) {
+    int best = i;
+    for (int j = i + 1; j < 9; ++j)
+      if (a[order[j] * 10] < a[order[best] * 10]) best = j;
+    const int t = order[i];
+    order[i] = order[best];
+    order[best] = t;
+  }
+  const int slot[4] = {3, 0, 1, 2};
+  for (int e = 0; e < 4; ++e)
+    for (int i = 0; i < 9; ++i) basis[slot[e]][i] = v[i * 9 + order[e]];
+  return true;
+}
+
+// --- Polynomials in (x, y, z) ------------------------------------------------
+// Linear: [x, y, z, 1]. Quadratic: [xx, xy, xz, yy, yz, zz, x, y, z, 1].
+// Cubic (Nister's order, the 10 eliminated monomials first):
+//   0 x^3, 1 y^3, 2 x^2y, 3 xy^2, 4 x^2z, 5 x^2, 6 y^2z, 7 y^2, 8 xyz, 9 xy,
+//   10 xz^2, 11 xz, 12 x, 13 yz^2, 14 yz, 15 y, 16 z^3, 17 z^2, 18 z, 19 1.
+
+CASHASH_HOST_DEVICE inline void MulLinear(const double* a, const double* b, double s, double* q) {
+  q[0] += s * (a[0] * b[0]);
+  q[1] += s * (a[0] * b[1] + a[1] * b[0]);
+  q[2] += s * (a[0] * b[2] + a[2] * b[0]);
+  q[3] += s * (a[1] * b[1]);
+  q[4] += s * (a[1] * b[2] + a[2] * b[1]);
+  q[5] += s * (a[2] * b[2]);
+  q[6] += s * (a[0] * b[3] + a[3] * b[0]);
+  q[7] += s * (a[1] * b[3] + a[3] * b[1]);
+  q[8] += s * (a[2] * b[3] + a[3] * b[2]);
+  q[9] += s * (a[3] * b[3]);
+}
+
+// c += s * q * l (quadratic times linear).
+CASHASH_HOST_DEVICE inline void MulQuadLinear(const double* q, const double* l, double s, double* c) {
+  const double xx = q[0], xy = q[1], xz = q[2], yy = q[3], yz = q[4], zz = q[5], x = q[6], y = q[7], z = q[8],
+               one = q[9];
+  const double lx = l[0], ly = l[1], lz = l[2], l1 = l[3];
+  c[0] += s * (xx * lx);
+  c[1] += s * (yy * ly);
+  c[2] += s * (xx * ly + xy * lx);
+  c[3] += s * (xy * ly + yy * lx);
+  c[4] += s * (xx * lz + xz * lx);
+  c[5] += s * (xx * l1 + x * lx);
+  c[6] += s * (yy * lz + yz * ly);
+  c[7] += s * (yy * l1 + y * ly);
+  c[8] += s * (xy * lz + xz * ly + yz * lx);
+  c[9] += s * (xy * l1 + x * ly + y * lx);
+  c[10] += s * (xz * lz + zz * lx);
+  c[11] += s * (xz * l1 + x * lz + z * lx);
+  c[12] += s * (x * l1 + one * lx);
+  c[13] += s * (yz * lz + zz * ly);
+  c[14] += s * (yz * l1 + y * lz + z * ly);
+  c[15] += s * (y * l1 + one * ly);
+  c[16] += s * (zz * lz);
+  c[17] += s * (zz * l1 + z * lz);
+  c[18] += s * (z * l1 + one * lz);
+  c[19] += s * (one * l1);
+}
+
+// The ten cubic constraints on (x, y, z): rows 0-8 the trace constraint
+// (E E^T - trace(E E^T) / 2 I) E = 0, row 9 det(E) = 0.
+CASHASH_HOST_DEVICE inline void ConstraintMatrix(const double (*basis)[9], double (*C)[20]) {
+  double E[9][4];
+  for (int i = 0; i < 9; ++i) {
+    E[i][0] = basis[0][i];
+    E[i][1] = basis[1][i];
+    E[i][2] = basis[2][i];
+    E[i][3] = basis[3][i];
+  }
+  for (int r = 0; r < 10; ++r)
+    for (int m = 0; m < 20; ++m) C[r][m] = 0;
+  double EEt[3][3][10];
+  for (int i = 0; i < 3; ++i)
+    for (int j = i; j < 3; ++j) {
+      for (int m = 0; m < 10; ++m) EEt[i][j][m] = 0;
+      for (int k = 0; k < 3; ++k) MulLinear(E[3 * i + k], E[3 * j + k], 1.0, EEt[i][j]);
+    }
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < i; ++j)
+      for (int m = 0; m < 10; ++m) EEt[i][j][m] = EEt[j][i][m];
+  for (int m = 0; m < 10; ++m) {
+    const double half_trace = 0.5 * (EEt[0][0][m] + EEt[1][1][m] + EEt[2][2][m]);
+    for (int i = 0; i < 3; ++i) EEt[i][i][m] -= half_trace;
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) MulQuadLinear(EEt[i][k], E[3 * k + j], 1.0, C[3 * i + j]);
+  double minor[10];
+  for (int m = 0; m < 10; ++m) minor[m] = 0;
+  MulLinear(E[4], E[8], 1.0, minor);
+  MulLinear(E[5], E[7], -1.0, minor);
+  MulQuadLinear(minor, E[0], 1.0, C[9]);
+  for (int m = 0; m < 10; ++m) minor[m] = 0;
+  MulLinear(E[3], E[8], 1.0, minor);
+  MulLinear(E[5], E[6], -1.0, minor);
+  MulQuadLinear(minor, E[1], -1.0, C[9]);
+  for (int m = 0; m < 10; ++m) minor[m] = 0;
+  MulLinear(E[3], E[7], 1.0, minor);
+  MulLinear(E[4], E[6], -1.0, minor);
+  MulQuadLinear(minor, E[2], 1.0, C[9]);
+}
+
+// --- Polynomials in one variable (ascending coefficients) -------------------
+
+CASHASH_HOST_DEVICE inline double Horner(const double* c, int degree, double t) {
+  double v = c[degree];
+  for (int i = degree - 1; i >= 0; --i) v = v * t + c[i];
+  return v;
+}
+
+// A simple root of p in [lo, hi] (p(lo), p(hi) of opposite signs, else the
+// best point reached): Newton steps, bisection whenever Newton leaves the
+// bracket.
+CASHASH_HOST_DEVICE inline double PolishRoot(const double* p, int degree, double lo, double hi) {
+  double f_lo = Horner(p, degree, lo);
+  const double f_hi = Horner(p, degree, hi);
+  if (f_lo == 0) return lo;
+  if (f_hi == 0) return hi;
+  const bool bracketed = (f_lo < 0) != (f_hi < 0);
+  double x = 0.5 * (lo + hi);
+  for (int it = 0; it < 100; ++it) {
+    double f = p[degree], df = 0;
+    for (int i = degree - 1; i >= 0; --i) {
+      df = df * x + f;
+      f = f * x + p[i];
+    }
+    if (f == 0) return x;
+    if (bracketed) {
+      if ((f < 0) == (f_lo < 0)) {
+        lo = x;
+        f_lo = f;
+      } else {
+        hi = x;
+      }
+    }
+    double next = df != 0 ? x - f / df : 0.5 * (lo + hi);
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (fabs(next - x) <= 1e-15 * fmax(1.0, fabs(x))) return next;
+    x = next;
+  }
+  return x;
+}
+
+// Real roots of sum_{i <= degree} c[i] t^i (degree <= 10), by a Sturm
+// sequence: intervals are split until each holds one root, which is then
+// polished. A cluster narrower than the working precision counts once.
+CASHASH_HOST_DEVICE inline int RealRoots(const double* coefficients, int degree, double* roots) {
+  double scale = 0;
+  for (int i = 0; i <= degree; ++i) scale = fmax(scale, fabs(coefficients[i]));
+  if (!(scale > 0) || !isfinite(scale)) return 0;
+  int n = degree;
+  while (n > 0 && fabs(coefficients[n]) <= 1e-14 * scale) --n;
+  if (n == 0) return 0;
+  double S[11][11];
+  int deg[11];
+  for (int i = 0; i <= n; ++i) S[0][i] = coefficients[i] / coefficients[n];
+  deg[0] = n;
+  for (int i = 0; i < n; ++i) S[1][i] = S[0][i + 1] * (i + 1) / n;
+  deg[1] = n - 1;
+  int length = 2;
+  while (length < 11 && deg[length - 1] > 0) {
+    const double* u = S[length - 2];
+    const double* w = S[length - 1];
+    const int du = deg[length - 2], dw = deg[length - 1];
+    double r[11];
+    double u_max = 0;
+    for (int i = 0; i <= du; ++i) {
+      r[i] = u[i];
+      u_max = fmax(u_max, fabs(u[i]));
+    }
+    for (int k = du - dw; k >= 0; --k) {
+      const double q = r[dw + k] / w[dw];
+      for (int j = 0; j <= dw; ++j) r[j + k] -= q * w[j];
+    }
+    int dr = dw - 1;
+    while (dr >= 0 && fabs(r[dr]) <= 1e-14 * u_max) --dr;
+    if (dr < 0) break;  // exact division: the sequence ends at the gcd
+    const double lead = fabs(r[dr]);
+    for (int j = 0; j <= dr; ++j) S[length][j] = -r[j] / lead;
+    deg[length] = dr;
+    ++length;
+  }
+  auto variations = [&](double t) {
+    int count = 0;
+    double previous = 0;
+    for (int k = 0; k < length; ++k) {
+      const double value = Horner(S[k], deg[k], t);
+      if (value == 0) continue;
+      if (previous != 0 && (value < 0) != (previous < 0)) ++count;
+      previous = value;
+    }
+    return count;
+  };
+  // Fujiwara's bound on the roots' magnitude.
+  double bound = 0;
+  for (int i = 1; i <= n; ++i) {
+    double a = fabs(S[0][n - i]);
+    if (i == n) a *= 0.5;
+    bound = fmax(bound, pow(a, 1.0 / i));
+  }
+  bound = 2.0 * bound * 1.0001 + 1e-12;
+  struct Interval {
+    double lo, hi;
+    int v_lo, v_hi;
+  };
+  Interval stack[12];
+  int top = 0;
+  stack[top++] = {-bound, bound, variations(-bound), variations(bound)};
+  int num_roots = 0, splits = 0;
+  while (top > 0 && num_roots < n) {
+    const Interval I = stack[--top];
+    const int count = I.v_lo - I.v_hi;
+    if (count <= 0) continue;
+    if (count == 1) {
+      roots[num_roots++] = PolishRoot(S[0], n, I.lo, I.hi);
+      continue;
+    }
+    const double mid = 0.5 * (I.lo + I.hi);
+    if (I.hi - I.lo <= 1e-13 * fmax(1.0, fabs(mid)) || ++splits > 800 || top + 2 > 12) {
+      roots[num_roots++] = mid;
+      continue;
+    }
+    const int v_mid = variations(mid);
+    if (v_mid - I.v_hi > 0) stack[top++] = {mid, I.hi, v_mid, I.v_hi};
+    if (I.v_lo - v_mid > 0) stack[top++] = {I.lo, mid, I.v_lo, v_mid};
+  }
+  return num_roots;
+}
+
+// Polynomial product accumulation: out += s * a * b (ascending).
+template <int NA, int NB>
+CASHASH_HOST_DEVICE inline void PolyMulAdd(const double* a, const double* b, double s, double* out) {
+  for (int i = 0; i < NA; ++i)
+    for (int j = 0; j < NB; ++j) out[i + j] += s * a[i] * b[j];
+}
+
+// --- The solver ---------------------------------------------------------------
+
+// Every essential matrix E = x b0 + y b1 + z b2 + b3 (row-major, unit norm)
+// that satisfies the cubic constraints; returns their number (<= 10).
+CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (*models)[9]) {
+  double C[10][20];
+  ConstraintMatrix(basis, C);
+  // Gauss-Jordan on the first 10 columns with partial pivoting: each row
+  // then reads "cubic monomial + combination of the last 10 = 0".
+  double left_max = 0;
+  for (int i = 0; i < 10; ++i)
+    for (int j = 0; j < 10; ++j) left_max = fmax(left_max, fabs(C[i][j]));
+  if (!(left_max > 0) || !isfinite(left_max)) return 0;
+  for (int k = 0; k < 10; ++k) {
+    int p = k;
+    for (int i = k + 1; i < 10; ++i)
+      if (fabs(C[i][k]) > fabs(C[p][k])) p = i;
+    if (!(fabs(C[p][k]) > 1e-14 * left_max)) return 0;
+    if (p != k)
+      for (int j = k; j < 20; ++j) {
+        const double t = C[k][j];
+        C[k][j] = C[p][j];
+        C[p][j] = t;
+      }
+    const double inv = 1.0 / C[k][k];
+    for (int j = k + 1; j < 20; ++j) C[k][j] *= inv;
+    C[k][k] = 1.0;
+    // Rows 0-3 are not read once they have served as pivots.
+    for (int i = k < 4 ? 0 : 4; i < 10; ++i) {
+      if (i == k) continue;
+      const double f = C[i][k];
+      if (f == 0) continue;
+      for (int j = k + 1; j < 20; ++j) C[i][j] -= f * C[k][j];
+      C[i][k] = 0;
+    }
+  }
+  // Rows (x^2z) - z (x^2), (y^2z) - z (y^2), (xyz) - z (xy): each is
+  // x px(z) + y py(z) + p1(z) = 0 with px, py cubic and p1 quartic.
+  double px[3][4], py[3][4], p1[3][5];
+  for (int i = 0; i < 3; ++i) {
+    const double* a = C[4 + 2 * i] + 10;  // x^2z, y^2z, xyz
+    const double* b = C[5 + 2 * i] + 10;  // x^2, y^2, xy
+    // Basis columns: xz^2, xz, x, yz^2, yz, y, z^3, z^2, z, 1.
+    px[i][3] = -b[0];
+    px[i][2] = a[0] - b[1];
+    px[i][1] = a[1] - b[2];
+    px[i][0] = a[2];
+    py[i][3] = -b[3];
+    py[i][2] = a[3] - b[4];
+    py[i][1] = a[4] - b[5];
+    py[i][0] = a[5];
+    p1[i][4] = -b[6];
+    p1[i][3] = a[6] - b[7];
+    p1[i][2] = a[7] - b[8];
+    p1[i][1] = a[8] - b[9];
+    p1[i][0] = a[9];
+  }
+  // det [px py p1] (rows i) = degree-10 polynomial in z.
+  double m0[8] = {0}, m1[8] = {0}, m2[8] = {0};
+  PolyMulAdd<4, 5>(py[1], p1[2], 1.0, m0);
+  PolyMulAdd<4, 5>(py[2], p1[1], -1.0, m0);
+  PolyMulAdd<4, 5>(py[0], p1[2], 1.0, m1);
+  PolyMulAdd<4, 5>(py[2], p1[0], -1.0, m1);
+  PolyMulAdd<4, 5>(py[0], p1[1], 1.0, m2);
+  PolyMulAdd<4, 5>(py[1], p1[0], -1.0, m2);
+  double det[11] = {0};
+  PolyMulAdd<4, 8>(px[0], m0, 1.0, det);
+  PolyMulAdd<4, 8>(px[1], m1, -1.0, det);
+  PolyMulAdd<4, 8>(px[2], m2, 1.0, det);
+  double zs[10];
+  const int num_z = RealRoots(det, 10, zs);
+  int num_models = 0;
+  for (int r = 0; r < num_z; ++r) {
+    const double z = zs[r];
+    double v[3][3];
+    for (int i = 0; i < 3; ++i) {
+      v[i][0] = Horner(px[i], 3, z);
+      v[i][1] = Horner(py[i], 3, z);
+      v[i][2] = Horner(p1[i], 4, z);
+    }
+    // (x, y, 1) is orthogonal to the three rows: the largest cross product.
+    double best[3] = {0, 0, 0}, best_norm = -1;
+    const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+    for (int k = 0; k < 3; ++k) {
+      const double* a = v[pairs[k][0]];
+      const double* b = v[pairs[k][1]];
+      const double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+      const double norm = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+      if (norm > best_norm) {
+        best_norm = norm;
+        best[0] = c[0];
+        best[1] = c[1];
+        best[2] = c[2];
+      }
+    }
+    if (!(fabs(best[2]) > 1e-12 * sqrt(best_norm))) continue;
+    const double x = best[0] / best[2], y = best[1] / best[2];
+    double norm2 = 0;
+    double* e = models[num_models];
+    for (int i = 0; i < 9; ++i) {
+      e[i] = x * basis[0][i] + y * basis[1][i] + z * basis[2][i] + basis[3][i];
+      norm2 += e[i] * e[i];
+    }
+    const double norm = sqrt(norm2);
+    if (!(norm > 0) || !isfinite(norm)) continue;
+    for (int i = 0; i < 9; ++i) e[i] /= norm;
+    ++num_models;
+  }
+  return num_models;
+}
+
+// The essential matrices through five correspondences (x1, y1, x2, y2 in
+// normalised camera coordinates, pairs[4 k + 0..3]).
+CASHASH_HOST_DEVICE inline int EssentialFromFivePoints(const double* pairs, double (*models)[9]) {
+  double rows[5][9];
+  for (int k = 0; k < 5; ++k)
+    EpipolarCoefficients(pairs[4 * k], pairs[4 * k + 1], pairs[4 * k + 2], pairs[4 * k + 3], rows[k]);
+  double basis[4][9];
+  if (!MinimalNullSpace(rows, basis)) return 0;
+  return SolveFromBasis(basis, models);
+}
+
+}  // namespace five_point
+}  // namespace cashash

@@ -1,0 +1,69 @@
+// The cascade screens, exact matching decides: every pair is matched by the
+// cascade; a pair that keeps at least `min_matches` matches (one that may
+// verify) is matched again exactly, by the same backend from the
+// descriptors it already holds (FeatureMatcher::MatchPairsExact), and the
+// exact matches replace the cascade's.
+//
+// Why: the cascade's first level misses true matches whose hash bits differ
+// in every table. On photographs with changing light and viewpoint that is
+// several percent of them (sacre_coeur at 3,072 features: recall 0.938 at
+// 8 x 7; docs/cascade_parameters.md), and those are the pairs where few
+// matches decide whether a pair verifies and how many inliers it keeps. The
+// pairs that can verify are a small share of an exhaustive run's pairs (9 %
+// of a 300-image street, 0.3 % of a 5,000-image one), so matching them
+// exactly costs little next to screening all pairs with the cascade, and
+// their raw matches, inliers and two-view geometry are exact matching's,
+// as COLMAP's. Pairs below the threshold keep the cascade's matches: with
+// fewer than min_num_inliers (15) of them RANSAC is not run at all.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cashash/matchers/feature_matcher.h"
+
+namespace cashash {
+
+// What a run's rematching did, for its log; shared with the run because the
+// matcher sits inside other wrappers.
+struct ExactRematchCounts {
+  std::atomic<size_t> pairs{0};      // matched by the cascade
+  std::atomic<size_t> rematched{0};  // of those, matched again exactly
+  std::atomic<int64_t> exact_us{0};  // wall time of the exact matching
+};
+
+class ExactRematchFeatureMatcher : public FeatureMatcher {
+ public:
+  // `cascade` must support MatchPairsExact; `min_matches` > 0. `counts` may
+  // be null (the matcher then keeps its own).
+  ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
+                             std::shared_ptr<ExactRematchCounts> counts = nullptr);
+
+  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
+  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
+  void RemoveImage(image_t image_id) override;
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
+  // "<cascade>+exact-rematch"
+  std::string Name() const override;
+  // Guided matching (Ga-CasHash) goes to the cascade alone: the band filter
+  // is its own screening.
+  bool SupportsEpipolarGuidance() const override;
+  std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance) override;
+  bool SupportsExactMatching() const override { return true; }
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override;
+
+  // Pairs matched so far, and of those matched again exactly.
+  size_t pairs_matched() const { return counts_->pairs; }
+  size_t pairs_rematched() const { return counts_->rematched; }
+
+ private:
+  std::unique_ptr<FeatureMatcher> cascade_;
+  size_t min_matches_;
+  std::shared_ptr<ExactRematchCounts> counts_;
+};
+
+}  // namespace cashash

@@ -1,0 +1,24 @@
+// A FeatureMatcher that runs a primary backend (the GPU) and, the first time
+// it fails with an error the caller calls recoverable (device memory
+// exhausted), moves every added image to a fallback backend (the CPU), says
+// so through `warn`, and goes on there: a run that outgrows the card finishes
+// slower instead of failing. Other errors propagate unchanged.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "cashash/matchers/feature_matcher.h"
+
+namespace cashash {
+
+std::unique_ptr<FeatureMatcher> CreateFallbackFeatureMatcher(
+    std::unique_ptr<FeatureMatcher> primary, std::function<std::unique_ptr<FeatureMatcher>()> make_fallback,
+    std::function<bool(const std::exception&)> recoverable, std::function<void(const std::string&)> warn);
+
+// True for the GPU backend's out-of-memory and memory-budget errors.
+bool IsDeviceMemoryError(const std::exception& error);
+
+}  // namespace cashash

@@ -1,0 +1,88 @@
+// The interface every matching backend (CPU cascade, CPU brute force, GPU
+// cascade, GPU brute force) implements. The pipeline adds the images of the
+// current block once, so per-image work (hash codes, bucket tables, device
+// uploads) is done once per image and reused for all of its pairs.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cashash/matching/matching_options.h"
+#include "cashash/base/types.h"
+
+namespace cashash {
+
+// The global mean descriptor subtracted before hashing (zero-mean hashing, as
+// the original CasHash). Computed once per run over the images to match.
+using MeanDescriptor = std::array<float, kDescriptorDim>;
+
+// One pair of guided matching (Ga-CasHash stage 2, guided_matching.h): its
+// fundamental matrix and the keypoint pixels of both images. The pointers
+// must stay valid during the call.
+struct GuidedPair {
+  ImagePair pair;
+  std::array<double, 9> F{};  // row-major, x2^T F x1 = 0 (pixels of first, second image)
+  // x, y of feature i at [2 i], [2 i + 1]; at least the rows added.
+  const std::vector<float>* points1 = nullptr;
+  const std::vector<float>* points2 = nullptr;
+};
+
+class FeatureMatcher {
+ public:
+  virtual ~FeatureMatcher() = default;
+
+  // Makes an image available to MatchPairs. Descriptors beyond
+  // max_num_matches rows are ignored. Adding an id twice replaces it.
+  virtual void AddImage(image_t image_id, const FeatureDescriptors& descriptors) = 0;
+  // AddImage for a caller that shares ownership of the descriptors (the
+  // pipeline). A matcher that must keep a host copy (the fallback to the
+  // CPU, to rebuild from) keeps this handle instead: the copy was most of
+  // the time the matching thread spent adding images (H200, 5,000 images:
+  // 3.4-4.8 s of 5.0-6.8 s) and a second host copy of every image. The
+  // default calls AddImage.
+  virtual void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
+    AddImage(image_id, *descriptors);
+  }
+  // Frees what AddImage holds for this image.
+  virtual void RemoveImage(image_t image_id) = 0;
+  // Matches each pair (both images added before); result i belongs to pair i
+  // and indexes (first image, second image) of that pair.
+  virtual std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) = 0;
+  // A short name for logs: "cpu-cascade", "gpu-bruteforce", ...
+  virtual std::string Name() const = 0;
+  // True while the matcher still times its backends to choose one (auto):
+  // other work on the same device would distort the timing, so the
+  // pipeline holds verification back meanwhile. Wrappers forward it.
+  virtual bool ChoosingBackend() const { return false; }
+
+  // Whether MatchPairsGuided is implemented (the cascade backends).
+  virtual bool SupportsEpipolarGuidance() const { return false; }
+  // MatchPairs with each query's candidates restricted to the band of
+  // max_distance pixels around its epipolar line (cascade_matcher.h,
+  // EpipolarGuidance). Throws std::logic_error where not supported.
+  virtual std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double max_distance);
+
+  // Whether MatchPairsExact is implemented (the cascade backends, which keep
+  // each image's descriptors anyway).
+  virtual bool SupportsExactMatching() const { return false; }
+  // Exact (brute-force) matches of each pair from the images already added:
+  // the same matches a brute-force backend returns, without adding the
+  // images to one (exact_rematch_feature_matcher.h). Throws
+  // std::logic_error where not supported.
+  virtual std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs);
+};
+
+// CPU backends (multi-threaded over pairs). MatcherType::kAuto gives an
+// AutoFeatureMatcher over the CPU cascade and brute force.
+std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean);
+
+// Mean of all descriptor rows of the given sets (uint8 -> float), rounded to
+// the nearest integer so that hashing stays exact integer arithmetic in every
+// backend (cascade_hashing.h, step 1).
+MeanDescriptor ComputeMeanDescriptor(const std::vector<const FeatureDescriptors*>& descriptors);
+
+}  // namespace cashash

@@ -1,0 +1,106 @@
+#include "cashash/matching/table_shape.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace cashash {
+namespace {
+
+double TargetCollisionProbability() {
+  return TableCollisionProbability(kTableShapeReferenceTables, kTableShapeReferenceBits);
+}
+
+int MaxTablesForBits(int bits_per_table) {
+  return std::max(1, std::min(kMaxShapeTables, kMaxSignatureBits / bits_per_table));
+}
+
+// One bit per doubling: floor(log2(n / 8192)) + 7, at least kMinShapeBits.
+int BitsForSize(size_t features_per_image) {
+  size_t n = features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image;
+  int log2_n = 0;
+  while (n > 1) {
+    n >>= 1;
+    ++log2_n;
+  }
+  int log2_reference = 0;
+  for (size_t r = kTableShapeReferenceFeatures; r > 1; r >>= 1) ++log2_reference;
+  return std::max(kMinShapeBits, kTableShapeReferenceBits + log2_n - log2_reference);
+}
+
+}  // namespace
+
+double TableCollisionProbability(int num_tables, int bits_per_table, double p) {
+  return 1.0 - std::pow(1.0 - std::pow(p, bits_per_table), num_tables);
+}
+
+int TablesForBits(int bits_per_table) {
+  const double target = TargetCollisionProbability();
+  const int max_tables = MaxTablesForBits(bits_per_table);
+  int tables = 1;
+  // The small tolerance keeps 8 x 7 itself from rounding up to 9 tables.
+  while (tables < max_tables && TableCollisionProbability(tables, bits_per_table) < target - 1e-12) ++tables;
+  return tables;
+}
+
+TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table) {
+  TableShape shape;
+  if (num_tables > 0 && bits_per_table > 0) {
+    shape.num_tables = num_tables;
+    shape.bits_per_table = bits_per_table;
+    return shape;
+  }
+  if (bits_per_table > 0) {
+    shape.bits_per_table = bits_per_table;
+    shape.num_tables = TablesForBits(bits_per_table);
+    return shape;
+  }
+  const double floor = TargetCollisionProbability() - kMaxCollisionLoss;
+  int bits = BitsForSize(features_per_image);
+  if (num_tables > 0) {
+    bits = std::max(1, std::min(bits, kMaxSignatureBits / num_tables));
+    while (bits > kTableShapeReferenceBits && TableCollisionProbability(num_tables, bits) < floor) --bits;
+    shape.num_tables = num_tables;
+    shape.bits_per_table = bits;
+    return shape;
+  }
+  while (bits > kTableShapeReferenceBits && TableCollisionProbability(TablesForBits(bits), bits) < floor) --bits;
+  shape.bits_per_table = bits;
+  shape.num_tables = TablesForBits(bits);
+  return shape;
+}
+
+size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches) {
+  if (rows_per_image.empty()) return 0;
+  const size_t cap = static_cast<size_t>(std::max(1, max_num_matches));
+  for (size_t& rows : rows_per_image) rows = std::min(rows, cap);
+  const size_t middle = rows_per_image.size() / 2;
+  std::nth_element(rows_per_image.begin(), rows_per_image.begin() + middle, rows_per_image.end());
+  return rows_per_image[middle];
+}
+
+CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image) {
+  CasHashOptions resolved = options;
+  const TableShape shape = ChooseTableShape(features_per_image, options.num_tables, options.bits_per_table);
+  resolved.num_tables = shape.num_tables;
+  resolved.bits_per_table = shape.bits_per_table;
+  return resolved;
+}
+
+std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOptions& resolved,
+                               size_t features_per_image, size_t num_images) {
+  std::ostringstream text;
+  text << "Hash tables: " << resolved.num_tables << " x " << resolved.bits_per_table << " bits";
+  if (requested.num_tables > 0 && requested.bits_per_table > 0) {
+    text << " (as set by the options)";
+    return text.str();
+  }
+  text << " (";
+  if (requested.num_tables > 0) text << "tables as set, bits ";
+  if (requested.bits_per_table > 0) text << "bits as set, tables ";
+  text << "chosen for " << features_per_image << " features per image, the median of " << num_images << " image"
+       << (num_images == 1 ? "" : "s") << ")";
+  return text.str();
+}
+
+}  // namespace cashash

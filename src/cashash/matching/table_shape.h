@@ -1,0 +1,87 @@
+// How many first-level hash tables, and how many bits each, the cascade uses
+// for images of a given size (--CasHash.num_tables / --CasHash.bits_per_table
+// left at 0). docs/cascade_parameters.md, "Tables that grow with the images",
+// has the derivation and the measurements.
+//
+// A table of b bits cuts n features into 2^b buckets of about n / 2^b, and a
+// query visits its bucket in each of L tables: about L n / 2^b candidates. At
+// a fixed shape that grows with n, so the cascade's cost per pair grows as
+// n^2, like brute force. One more bit per doubling of n from 16,384 on keeps
+// the buckets, and so the candidates per query, the same size. Below 8,192
+// features the bits stay at 7: fewer bits with fewer tables hold the same
+// collision probability but visit more candidates (generated streets, 2,048
+// features: 6 x 5 visits 441 bucket entries per query for recall 0.983,
+// 8 x 7 175 for 0.976, 1.7x faster).
+//
+// A true match whose projection bit agrees with the query's with
+// probability p lands in the query's bucket of one table with p^b, of at
+// least one of L tables with 1 - (1 - p^b)^L. p = 0.867 fits the recall of
+// eight (L, b) settings measured on fountain-P11; the rule keeps this
+// collision probability at the default's (8 x 7 at 8,192 features: 0.975)
+// by choosing, for each b, the fewest tables that reach it.
+//
+// The GPU backend packs the bucket bits of a feature in one 64-bit word
+// (L b <= 64) and runs at most 32 tables. Past 8 bits no L within 64 bits
+// reaches the target (8 x 8: 0.954, 7 x 9: 0.897), so the bits stop at the
+// width whose capped L loses at most kMaxCollisionLoss; beyond that size the
+// candidates per query grow again (linearly in n), the recall does not drop.
+// CPU and GPU use the same rule, so their matches stay identical.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "cashash/matching/matching_options.h"
+
+namespace cashash {
+
+struct TableShape {
+  int num_tables = 0;
+  int bits_per_table = 0;
+};
+
+// Features per image at which the rule gives today's defaults, 8 x 7.
+constexpr size_t kTableShapeReferenceFeatures = 8192;
+constexpr int kTableShapeReferenceTables = 8;
+constexpr int kTableShapeReferenceBits = 7;
+// Probability that one projection bit of a true match agrees with the query's.
+constexpr double kTableShapeBitAgreement = 0.867;
+// Largest drop of the collision probability below the default's accepted to
+// add a bit when the 64-bit signature caps the number of tables.
+constexpr double kMaxCollisionLoss = 0.025;
+// Limits of the GPU backend (cuda/cashash_cuda/matching/cascade_hashing.cuh,
+// cascade_matcher.cuh), kept on every backend.
+constexpr int kMaxSignatureBits = 64;
+constexpr int kMaxShapeTables = 32;
+// Fewest bits the rule chooses: the reference's (8 x 7 for every smaller image).
+constexpr int kMinShapeBits = kTableShapeReferenceBits;
+
+// 1 - (1 - p^bits)^tables.
+double TableCollisionProbability(int num_tables, int bits_per_table, double p = kTableShapeBitAgreement);
+
+// The fewest tables of `bits_per_table` bits whose collision probability
+// reaches the default's, within the GPU limits.
+int TablesForBits(int bits_per_table);
+
+// The shape for images of `features_per_image` features (0: the reference
+// size). num_tables / bits_per_table > 0 are kept as given (explicit
+// options win) and the other is chosen for them: bits from the size and
+// within 64 / num_tables; tables from the bits.
+TableShape ChooseTableShape(size_t features_per_image, int num_tables = 0, int bits_per_table = 0);
+
+// The feature count a run's rule is decided from: the median over its
+// images of min(rows, max_num_matches) (the upper one of the two middle
+// values; 0 for no images).
+size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches);
+
+// `options` with num_tables and bits_per_table chosen for the size where
+// they are 0 (the defaults), unchanged where set.
+CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image);
+
+// One line for the run's log, e.g. "Hash tables: 8 x 8 bits (chosen for
+// 16384 features per image, the median of 300 images)".
+std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOptions& resolved,
+                               size_t features_per_image, size_t num_images);
+
+}  // namespace cashash

@@ -1,0 +1,171 @@
+#include "cashash/pipeline/feature_cache.h"
+
+#include <algorithm>
+#include <utility>
+
+namespace cashash {
+
+size_t FeatureBytes(const ImageFeatures& features) {
+  return features.descriptors.data.size() + features.keypoints.size() * sizeof(Keypoint);
+}
+
+std::vector<std::vector<image_t>> GroupFeatureCache::Steps(const std::vector<PairChunk>& chunks) {
+  std::vector<std::vector<image_t>> steps;
+  std::unordered_set<image_t> step_images;
+  std::pair<int, int> group_pair(-1, -1);
+  for (const PairChunk& chunk : chunks) {
+    const std::pair<int, int> chunk_groups(chunk.group_i, chunk.group_j);
+    const bool all_held = std::all_of(chunk.images.begin(), chunk.images.end(),
+                                      [&](image_t id) { return step_images.count(id) > 0; });
+    if (steps.empty() || (chunk_groups != group_pair && !all_held)) {
+      steps.emplace_back();
+      step_images.clear();
+    }
+    group_pair = chunk_groups;
+    for (image_t id : chunk.images) {
+      if (step_images.insert(id).second) steps.back().push_back(id);
+    }
+  }
+  return steps;
+}
+
+GroupFeatureCache::GroupFeatureCache(FeatureSource* source, const std::vector<PairChunk>& chunks)
+    : source_(source), steps_(Steps(chunks)) {
+  for (size_t s = 0; s < steps_.size(); ++s) {
+    step_sets_.emplace_back(steps_[s].begin(), steps_[s].end());
+    for (image_t id : steps_[s]) steps_of_image_[id].push_back(static_cast<int>(s));
+  }
+  stats_.steps = steps_.size();
+  if (!steps_.empty()) loader_ = std::thread([this]() { LoaderLoop(); });
+}
+
+GroupFeatureCache::~GroupFeatureCache() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  changed_.notify_all();
+  if (loader_.joinable()) loader_.join();
+}
+
+int GroupFeatureCache::StepHolding(image_t image_id, int from) const {
+  const auto it = steps_of_image_.find(image_id);
+  if (it == steps_of_image_.end()) return -1;
+  const auto step = std::lower_bound(it->second.begin(), it->second.end(), from);
+  return step == it->second.end() ? -1 : *step;
+}
+
+void GroupFeatureCache::LoaderLoop() {
+  const int num_steps = static_cast<int>(steps_.size());
+  std::unique_lock<std::mutex> lock(mutex_);
+  for (int s = 0;; ++s) {
+    // Load step s once the pipeline works on step s - 1: the current step
+    // and the next are held, never more.
+    changed_.wait(lock, [&]() { return stopping_ || current_step_ >= s - 1; });
+    if (stopping_) break;
+    s = std::max(s, current_step_);  // the pipeline skipped ahead
+    if (s >= num_steps) break;
+    // Keep steps s - 1 and s (the pipeline is on one of them), whether the
+    // loader runs ahead of the pipeline or behind it, so that what is read
+    // again does not depend on timing.
+    const std::unordered_set<image_t>* previous = s > 0 ? &step_sets_[s - 1] : nullptr;
+    for (auto it = held_.begin(); it != held_.end();) {
+      if ((previous && previous->count(it->first)) || step_sets_[s].count(it->first)) {
+        ++it;
+      } else {
+        held_bytes_ -= FeatureBytes(*it->second);
+        it = held_.erase(it);
+      }
+    }
+    loading_step_ = s;
+    loading_done_ = false;
+    for (image_t id : steps_[s]) {
+      if (stopping_ || current_step_ > s) break;
+      if (held_.count(id)) continue;
+      lock.unlock();
+      FeaturesPtr features;
+      std::exception_ptr error;
+      try {
+        std::lock_guard<std::mutex> source_lock(source_mutex_);
+        features = std::make_shared<const ImageFeatures>(source_->LoadFeatures(id));
+      } catch (...) {
+        error = std::current_exception();
+      }
+      lock.lock();
+      ++stats_.source_loads;
+      if (error) {
+        failed_[id] = error;
+      } else {
+        held_bytes_ += FeatureBytes(*features);
+        stats_.peak_bytes = std::max(stats_.peak_bytes, held_bytes_);
+        held_.emplace(id, std::move(features));
+      }
+      changed_.notify_all();
+    }
+    loading_done_ = true;
+    changed_.notify_all();
+  }
+  // Nothing more will be loaded: waiting requests go to the source.
+  loading_step_ = num_steps;
+  loading_done_ = true;
+  changed_.notify_all();
+}
+
+ImageFeatures GroupFeatureCache::LoadDirectly(image_t image_id) {
+  std::lock_guard<std::mutex> source_lock(source_mutex_);
+  ImageFeatures features = source_->LoadFeatures(image_id);
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.source_loads;
+  ++stats_.unplanned;
+  return features;
+}
+
+ImageFeatures GroupFeatureCache::LoadFeatures(image_t image_id) {
+  return *LoadSharedFeatures(image_id);  // the copy is made outside the lock
+}
+
+std::shared_ptr<const ImageFeatures> GroupFeatureCache::LoadSharedFeatures(image_t image_id) {
+  FeaturesPtr features;
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (steps_.empty()) {
+      lock.unlock();
+      return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
+    }
+    if (!step_sets_[current_step_].count(image_id)) {
+      const int step = StepHolding(image_id, current_step_ + 1);
+      if (step < 0) {
+        lock.unlock();
+        return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
+      }
+      current_step_ = step;
+      changed_.notify_all();
+    }
+    changed_.wait(lock, [&]() {
+      return held_.count(image_id) || failed_.count(image_id) || loading_step_ > current_step_ ||
+             (loading_step_ == current_step_ && loading_done_);
+    });
+    const auto failed = failed_.find(image_id);
+    if (failed != failed_.end()) {
+      const std::exception_ptr error = failed->second;
+      failed_.erase(failed);
+      std::rethrow_exception(error);
+    }
+    const auto held = held_.find(image_id);
+    if (held != held_.end()) {
+      features = held->second;
+      ++stats_.served;
+    }
+  }
+  if (!features) return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
+  return features;
+}
+
+const Camera& GroupFeatureCache::CameraOfImage(image_t image_id) const { return source_->CameraOfImage(image_id); }
+
+FeatureCacheStats GroupFeatureCache::stats() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stats_;
+}
+
+}  // namespace cashash

@@ -1,0 +1,319 @@
+#include "cashash/pipeline/matching_pipeline.h"
+
+#include <chrono>
+#include <exception>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "cashash/pipeline/blocking_queue.h"
+#include "cashash/pipeline/in_order_turnstile.h"
+#include "cashash/base/pair_id.h"
+#include "cashash/pipeline/thread_pool.h"
+
+namespace cashash {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
+
+// What travels from the matching stage to the verification stage.
+struct MatchedChunk {
+  size_t index = 0;  // position in the run's chunks: the writer's order
+  const PairChunk* chunk = nullptr;
+  std::unordered_map<image_t, FeaturesPtr> features;
+  std::vector<FeatureMatches> matches;
+  Clock::time_point started;
+};
+
+struct VerifiedChunk {
+  const PairChunk* chunk = nullptr;
+  std::vector<PairResult> results;
+  Clock::time_point started;
+};
+
+// Remembers the first exception thrown by any stage and makes all stages stop.
+class FirstError {
+ public:
+  void Set(std::exception_ptr error) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!error_) error_ = error;
+    failed_ = true;
+  }
+  bool failed() const { return failed_; }
+  void RethrowIfAny() {
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  std::mutex mutex_;
+  std::exception_ptr error_;
+  std::atomic<bool> failed_{false};
+};
+
+// The verification of one matched chunk: results in the chunk's pair order,
+// geometries left undefined when verification is skipped. Releases the
+// chunk's features.
+VerifiedChunk VerifyChunk(const PipelineOptions& options, FeatureSource* source, MatchedChunk* item,
+                          BatchVerifier* verifier) {
+  VerifiedChunk out;
+  out.chunk = item->chunk;
+  out.started = item->started;
+  const std::vector<ImagePair>& pairs = item->chunk->pairs;
+  out.results.resize(pairs.size());
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    out.results[k].pair = pairs[k];
+    out.results[k].matches = std::move(item->matches[k]);
+  }
+  if (!options.skip_geometric_verification) {
+    // Keypoint positions once per image of the chunk, not once per pair.
+    std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
+    for (const auto& entry : item->features) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
+    std::vector<std::pair<const image_t, std::vector<Eigen::Vector2d>>*> slots;
+    for (auto& entry : positions) slots.push_back(&entry);
+    ParallelFor(slots.size(), options.num_threads, [&](size_t i) {
+      slots[i]->second = KeypointPositions(item->features.at(slots[i]->first)->keypoints);
+    });
+    std::vector<VerificationPair> tasks(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      VerificationPair& task = tasks[k];
+      task.camera1 = &source->CameraOfImage(pairs[k].first);
+      task.camera2 = &source->CameraOfImage(pairs[k].second);
+      task.points1 = &positions.at(pairs[k].first);
+      task.points2 = &positions.at(pairs[k].second);
+      task.matches = &out.results[k].matches;
+      task.random_seed = PairRandomSeed(options.two_view.random_seed, pairs[k]);
+    }
+    std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
+    for (size_t k = 0; k < pairs.size(); ++k) out.results[k].geometry = std::move(geometries[k]);
+  }
+  item->features.clear();
+  return out;
+}
+
+// Holds verification back while the matcher chooses its backend (see
+// FeatureMatcher::ChoosingBackend). Device run 25 timed the cascade at
+// 0.56 ms per pair instead of 0.016 while the first chunk's RANSAC filled
+// the GPU, and auto chose brute force, 3x slower over the run; verification
+// has time to spare at the start, and the queue keeps the chunks.
+class VerificationGate {
+ public:
+  void Open() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    open_ = true;
+    opened_.notify_all();
+  }
+  void Wait() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    opened_.wait(lock, [&] { return open_; });
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable opened_;
+  bool open_ = false;
+};
+
+}  // namespace
+
+TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
+                           const ImageFeatures& image2, const FeatureMatches& matches,
+                           const TwoViewGeometryOptions& options) {
+  return EstimateTwoViewGeometry(camera1, KeypointPositions(image1.keypoints), camera2,
+                                 KeypointPositions(image2.keypoints), matches, options);
+}
+
+std::shared_ptr<const ImageFeatures> FeatureSource::LoadSharedFeatures(image_t image_id) {
+  return std::make_shared<const ImageFeatures>(LoadFeatures(image_id));
+}
+
+MatchingPipeline::MatchingPipeline(const PipelineOptions& options, FeatureSource* source,
+                                   FeatureMatcher* matcher, ResultSink* sink)
+    : options_(options), source_(source), matcher_(matcher), sink_(sink) {}
+
+void MatchingPipeline::SetProgressCallback(std::function<void(const PipelineProgress&)> callback) {
+  progress_ = std::move(callback);
+}
+
+void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop; }
+
+void MatchingPipeline::SetBatchVerifier(BatchVerifier* verifier) { verifier_ = verifier; }
+
+PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
+  PipelineStats stats;
+  for (const PairChunk& chunk : chunks) stats.pairs_total += chunk.pairs.size();
+  const Clock::time_point run_start = Clock::now();
+
+  // Two chunks in flight between stages: enough to overlap the stages while
+  // bounding memory to a few chunks' matches.
+  constexpr size_t kChunksInQueue = 2;
+  BlockingQueue<MatchedChunk> to_verify(kChunksInQueue);
+  BlockingQueue<VerifiedChunk> to_write(2);
+  FirstError error;
+  std::mutex stats_mutex;
+  // Adds the time since `start` to one of the stats' times (any thread).
+  auto add_seconds = [&](double PipelineStats::*field, Clock::time_point start) {
+    const double seconds = SecondsSince(start);
+    std::lock_guard<std::mutex> lock(stats_mutex);
+    stats.*field += seconds;
+  };
+
+  // Stage 3: the single writer.
+  std::thread writer([&]() {
+    try {
+      for (;;) {
+        const Clock::time_point t_wait = Clock::now();
+        std::optional<VerifiedChunk> item = to_write.Pop();
+        add_seconds(&PipelineStats::seconds_writing_wait_input, t_wait);
+        if (!item) break;
+        const Clock::time_point t0 = Clock::now();
+        sink_->WriteChunk(item->results);
+        PipelineProgress progress;
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_writing += SecondsSince(t0);
+          stats.pairs_done += item->results.size();
+          for (const PairResult& r : item->results) {
+            stats.raw_matches += r.matches.size();
+            if (r.geometry.config >= kCalibrated) {
+              ++stats.verified_pairs;
+              stats.inlier_matches += r.geometry.inlier_matches.size();
+            }
+          }
+          progress.pairs_done = stats.pairs_done;
+        }
+        progress.pairs_total = stats.pairs_total;
+        progress.elapsed_seconds = SecondsSince(run_start);
+        progress.chunk = item->chunk;
+        progress.chunk_seconds = SecondsSince(item->started);
+        if (progress_) progress_(progress);
+      }
+    } catch (...) {
+      error.Set(std::current_exception());
+      to_verify.Close();
+      to_write.Close();
+    }
+  });
+
+  // Stage 2: verification of whole chunks by the batch verifier, on as many
+  // threads as it takes calls at once. Chunks still reach the writer in the
+  // order they were matched (the turnstile).
+  std::unique_ptr<BatchVerifier> default_verifier;
+  BatchVerifier* verifier = verifier_;
+  if (verifier == nullptr && !options_.skip_geometric_verification) {
+    default_verifier = CreateCpuBatchVerifier(options_.two_view, options_.num_threads);
+    verifier = default_verifier.get();
+  }
+  const int num_verifier_threads =
+      options_.skip_geometric_verification ? 1 : std::max(1, verifier->MaxConcurrentCalls());
+  stats.verification_threads = num_verifier_threads;
+  InOrderTurnstile to_writer_in_order;
+  VerificationGate gate;
+  std::atomic<int> verifier_threads_left{num_verifier_threads};
+  auto verification_stage = [&]() {
+    try {
+      for (;;) {
+        const Clock::time_point t_wait = Clock::now();
+        gate.Wait();
+        std::optional<MatchedChunk> item = to_verify.Pop();
+        add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
+        if (!item) break;
+        const Clock::time_point t0 = Clock::now();
+        VerifiedChunk out = VerifyChunk(options_, source_, &*item, verifier);
+        add_seconds(&PipelineStats::seconds_verification, t0);
+        const Clock::time_point t_push = Clock::now();
+        if (!to_writer_in_order.Wait(item->index)) break;
+        const bool pushed = to_write.Push(std::move(out));
+        to_writer_in_order.Pass(item->index);
+        add_seconds(&PipelineStats::seconds_verification_wait_writer, t_push);
+        if (!pushed) break;
+      }
+    } catch (...) {
+      error.Set(std::current_exception());
+      to_verify.Close();
+      to_writer_in_order.Cancel();
+    }
+    if (--verifier_threads_left == 0) to_write.Close();
+  };
+  std::vector<std::thread> verifier_threads;
+  for (int t = 0; t < num_verifier_threads; ++t) verifier_threads.emplace_back(verification_stage);
+
+  // Stage 1 (this thread): load what the chunk needs, match. The gate opens
+  // once the matcher has chosen, or before a push that could wait for
+  // verification (the queue full), or when matching ends.
+  size_t pushed_while_gated = 0;
+  try {
+    std::unordered_map<image_t, FeaturesPtr> loaded;
+    for (size_t c = 0; c < chunks.size(); ++c) {
+      if (error.failed() || (stop_ && stop_->load())) {
+        stats.stopped = !error.failed();
+        break;
+      }
+      const PairChunk& chunk = chunks[c];
+      const Clock::time_point chunk_start = Clock::now();
+
+      // Drop images that neither this chunk nor the next one needs.
+      std::unordered_set<image_t> keep(chunk.images.begin(), chunk.images.end());
+      if (c + 1 < chunks.size()) keep.insert(chunks[c + 1].images.begin(), chunks[c + 1].images.end());
+      for (auto it = loaded.begin(); it != loaded.end();) {
+        if (keep.count(it->first)) {
+          ++it;
+        } else {
+          matcher_->RemoveImage(it->first);
+          it = loaded.erase(it);
+        }
+      }
+      double load_seconds = 0, hash_seconds = 0;
+      for (image_t image_id : chunk.images) {
+        if (loaded.count(image_id)) continue;
+        const Clock::time_point t_load = Clock::now();
+        FeaturesPtr features = source_->LoadSharedFeatures(image_id);
+        const Clock::time_point t_hash = Clock::now();
+        load_seconds += std::chrono::duration<double>(t_hash - t_load).count();
+        // The matcher may keep the descriptors (aliasing the features).
+        matcher_->AddSharedImage(image_id, std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors));
+        hash_seconds += SecondsSince(t_hash);
+        loaded.emplace(image_id, std::move(features));
+      }
+
+      const Clock::time_point t_match = Clock::now();
+      MatchedChunk item;
+      item.index = c;
+      item.chunk = &chunk;
+      item.started = chunk_start;
+      item.matches = matcher_->MatchPairs(chunk.pairs);
+      {
+        std::lock_guard<std::mutex> lock(stats_mutex);
+        stats.seconds_loading += load_seconds;
+        stats.seconds_hashing += hash_seconds;
+        stats.seconds_matching += SecondsSince(t_match);
+      }
+      for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
+      if (!matcher_->ChoosingBackend() || pushed_while_gated >= kChunksInQueue) gate.Open();
+      ++pushed_while_gated;
+      const Clock::time_point t_push = Clock::now();
+      const bool pushed = to_verify.Push(std::move(item));
+      add_seconds(&PipelineStats::seconds_matching_wait_queue, t_push);
+      if (!pushed) break;
+    }
+  } catch (...) {
+    error.Set(std::current_exception());
+  }
+  gate.Open();
+  to_verify.Close();
+  for (std::thread& thread : verifier_threads) thread.join();
+  writer.join();
+  error.RethrowIfAny();
+  if (stop_ && stop_->load() && stats.pairs_done < stats.pairs_total) stats.stopped = true;
+  stats.seconds_total = SecondsSince(run_start);
+  return stats;
+}
+
+}  // namespace cashash

@@ -1,0 +1,127 @@
+// The matching pipeline: load features of a chunk of pairs, match them with a
+// FeatureMatcher backend, verify each pair geometrically, hand the results to
+// a writer. The three stages run on their own threads with bounded queues, so
+// the GPU matches chunk k+1 while the CPU verifies chunk k and the database
+// commits chunk k-1.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/matchers/feature_matcher.h"
+#include "cashash/pipeline/pair_generation.h"
+#include "cashash/geometry/two_view_geometry.h"
+#include "cashash/base/types.h"
+
+namespace cashash {
+
+// Where features come from (a COLMAP database in practice).
+class FeatureSource {
+ public:
+  virtual ~FeatureSource() = default;
+  // Keypoints and descriptors of one image; throws with a message naming the
+  // image when its data is unusable.
+  virtual ImageFeatures LoadFeatures(image_t image_id) = 0;
+  // The same features for a caller that only reads them. A source that keeps
+  // them in memory (GroupFeatureCache) hands out what it holds instead of a
+  // copy: on a 5,000-image run the copies (1.2 MB per image at 8,192
+  // features, one per image per block pair) were a third of the matching
+  // thread's time. The default wraps LoadFeatures.
+  virtual std::shared_ptr<const ImageFeatures> LoadSharedFeatures(image_t image_id);
+  virtual const Camera& CameraOfImage(image_t image_id) const = 0;
+};
+
+struct PairResult {
+  ImagePair pair;
+  FeatureMatches matches;
+  TwoViewGeometry geometry;
+};
+
+// Where results go. WriteChunk persists a chunk atomically (one
+// transaction), so a stopped run leaves only whole chunks behind.
+class ResultSink {
+ public:
+  virtual ~ResultSink() = default;
+  virtual void WriteChunk(const std::vector<PairResult>& results) = 0;
+};
+
+struct PipelineOptions {
+  int num_threads = -1;
+  // Write raw matches only; two_view_geometries rows are not written.
+  bool skip_geometric_verification = false;
+  TwoViewGeometryOptions two_view;
+};
+
+struct PipelineProgress {
+  size_t pairs_done = 0;
+  size_t pairs_total = 0;
+  double elapsed_seconds = 0;
+  const PairChunk* chunk = nullptr;
+  double chunk_seconds = 0;
+};
+
+struct PipelineStats {
+  size_t pairs_total = 0;
+  size_t pairs_done = 0;
+  size_t raw_matches = 0;
+  size_t verified_pairs = 0;  // config >= CALIBRATED
+  size_t inlier_matches = 0;
+  double seconds_total = 0;
+  // Busy time of each stage (loading and hashing on the loading thread,
+  // matching after them on the same thread; verification and writing on
+  // their own threads, overlapping the others).
+  double seconds_loading = 0;  // features from the source (waits on a cache's loader too)
+  double seconds_hashing = 0;  // adding images to the matcher (hash codes, device upload)
+  double seconds_matching = 0;
+  // Summed over the verification threads when chunks are verified
+  // concurrently (verification_threads > 1), as are its waits below.
+  double seconds_verification = 0;
+  double seconds_writing = 0;
+  // Waiting, apart from the busy times above: the matching thread for room
+  // in the queue to verification (verification is slower), verification for
+  // a matched chunk (matching is slower) and for room in the queue to the
+  // writer, the writer for a verified chunk.
+  double seconds_matching_wait_queue = 0;
+  double seconds_verification_wait_input = 0;
+  double seconds_verification_wait_writer = 0;
+  double seconds_writing_wait_input = 0;
+  bool stopped = false;  // the stop flag was raised before the end
+  int verification_threads = 1;  // chunks verified at once (BatchVerifier::MaxConcurrentCalls)
+};
+
+class MatchingPipeline {
+ public:
+  MatchingPipeline(const PipelineOptions& options, FeatureSource* source, FeatureMatcher* matcher,
+                   ResultSink* sink);
+
+  // Called from the writer thread after each chunk is committed.
+  void SetProgressCallback(std::function<void(const PipelineProgress&)> callback);
+  // When the flag becomes true the pipeline finishes the chunks in flight,
+  // commits them, and returns with stats.stopped set.
+  void SetStopFlag(const std::atomic<bool>* stop);
+  // Verifies each chunk with `verifier` (not owned; e.g. the GPU one)
+  // instead of the default CPU thread pool over options.two_view.
+  void SetBatchVerifier(BatchVerifier* verifier);
+
+  PipelineStats Run(const std::vector<PairChunk>& chunks);
+
+ private:
+  PipelineOptions options_;
+  FeatureSource* source_;
+  FeatureMatcher* matcher_;
+  ResultSink* sink_;
+  std::function<void(const PipelineProgress&)> progress_;
+  const std::atomic<bool>* stop_ = nullptr;
+  BatchVerifier* verifier_ = nullptr;
+};
+
+// Verifies one pair (exposed for tests and for the verify-only mode).
+TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
+                           const ImageFeatures& image2, const FeatureMatches& matches,
+                           const TwoViewGeometryOptions& options);
+
+}  // namespace cashash

@@ -1,0 +1,94 @@
+// Which image pairs to match, and in what order. Exhaustive matching walks
+// blocks of images as COLMAP's ExhaustiveMatching.block_size does, so that
+// only two blocks of features need to be loaded at a time. The scheduled
+// order adds a second level, groups of blocks (what host memory holds), as
+// the three-level data scheduling of Xu, Sun and Tao: see
+// ScheduledPairChunks.
+#pragma once
+
+#include <vector>
+
+#include "cashash/base/types.h"
+
+namespace cashash {
+
+// A chunk of pairs matched together; images() are the images they touch.
+struct PairChunk {
+  std::vector<ImagePair> pairs;
+  std::vector<image_t> images;  // sorted, unique
+  int block_i = 0;              // for progress messages: block indices
+  int block_j = 0;
+  int num_blocks = 0;
+  int group_i = 0;  // groups of blocks holding block_i and block_j
+  int group_j = 0;
+  int num_groups = 1;
+};
+
+// Every unordered pair of `image_ids` once, as (smaller position, larger
+// position) in the given order, grouped by block pairs (i <= j).
+std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_ids, int block_size);
+
+// Every unordered pair of `image_ids` once, like ExhaustivePairChunks, one
+// chunk per pair of blocks, but in an order that reloads as little as
+// possible when blocks (block_size images, what the matcher holds) are
+// gathered into groups (blocks_per_group blocks, what host memory holds).
+//
+// Group pairs come as (G0,G0), (G0,Gn-1), ..., (G0,G1), (G1,G1), (G1,Gn-1),
+// ..., so that each group pair after the first brings exactly one group not
+// already held (none for a diagonal one): 1 + n(n-1)/2 group loads in all.
+// Inside a group pair the block pairs are ordered the same way (diagonal
+// pairs in a row first, then the rest of the row from the far end; across
+// two groups a snake), and each group pair starts on a block the previous
+// one ended on, so every chunk after the first shares a block with the one
+// before it: the matcher never needs more than three blocks at once. The
+// last group's last four blocks go as a band, then their far pairs, so
+// that the run does not end on a diagonal chunk, the slowest to verify
+// (see BlockPairOrder::Diagonal).
+std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
+                                           int blocks_per_group);
+
+// Splits an arbitrary pair list into chunks of at most max_pairs_per_chunk
+// pairs (in the given order), each touching at most max_images_per_chunk
+// images where possible.
+std::vector<PairChunk> ListPairChunks(const std::vector<ImagePair>& pairs, size_t max_pairs_per_chunk,
+                                      size_t max_images_per_chunk);
+
+}  // namespace cashash
+
+namespace cashash {
+
+// Removes the pairs for which skip(pair) is true (e.g. pairs already in the
+// database when resuming), dropping chunks left empty and recomputing the
+// images each chunk touches.
+template <typename SkipPredicate>
+std::vector<PairChunk> RemovePairs(std::vector<PairChunk> chunks, SkipPredicate skip);
+
+}  // namespace cashash
+
+#include <algorithm>
+
+namespace cashash {
+
+template <typename SkipPredicate>
+std::vector<PairChunk> RemovePairs(std::vector<PairChunk> chunks, SkipPredicate skip) {
+  std::vector<PairChunk> kept;
+  for (PairChunk& chunk : chunks) {
+    std::vector<ImagePair> pairs;
+    std::vector<image_t> images;
+    for (const ImagePair& pair : chunk.pairs) {
+      if (skip(pair)) continue;
+      pairs.push_back(pair);
+      images.push_back(pair.first);
+      images.push_back(pair.second);
+    }
+    if (pairs.empty()) continue;
+    std::sort(images.begin(), images.end());
+    images.erase(std::unique(images.begin(), images.end()), images.end());
+    chunk.pairs = std::move(pairs);
+    chunk.images = std::move(images);
+    kept.push_back(std::move(chunk));
+  }
+  return kept;
+}
+
+}  // namespace cashash

@@ -1,0 +1,138 @@
+#include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/matching_api.h"
+
+#include <gtest/gtest.h>
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+ParseOutcome Parse(std::vector<const char*> args, MatcherCommandOptions* options) {
+  args.insert(args.begin(), "exhaustive_matcher");
+  return ParseMatcherCommandOptions("exhaustive_matcher", static_cast<int>(args.size()), args.data(), options);
+}
+
+TEST(CommandOptions, DefaultsAreColmaps) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(Parse({"--database_path", "db.db"}, &o), ParseOutcome::kRun);
+  EXPECT_EQ(o.database_path, "db.db");
+  EXPECT_DOUBLE_EQ(o.sift.max_ratio, 0.8);
+  EXPECT_DOUBLE_EQ(o.sift.max_distance, 0.7);
+  EXPECT_TRUE(o.sift.cross_check);
+  EXPECT_EQ(o.sift.max_num_matches, 32768);
+  EXPECT_EQ(o.two_view.min_num_inliers, 15);
+  EXPECT_DOUBLE_EQ(o.two_view.max_error, 4.0);
+  EXPECT_DOUBLE_EQ(o.two_view.confidence, 0.999);
+  EXPECT_EQ(o.two_view.max_num_trials, 10000);
+  EXPECT_DOUBLE_EQ(o.two_view.min_inlier_ratio, 0.25);
+  EXPECT_EQ(o.block_size, 50);
+  EXPECT_TRUE(o.use_gpu);
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+}
+
+TEST(CommandOptions, Colmap38Names) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(Parse({"--database_path", "x", "--SiftMatching.use_gpu", "0", "--SiftMatching.max_ratio", "0.7",
+                   "--SiftMatching.max_error", "2", "--SiftMatching.min_num_inliers", "30",
+                   "--SiftMatching.num_threads", "3", "--SiftMatching.cross_check", "0",
+                   "--ExhaustiveMatching.block_size", "10"},
+                  &o),
+            ParseOutcome::kRun);
+  EXPECT_FALSE(o.use_gpu);
+  EXPECT_DOUBLE_EQ(o.sift.max_ratio, 0.7);
+  EXPECT_DOUBLE_EQ(o.two_view.max_error, 2.0);
+  EXPECT_EQ(o.two_view.min_num_inliers, 30);
+  EXPECT_EQ(o.sift.num_threads, 3);
+  EXPECT_FALSE(o.sift.cross_check);
+  EXPECT_EQ(o.block_size, 10);
+}
+
+TEST(CommandOptions, Colmap4Names) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "false", "--FeatureMatching.gpu_index",
+                   "1", "--TwoViewGeometry.max_error", "3", "--TwoViewGeometry.confidence", "0.99",
+                   "--FeatureMatching.max_num_matches", "1000", "--CasHash.matcher", "bruteforce",
+                   "--random_seed", "7"},
+                  &o),
+            ParseOutcome::kRun);
+  EXPECT_FALSE(o.use_gpu);
+  EXPECT_EQ(o.gpu_index, "1");
+  EXPECT_DOUBLE_EQ(o.two_view.max_error, 3.0);
+  EXPECT_DOUBLE_EQ(o.two_view.confidence, 0.99);
+  EXPECT_EQ(o.sift.max_num_matches, 1000);
+  EXPECT_EQ(o.cashash.matcher, MatcherType::kBruteForce);
+  EXPECT_EQ(o.cashash.random_seed, 7u);
+  EXPECT_EQ(o.two_view.random_seed, 7u);
+}
+
+TEST(CommandOptions, BadInputIsAnError) {
+  MatcherCommandOptions o;
+  EXPECT_EQ(Parse({"--database_path", "x", "--SiftMatching.max_ratio", "abc"}, &o), ParseOutcome::kError);
+  MatcherCommandOptions o2;
+  EXPECT_EQ(Parse({"--no_such_option", "1"}, &o2), ParseOutcome::kError);
+  MatcherCommandOptions o3;
+  EXPECT_EQ(Parse({"--CasHash.matcher", "kdtree"}, &o3), ParseOutcome::kError);
+  MatcherCommandOptions o4;
+  ASSERT_EQ(Parse({"--ExhaustiveMatching.block_size", "1", "--database_path", "x"}, &o4), ParseOutcome::kRun);
+  EXPECT_NE(CheckMatcherCommandOptions(o4).find("ExhaustiveMatching.block_size"), std::string::npos);
+  MatcherCommandOptions o5;
+  ASSERT_EQ(Parse({}, &o5), ParseOutcome::kRun);
+  EXPECT_NE(CheckMatcherCommandOptions(o5).find("--database_path"), std::string::npos);
+}
+
+TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
+  MatcherCommandOptions defaults;
+  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  EXPECT_EQ(defaults.cashash.matcher, MatcherType::kAuto);
+  EXPECT_EQ(defaults.cashash.num_tables, 0);
+  EXPECT_EQ(defaults.cashash.bits_per_table, 0);
+  EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
+  // Given on the command line, the tables are kept for any image size.
+  MatcherCommandOptions set;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "8", "--CasHash.bits_per_table", "7",
+                   "--CasHash.matcher", "cascade"},
+                  &set),
+            ParseOutcome::kRun);
+  EXPECT_EQ(set.cashash.matcher, MatcherType::kCascade);
+  const MatcherCommandOptions run = ResolveOptionsForRun(set, {32768, 32768, 32768}, nullptr);
+  EXPECT_EQ(run.cashash.num_tables, 8);
+  EXPECT_EQ(run.cashash.bits_per_table, 7);
+  // Left at 0, they follow the images: 8 x 8 at 32,768 features.
+  const MatcherCommandOptions chosen = ResolveOptionsForRun(defaults, {32768, 32768, 32768}, nullptr);
+  EXPECT_EQ(chosen.cashash.num_tables, 8);
+  EXPECT_EQ(chosen.cashash.bits_per_table, 8);
+  MatcherCommandOptions auto_named;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "auto"}, &auto_named), ParseOutcome::kRun);
+  EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
+}
+
+TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {
+  const char* argv[] = {"guided_matcher", "--database_path", "x"};
+  MatcherCommandOptions o;
+  ASSERT_EQ(ParseMatcherCommandOptions("guided_matcher", 3, argv, &o), ParseOutcome::kRun);
+  EXPECT_TRUE(o.guided.enabled);
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+  std::vector<std::string> said;
+  const MatcherCommandOptions run =
+      ResolveOptionsForRun(o, {1000, 2000}, [&](const std::string& text) { said.push_back(text); });
+  EXPECT_EQ(run.cashash.matcher, MatcherType::kCascade);
+  ASSERT_FALSE(said.empty());
+  EXPECT_NE(said.front().find("guided"), std::string::npos);
+  o.cashash.matcher = MatcherType::kBruteForce;
+  EXPECT_NE(CheckMatcherCommandOptions(o).find("GuidedMatching.enabled"), std::string::npos);
+}
+
+TEST(CommandOptions, HelpListsOptions) {
+  MatcherCommandOptions o;
+  testing::internal::CaptureStdout();
+  EXPECT_EQ(Parse({"--help"}, &o), ParseOutcome::kHelpShown);
+  const std::string help = testing::internal::GetCapturedStdout();
+  for (const char* name : {"--SiftMatching.max_ratio", "--FeatureMatching.use_gpu", "--TwoViewGeometry.max_error",
+                           "--CasHash.tau", "--ExhaustiveMatching.block_size", "--SiftMatching.min_num_inliers"}) {
+    EXPECT_NE(help.find(name), std::string::npos) << name;
+  }
+}
+
+}  // namespace
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,313 @@
+// The library calls: MatchImagePair on features in memory, and
+// MatchExhaustive / MatchPairs on a small COLMAP database of a synthetic
+// scene (three views of one point cloud, each point with its own descriptor).
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+#include <unistd.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "cashash/matching/pair_matching.h"
+#include "colmap_bridge/api/matching_api.h"
+
+namespace cashash {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kWidth = 1280, kHeight = 960;
+constexpr double kFocal = 1000.0;
+
+// One view of the scene: keypoints, descriptors and for each row the index
+// of the 3-D point it sees. Rows are shuffled so that row indices differ
+// between views.
+struct View {
+  Keypoints keypoints;
+  FeatureDescriptors descriptors;
+  std::vector<int> point_of_row;
+};
+
+struct Scene {
+  std::vector<Eigen::Vector3d> points;
+  std::vector<std::vector<uint8_t>> descriptors;  // one per point
+};
+
+Scene MakeScene(int num_points, unsigned seed) {
+  Scene scene;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> xy(-2.5, 2.5), depth(5.0, 9.0);
+  std::uniform_int_distribution<int> value(0, 60);
+  for (int i = 0; i < num_points; ++i) {
+    scene.points.emplace_back(xy(rng), xy(rng), depth(rng));
+    // SIFT descriptors have an L2 norm of about 512; the matcher's distance
+    // threshold is an angle that assumes it.
+    std::vector<double> raw(kDescriptorDim);
+    double norm = 0;
+    for (double& v : raw) {
+      v = value(rng);
+      norm += v * v;
+    }
+    std::vector<uint8_t> d(kDescriptorDim);
+    const double scale = 512.0 / std::sqrt(norm);
+    for (int k = 0; k < kDescriptorDim; ++k) d[k] = static_cast<uint8_t>(std::lround(raw[k] * scale));
+    scene.descriptors.push_back(d);
+  }
+  return scene;
+}
+
+// Camera i sits at x = 0.4 i, turned slightly towards the cloud's centre.
+View MakeView(const Scene& scene, int camera_index, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> pixel_noise(0.0, 0.3);
+  std::uniform_int_distribution<int> byte_noise(-2, 2);
+  const Eigen::Matrix3d R(Eigen::AngleAxisd(-0.03 * camera_index, Eigen::Vector3d::UnitY()));
+  const Eigen::Vector3d center(0.4 * camera_index, 0.05 * camera_index, 0.0);
+  std::vector<int> order(scene.points.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::shuffle(order.begin(), order.end(), rng);
+  View view;
+  for (int p : order) {
+    const Eigen::Vector3d X = R * (scene.points[p] - center);
+    const double x = kFocal * X.x() / X.z() + kWidth / 2 + pixel_noise(rng);
+    const double y = kFocal * X.y() / X.z() + kHeight / 2 + pixel_noise(rng);
+    if (x < 0 || y < 0 || x >= kWidth || y >= kHeight) continue;
+    Keypoint k;
+    k.x = static_cast<float>(x);
+    k.y = static_cast<float>(y);
+    view.keypoints.push_back(k);
+    for (uint8_t v : scene.descriptors[p]) {
+      view.descriptors.data.push_back(static_cast<uint8_t>(std::clamp(v + byte_noise(rng), 0, 255)));
+    }
+    view.point_of_row.push_back(p);
+  }
+  return view;
+}
+
+Camera PinholeCamera(bool prior) {
+  Camera camera;
+  camera.model_id = 1;  // PINHOLE
+  camera.width = kWidth;
+  camera.height = kHeight;
+  camera.params = {kFocal, kFocal, kWidth / 2.0, kHeight / 2.0};
+  camera.has_prior_focal_length = prior;
+  return camera;
+}
+
+size_t CorrectMatches(const FeatureMatches& matches, const View& a, const View& b) {
+  size_t correct = 0;
+  for (const FeatureMatch& m : matches) {
+    correct += a.point_of_row[m.point2D_idx1] == b.point_of_row[m.point2D_idx2];
+  }
+  return correct;
+}
+
+TEST(MatchImagePair, MatchesAndVerifiesFeaturesInMemory) {
+  const Scene scene = MakeScene(800, 1);
+  const View a = MakeView(scene, 0, 2), b = MakeView(scene, 1, 3);
+  ASSERT_GT(a.keypoints.size(), 500u);
+
+  const PairMatchingResult guessed =
+      MatchImagePair(a.keypoints, a.descriptors, b.keypoints, b.descriptors, PairMatchingOptions());
+  ASSERT_TRUE(guessed.verified);
+  EXPECT_GT(guessed.matches.size(), 400u);
+  EXPECT_GE(CorrectMatches(guessed.matches, a, b), guessed.matches.size() * 98 / 100);
+  // Without intrinsics only F and H can be estimated.
+  EXPECT_EQ(guessed.two_view_geometry.config, kUncalibrated);
+  EXPECT_GE(guessed.two_view_geometry.inlier_matches.size(), guessed.matches.size() * 95 / 100);
+
+  const Camera camera = PinholeCamera(/*prior=*/true);
+  const PairMatchingResult calibrated = MatchImagePair(a.keypoints, a.descriptors, b.keypoints, b.descriptors,
+                                                       PairMatchingOptions(), &camera, &camera);
+  EXPECT_EQ(calibrated.two_view_geometry.config, kCalibrated);
+  EXPECT_EQ(calibrated.matches, guessed.matches);
+}
+
+TEST(MatchImagePair, DescriptorsOnlyGiveRawMatches) {
+  const Scene scene = MakeScene(300, 4);
+  const View a = MakeView(scene, 0, 5), b = MakeView(scene, 1, 6);
+  const PairMatchingResult result = MatchImagePair({}, a.descriptors, {}, b.descriptors, PairMatchingOptions());
+  EXPECT_FALSE(result.verified);
+  EXPECT_EQ(result.two_view_geometry.config, kUndefined);
+  EXPECT_GE(CorrectMatches(result.matches, a, b), 150u);
+}
+
+TEST(MatchImagePair, RejectsMismatchedRowsAndBadOptions) {
+  const Scene scene = MakeScene(100, 7);
+  View a = MakeView(scene, 0, 8);
+  const View b = MakeView(scene, 1, 9);
+  a.keypoints.pop_back();
+  try {
+    MatchImagePair(a.keypoints, a.descriptors, b.keypoints, b.descriptors, PairMatchingOptions());
+    FAIL() << "accepted more descriptors than keypoints";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("image 1 has"), std::string::npos) << e.what();
+  }
+  PairMatchingOptions bad;
+  bad.cashash.top_k = 0;
+  EXPECT_THROW(MatchImagePair({}, b.descriptors, {}, b.descriptors, bad), std::invalid_argument);
+}
+
+TEST(GuessCamera, SpansKeypointsWithoutFocalPrior) {
+  Keypoints keypoints(2);
+  keypoints[1].x = 639.5f;
+  keypoints[1].y = 479.2f;
+  const Camera camera = GuessCamera(keypoints);
+  EXPECT_EQ(camera.width, 640u);
+  EXPECT_EQ(camera.height, 480u);
+  EXPECT_FALSE(camera.has_prior_focal_length);
+  EXPECT_DOUBLE_EQ(camera.params[0], 1.2 * 640);
+}
+
+// A COLMAP 3.8 database made by `colmap database_creator`, filled with three
+// views of one scene through raw SQLite.
+class SceneDatabase : public testing::Test {
+ protected:
+  void SetUp() override {
+    if (std::system("command -v colmap > /dev/null 2>&1") != 0) GTEST_SKIP() << "colmap is not installed";
+    dir_ = fs::temp_directory_path() / ("cashash_matching_api_test_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    path_ = (dir_ / "scene.db").string();
+    ASSERT_EQ(std::system(("QT_QPA_PLATFORM=offscreen colmap database_creator --database_path " + path_ +
+                           " > /dev/null 2>&1")
+                              .c_str()),
+              0);
+    const Scene scene = MakeScene(700, 11);
+    ASSERT_EQ(sqlite3_open(path_.c_str(), &db_), SQLITE_OK);
+    const Camera camera = PinholeCamera(/*prior=*/false);
+    Insert("INSERT INTO cameras(camera_id, model, width, height, params, prior_focal_length) VALUES (1, 1, " +
+               std::to_string(kWidth) + ", " + std::to_string(kHeight) + ", ?, 0)",
+           camera.params.data(), camera.params.size() * sizeof(double));
+    for (int i = 0; i < 3; ++i) {
+      const View view = MakeView(scene, i, 20 + i);
+      const std::string id = std::to_string(i + 1);
+      Insert("INSERT INTO images(image_id, name, camera_id) VALUES (" + id + ", 'view" + id + ".jpg', 1)", nullptr,
+             0);
+      Insert("INSERT INTO keypoints VALUES (" + id + ", " + std::to_string(view.keypoints.size()) + ", 6, ?)",
+             view.keypoints.data(), view.keypoints.size() * sizeof(Keypoint));
+      Insert("INSERT INTO descriptors VALUES (" + id + ", " + std::to_string(view.descriptors.rows()) + ", 128, ?)",
+             view.descriptors.data.data(), view.descriptors.data.size());
+    }
+    sqlite3_close(db_);
+    db_ = nullptr;
+    options_.use_gpu = false;
+  }
+
+  void TearDown() override {
+    if (db_ != nullptr) sqlite3_close(db_);
+    std::error_code ignored;
+    if (!dir_.empty()) fs::remove_all(dir_, ignored);
+  }
+
+  // Runs `sql`; its one '?' (if any) is bound to the blob.
+  void Insert(const std::string& sql, const void* blob, size_t num_bytes) {
+    sqlite3_stmt* stmt = nullptr;
+    ASSERT_EQ(sqlite3_prepare_v2(db_, sql.c_str(), -1, &stmt, nullptr), SQLITE_OK) << sql;
+    if (blob != nullptr) sqlite3_bind_blob(stmt, 1, blob, static_cast<int>(num_bytes), SQLITE_TRANSIENT);
+    EXPECT_EQ(sqlite3_step(stmt), SQLITE_DONE) << sql << ": " << sqlite3_errmsg(db_);
+    sqlite3_finalize(stmt);
+  }
+
+  fs::path dir_;
+  std::string path_;
+  sqlite3* db_ = nullptr;
+  colmap::MatcherCommandOptions options_;
+};
+
+TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
+  size_t progress_calls = 0, last_done = 0;
+  std::vector<std::string> notes, warnings;
+  colmap::MatchingCallbacks callbacks;
+  callbacks.progress = [&](const PipelineProgress& p) {
+    ++progress_calls;
+    last_done = p.pairs_done;
+  };
+  callbacks.info = [&](const std::string& text) { notes.push_back(text); };
+  callbacks.warning = [&](const std::string& text) { warnings.push_back(text); };
+
+  options_.cashash.matcher = MatcherType::kCascade;  // auto: DefaultsChooseTablesAndMatcherAndSaySo
+  const colmap::MatchingSummary first = colmap::MatchExhaustive(path_, options_, callbacks);
+  EXPECT_EQ(first.pairs_requested, 3u);
+  EXPECT_EQ(first.pairs_skipped, 0u);
+  // Runs match the pairs that may verify again exactly (all three here).
+  EXPECT_EQ(first.matcher_name, "cpu-cascade+exact-rematch");
+  EXPECT_EQ(first.pipeline.pairs_done, 3u);
+  EXPECT_EQ(first.pipeline.verified_pairs, 3u);
+  EXPECT_GT(first.pipeline.inlier_matches, 3u * 300u);
+  EXPECT_GE(progress_calls, 1u);
+  EXPECT_EQ(last_done, 3u);
+  EXPECT_TRUE(warnings.empty());
+  ASSERT_FALSE(notes.empty());
+  EXPECT_NE(std::find(notes.begin(), notes.end(), "Matcher: cpu-cascade+exact-rematch"), notes.end());
+  EXPECT_NE(std::find_if(notes.begin(), notes.end(),
+                         [](const std::string& n) { return n.rfind("Exact rematch: 3 of 3 pairs", 0) == 0; }),
+            notes.end())
+      << testing::PrintToString(notes);
+  EXPECT_EQ(notes.back().rfind("Features: 3 image reads for 3 images", 0), 0u) << notes.back();
+
+  notes.clear();
+  const colmap::MatchingSummary second = colmap::MatchExhaustive(path_, options_, callbacks);
+  EXPECT_EQ(second.pairs_skipped, 3u);
+  EXPECT_TRUE(second.matcher_name.empty());
+  EXPECT_EQ(second.pipeline.pairs_done, 0u);
+  EXPECT_EQ(notes.back(), "Nothing to match.");
+}
+
+TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
+  std::vector<std::string> notes;
+  colmap::MatchingCallbacks callbacks;
+  callbacks.info = [&](const std::string& text) { notes.push_back(text); };
+  const colmap::MatchingSummary summary = colmap::MatchExhaustive(path_, options_, callbacks);
+  EXPECT_EQ(summary.pipeline.pairs_done, 3u);
+  EXPECT_EQ(summary.pipeline.verified_pairs, 3u);
+  const auto starts = [&](const std::string& prefix) {
+    return std::find_if(notes.begin(), notes.end(),
+                        [&](const std::string& n) { return n.rfind(prefix, 0) == 0; }) != notes.end();
+  };
+  // Hundreds of features per image: the defaults' 8 x 7.
+  EXPECT_TRUE(starts("Hash tables: 8 x 7 bits (chosen for ")) << testing::PrintToString(notes);
+  EXPECT_TRUE(starts("Matcher: auto(cpu-cascade+exact-rematch|cpu-bruteforce)")) << testing::PrintToString(notes);
+  // Three pairs are too few to decide: the summary names whoever finished.
+  EXPECT_TRUE(summary.matcher_name == "auto(cpu-cascade+exact-rematch|cpu-bruteforce)" ||
+              summary.matcher_name == "cpu-cascade+exact-rematch" || summary.matcher_name == "cpu-bruteforce")
+      << summary.matcher_name;
+}
+
+TEST_F(SceneDatabase, PairsByNameMatchOnceAndNameUnknownImages) {
+  const colmap::MatchingSummary summary =
+      colmap::MatchPairs(path_, {{"view1.jpg", "view3.jpg"}, {"view3.jpg", "view1.jpg"}}, options_);
+  EXPECT_EQ(summary.pairs_requested, 1u);
+  EXPECT_EQ(summary.pipeline.verified_pairs, 1u);
+
+  try {
+    colmap::MatchPairs(path_, {{"view1.jpg", "view2.jpg"}, {"view2.jpg", "nope.jpg"}}, options_);
+    FAIL() << "accepted an unknown image";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), "image pair 1: image 'nope.jpg' is not in table images");
+  }
+}
+
+TEST_F(SceneDatabase, OptionErrorsCarryTheCommandLineMessage) {
+  options_.block_size = 1;
+  try {
+    colmap::MatchExhaustive(path_, options_);
+    FAIL() << "accepted block_size 1";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), "--ExhaustiveMatching.block_size must be >= 2");
+  }
+  options_.block_size = 50;
+  EXPECT_THROW(colmap::MatchExhaustive(path_ + ".missing", options_), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace cashash

@@ -1,0 +1,426 @@
+// GPU Cascade Hashing against the CPU cascade reference: the hash bits are
+// exact integers on both, so the matches must agree except for float
+// rounding in the acceptance test. Skipped when no CUDA device is usable.
+#include <gtest/gtest.h>
+
+#include "gpu_test_support.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <random>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "cashash/matchers/feature_matcher.h"
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/utils/device_memory.cuh"
+
+namespace cashash {
+namespace {
+
+// Descriptor source: real SIFT rows from a raw N x 128 uint8 file
+// (CASHASH_SIFT_SAMPLE, or .devbin/sift_sample.u8 of the checkout) when
+// present, else synthetic SIFT-like rows (sparse, L2 norm ~512).
+class DescriptorSource {
+ public:
+  explicit DescriptorSource(uint32_t seed) : rng_(seed) {
+    const char* env = std::getenv("CASHASH_SIFT_SAMPLE");
+    const std::string path = env != nullptr ? env : std::string(CASHASH_SOURCE_DIR) + "/.devbin/sift_sample.u8";
+    std::ifstream file(path, std::ios::binary);
+    if (file) {
+      real_.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
+      real_.resize(real_.size() / kDescriptorDim * kDescriptorDim);
+    }
+  }
+  bool real() const { return !real_.empty(); }
+
+  void Row(uint8_t* out) {
+    if (real()) {
+      const size_t rows = real_.size() / kDescriptorDim;
+      const size_t r = std::uniform_int_distribution<size_t>(0, rows - 1)(rng_);
+      std::copy(real_.begin() + r * kDescriptorDim, real_.begin() + (r + 1) * kDescriptorDim, out);
+      return;
+    }
+    std::normal_distribution<float> normal(0.f, 1.f);
+    std::bernoulli_distribution on(0.6);
+    float v[kDescriptorDim];
+    double norm = 0;
+    for (int d = 0; d < kDescriptorDim; ++d) {
+      v[d] = on(rng_) ? std::exp(0.9f * normal(rng_)) : 0.f;
+      norm += double(v[d]) * v[d];
+    }
+    const float scale = norm > 0 ? static_cast<float>(512.0 / std::sqrt(norm)) : 0.f;
+    for (int d = 0; d < kDescriptorDim; ++d) out[d] = static_cast<uint8_t>(std::min(255.f, std::round(v[d] * scale)));
+  }
+
+  // A noisy copy of `in`, as the same point seen in another image.
+  void Perturb(const uint8_t* in, uint8_t* out, float sigma) {
+    std::normal_distribution<float> noise(0.f, sigma);
+    for (int d = 0; d < kDescriptorDim; ++d) {
+      out[d] = static_cast<uint8_t>(std::clamp(std::round(in[d] + noise(rng_)), 0.f, 255.f));
+    }
+  }
+
+  FeatureDescriptors Image(size_t n) {
+    FeatureDescriptors f;
+    f.data.resize(n * kDescriptorDim);
+    for (size_t i = 0; i < n; ++i) Row(f.data.data() + i * kDescriptorDim);
+    return f;
+  }
+
+  // An image sharing `overlap` of its features (noisy, shuffled) with `base`.
+  FeatureDescriptors Related(const FeatureDescriptors& base, size_t n, double overlap) {
+    FeatureDescriptors f = Image(n);
+    std::vector<size_t> order(base.rows());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::shuffle(order.begin(), order.end(), rng_);
+    const size_t shared = std::min(order.size(), static_cast<size_t>(overlap * n));
+    std::vector<size_t> slots(n);
+    for (size_t i = 0; i < n; ++i) slots[i] = i;
+    std::shuffle(slots.begin(), slots.end(), rng_);
+    for (size_t i = 0; i < shared; ++i) {
+      Perturb(base.row(order[i]), f.data.data() + slots[i] * kDescriptorDim, 6.f);
+    }
+    return f;
+  }
+
+ private:
+  std::mt19937 rng_;
+  std::vector<uint8_t> real_;
+};
+
+MeanDescriptor MeanOf(const std::vector<FeatureDescriptors>& images) {
+  std::vector<const FeatureDescriptors*> ptrs;
+  for (const auto& image : images) ptrs.push_back(&image);
+  return ComputeMeanDescriptor(ptrs);
+}
+
+std::vector<ImagePair> AllPairs(size_t num_images) {
+  std::vector<ImagePair> pairs;
+  for (image_t i = 0; i < num_images; ++i) {
+    for (image_t j = i + 1; j < num_images; ++j) pairs.emplace_back(i, j);
+  }
+  return pairs;
+}
+
+std::vector<FeatureMatches> AddAndMatch(FeatureMatcher* matcher, const std::vector<FeatureDescriptors>& images,
+                                const std::vector<ImagePair>& pairs) {
+  for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(static_cast<image_t>(i), images[i]);
+  return matcher->MatchPairs(pairs);
+}
+
+struct Agreement {
+  size_t cpu = 0, gpu = 0, common = 0;
+  double value() const { return std::max(cpu, gpu) == 0 ? 1.0 : double(common) / double(std::max(cpu, gpu)); }
+};
+
+Agreement Compare(const std::vector<FeatureMatches>& cpu, const std::vector<FeatureMatches>& gpu) {
+  Agreement a;
+  EXPECT_EQ(cpu.size(), gpu.size());
+  for (size_t p = 0; p < std::min(cpu.size(), gpu.size()); ++p) {
+    std::set<std::pair<uint32_t, uint32_t>> reference;
+    for (const FeatureMatch& m : cpu[p]) reference.emplace(m.point2D_idx1, m.point2D_idx2);
+    a.cpu += cpu[p].size();
+    a.gpu += gpu[p].size();
+    for (const FeatureMatch& m : gpu[p]) a.common += reference.count({m.point2D_idx1, m.point2D_idx2});
+    // Matches come sorted by idx1 like the CPU backend's.
+    EXPECT_TRUE(std::is_sorted(gpu[p].begin(), gpu[p].end())) << "pair " << p;
+  }
+  return a;
+}
+
+Agreement CompareWithCpu(const std::vector<FeatureDescriptors>& images, const std::vector<ImagePair>& pairs,
+                         const SiftMatchingOptions& sift, const CasHashOptions& cas) {
+  const MeanDescriptor mean = MeanOf(images);
+  auto cpu = CreateCpuFeatureMatcher(sift, cas, mean);
+  auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+  const Agreement a = Compare(AddAndMatch(cpu.get(), images, pairs), AddAndMatch(gpu.get(), images, pairs));
+  std::printf("[ agreement ] %s: cpu %zu, gpu %zu, common %zu -> %.4f%%\n", gpu->Name().c_str(), a.cpu, a.gpu,
+              a.common, 100.0 * a.value());
+  return a;
+}
+
+TEST(GpuCascadeTest, AgreesWithCpuCascade) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(1);
+  std::printf("descriptors: %s\n", source.real() ? "real SIFT sample" : "synthetic SIFT-like");
+  std::vector<FeatureDescriptors> images{source.Image(4000)};
+  for (int i = 1; i < 6; ++i) images.push_back(source.Related(images[i - 1], 3000 + 500 * i, 0.5));
+  const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), CasHashOptions());
+  EXPECT_GT(a.cpu, 1000u);  // the planted duplicates are found
+  EXPECT_GE(a.value(), 0.995);
+}
+
+TEST(GpuCascadeTest, AgreesWithoutCrossCheckAndOtherParameters) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(2);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  images.push_back(source.Related(images[0], 2500, 0.4));
+  images.push_back(source.Related(images[1], 3500, 0.3));
+  SiftMatchingOptions sift;
+  sift.cross_check = false;
+  CasHashOptions cas;
+  cas.num_tables = 8;
+  cas.bits_per_table = 7;
+  cas.top_k = 32;
+  cas.tau = 40;
+  cas.random_seed = 7;
+  const Agreement a = CompareWithCpu(images, AllPairs(images.size()), sift, cas);
+  EXPECT_GT(a.cpu, 300u);
+  EXPECT_GE(a.value(), 0.995);
+}
+
+TEST(GpuCascadeTest, SkewedBucketsAreNotTruncated) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(3);
+  FeatureDescriptors a = source.Image(6000), b = source.Related(a, 5000, 0.5);
+  // 3000 identical rows in a and 2000 in b: one bucket of >= 2000 per table.
+  std::vector<uint8_t> repeated(kDescriptorDim);
+  source.Row(repeated.data());
+  for (size_t i = 0; i < 3000; ++i) std::copy(repeated.begin(), repeated.end(), a.data.begin() + 2 * i * kDescriptorDim);
+  for (size_t i = 0; i < 2000; ++i) std::copy(repeated.begin(), repeated.end(), b.data.begin() + 2 * i * kDescriptorDim);
+  const std::vector<FeatureDescriptors> images{a, b};
+  const Agreement agreement = CompareWithCpu(images, {{0, 1}, {1, 0}}, SiftMatchingOptions(), CasHashOptions());
+  EXPECT_GT(agreement.cpu, 500u);
+  EXPECT_GE(agreement.value(), 0.995);
+}
+
+TEST(GpuCascadeTest, EmptySingleAndLargeImages) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(4);
+  SiftMatchingOptions sift;
+  sift.max_num_matches = 50000;
+  std::vector<FeatureDescriptors> images{FeatureDescriptors(), source.Image(1), source.Image(41000)};
+  images.push_back(source.Related(images[2], 40500, 0.3));
+  // The single feature also appears (noisy) in the large image.
+  source.Perturb(images[1].row(0), images[2].data.data() + 777 * kDescriptorDim, 2.f);
+  const std::vector<ImagePair> pairs{{0, 2}, {2, 0}, {0, 1}, {1, 2}, {2, 1}, {2, 3}};
+  const MeanDescriptor mean = MeanOf(images);
+  auto cpu = CreateCpuFeatureMatcher(sift, CasHashOptions(), mean);
+  auto gpu = cuda::CreateGpuFeatureMatcher(sift, CasHashOptions(), mean, 0);
+  const auto cpu_matches = AddAndMatch(cpu.get(), images, pairs);
+  const auto gpu_matches = AddAndMatch(gpu.get(), images, pairs);
+  EXPECT_TRUE(gpu_matches[0].empty());
+  EXPECT_TRUE(gpu_matches[1].empty());
+  EXPECT_TRUE(gpu_matches[2].empty());
+  EXPECT_EQ(gpu_matches[3], cpu_matches[3]);
+  EXPECT_EQ(gpu_matches[4], cpu_matches[4]);
+  const Agreement a = Compare(cpu_matches, gpu_matches);
+  std::printf("[ agreement ] 41000 x 40500 features: cpu %zu, gpu %zu, common %zu\n", a.cpu, a.gpu, a.common);
+  EXPECT_GT(gpu_matches[5].size(), 3000u);
+  EXPECT_GE(a.value(), 0.995);
+}
+
+// Sets an environment variable for the lifetime of the object.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : name_(name) { setenv(name, value.c_str(), 1); }
+  ~ScopedEnv() { unsetenv(name_); }
+
+ private:
+  const char* name_;
+};
+
+TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(5);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  for (int i = 1; i < 12; ++i) images.push_back(source.Related(images[i - 1], 3000, 0.4));
+  const std::vector<ImagePair> pairs = AllPairs(images.size());
+  const MeanDescriptor mean = MeanOf(images);
+  // The budgets below are sized for 7 tables x 8 bits (the per-image bucket
+  // tables grow with the number of tables), not for whatever the defaults are.
+  CasHashOptions options;
+  options.num_tables = 7;
+  options.bits_per_table = 8;
+  std::vector<FeatureMatches> unlimited;
+  {
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
+    unlimited = AddAndMatch(gpu.get(), images, pairs);
+  }
+  {
+    // ~1.05 MiB per image of 3000 features, ~6.2 MiB of candidate lists per
+    // pair: 40 MiB leave scratch for about two pairs per batch, so the 66
+    // pairs run in many batches.
+    ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "40");
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
+    EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), unlimited);
+  }
+  {
+    ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "4");
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
+    try {
+      AddAndMatch(gpu.get(), images, pairs);
+      ADD_FAILURE() << "12 images of 3000 features cannot fit in 4 MiB";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("budget"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// The bucket-tile kernels (default) and the per-query kernel implement the
+// same definition: identical matches, pair for pair, on real descriptors,
+// with and without cross-check and with full candidate lists (skewed).
+TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(8);
+  std::vector<FeatureDescriptors> images{source.Image(5000)};
+  for (int i = 1; i < 5; ++i) images.push_back(source.Related(images[i - 1], 4000 + 700 * i, 0.5));
+  std::vector<uint8_t> repeated(kDescriptorDim);
+  source.Row(repeated.data());
+  for (size_t i = 0; i < 400; ++i) {
+    std::copy(repeated.begin(), repeated.end(), images[3].data.begin() + 3 * i * kDescriptorDim);
+    std::copy(repeated.begin(), repeated.end(), images[4].data.begin() + 5 * i * kDescriptorDim);
+  }
+  std::vector<ImagePair> pairs = AllPairs(images.size());
+  pairs.emplace_back(4, 3);
+  const MeanDescriptor mean = MeanOf(images);
+  for (const bool cross_check : {true, false}) {
+    for (const int top_k : {10, 20}) {
+      SiftMatchingOptions sift;
+      sift.cross_check = cross_check;
+      CasHashOptions cas;
+      cas.top_k = top_k;
+      std::vector<FeatureMatches> direct, tiled;
+      {
+        ScopedEnv env("CASHASH_GPU_CASCADE_KERNEL", "direct");
+        auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+        direct = AddAndMatch(gpu.get(), images, pairs);
+      }
+      {
+        auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+        tiled = AddAndMatch(gpu.get(), images, pairs);
+      }
+      size_t total = 0;
+      for (const FeatureMatches& m : direct) total += m.size();
+      std::printf("[ kernels ] cross_check %d, top_k %d: %zu matches, identical %d\n", cross_check ? 1 : 0, top_k,
+                  total, direct == tiled ? 1 : 0);
+      EXPECT_GT(total, 1000u);
+      EXPECT_EQ(direct, tiled) << "cross_check " << cross_check << ", top_k " << top_k;
+    }
+  }
+}
+
+TEST(GpuCascadeTest, DeviceOutOfMemoryIsAnError) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  cuda::DeviceBuffer buffer;
+  try {
+    buffer.Allocate(size_t{1} << 50, "a petabyte");
+    ADD_FAILURE() << "a petabyte was allocated";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("out of memory"), std::string::npos) << e.what();
+  }
+  // The device stays usable afterwards.
+  buffer.Allocate(1 << 20, "a mebibyte");
+  EXPECT_EQ(buffer.bytes(), size_t{1} << 20);
+}
+
+TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(6);
+  std::vector<FeatureDescriptors> images{source.Image(2000)};
+  images.push_back(source.Related(images[0], 2500, 0.5));
+  images.push_back(FeatureDescriptors());
+  CasHashOptions cas;
+  cas.matcher = MatcherType::kBruteForce;
+  const Agreement a = CompareWithCpu(images, {{0, 1}, {1, 0}, {0, 2}}, SiftMatchingOptions(), cas);
+  EXPECT_GT(a.cpu, 500u);
+  EXPECT_GE(a.value(), 0.999);
+}
+
+// The cascade's exact rematch (MatchPairsExact, from the descriptors it
+// uploaded) returns the GPU brute-force backend's matches, and those of the
+// CPU brute force, on pairs whose images differ in size and on an empty one.
+TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(7);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  images.push_back(source.Related(images[0], 2500, 0.5));
+  images.push_back(source.Related(images[1], 4100, 0.3));
+  images.push_back(FeatureDescriptors());
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 0}, {1, 2}, {0, 2}, {0, 3}};
+  const MeanDescriptor mean = MeanOf(images);
+  CasHashOptions brute_force;
+  brute_force.matcher = MatcherType::kBruteForce;
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+  auto gpu_brute_force = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean, 0);
+  auto cpu_brute_force = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean);
+  ASSERT_TRUE(cascade->SupportsExactMatching());
+  AddAndMatch(cascade.get(), images, {});
+  const std::vector<FeatureMatches> exact = cascade->MatchPairsExact(pairs);
+  const std::vector<FeatureMatches> gpu = AddAndMatch(gpu_brute_force.get(), images, pairs);
+  const std::vector<FeatureMatches> cpu = AddAndMatch(cpu_brute_force.get(), images, pairs);
+  ASSERT_EQ(exact.size(), pairs.size());
+  size_t total = 0;
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    EXPECT_EQ(exact[p], gpu[p]) << "pair " << p;
+    total += exact[p].size();
+  }
+  const Agreement a = Compare(cpu, exact);
+  EXPECT_GT(total, 500u);
+  EXPECT_TRUE(exact[4].empty());
+  EXPECT_GE(a.value(), 0.999);
+}
+
+TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  CasHashOptions cas;
+  cas.top_k = 33;
+  EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);
+  cas = CasHashOptions();
+  cas.num_tables = 10;
+  cas.bits_per_table = 8;
+  EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);
+}
+
+// The shape the table rule gives 16,384 features and more (table_shape.h):
+// 8 tables of 8 bits fill the 64-bit signature exactly. Same matches as the
+// CPU, as for every other shape.
+TEST(GpuCascadeTest, SixtyFourSignatureBitsOfTheTableRuleAgreeWithCpu) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(5);
+  std::vector<FeatureDescriptors> images{source.Image(16384)};
+  images.push_back(source.Related(images[0], 16384, 0.5));
+  images.push_back(source.Related(images[1], 16384, 0.5));
+  CasHashOptions cas;
+  cas.num_tables = 8;
+  cas.bits_per_table = 8;
+  const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), cas);
+  EXPECT_GT(a.cpu, 1000u);
+  EXPECT_EQ(a.common, a.cpu);
+  EXPECT_EQ(a.common, a.gpu);
+}
+
+// --CasHash.matcher auto on the GPU: a wrapper over the GPU cascade and
+// brute force; whichever answers a pair, its matches are that backend's.
+TEST(GpuCascadeTest, AutoGivesEachPairOneBackendsMatches) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(6);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  for (int i = 1; i < 12; ++i) images.push_back(source.Related(images[i - 1], 3000, 0.5));
+  const std::vector<ImagePair> pairs = AllPairs(images.size());
+  const MeanDescriptor mean = MeanOf(images);
+  CasHashOptions cas;
+  cas.matcher = MatcherType::kCascade;
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, mean, 0);
+  cas.matcher = MatcherType::kBruteForce;
+  auto brute_force = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, mean, 0);
+  cas.matcher = MatcherType::kAuto;
+  auto automatic = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, mean, 0);
+  EXPECT_EQ(automatic->Name(), "auto(gpu-cascade|gpu-bruteforce)");
+  const auto by_cascade = AddAndMatch(cascade.get(), images, pairs);
+  const auto by_brute_force = AddAndMatch(brute_force.get(), images, pairs);
+  const auto by_auto = AddAndMatch(automatic.get(), images, pairs);
+  ASSERT_EQ(by_auto.size(), pairs.size());
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    EXPECT_TRUE(by_auto[p] == by_cascade[p] || by_auto[p] == by_brute_force[p]) << "pair " << p;
+  }
+}
+
+}  // namespace
+}  // namespace cashash

@@ -1,0 +1,108 @@
+// The device block pool that holds the GPU matchers' images, the pinned ring
+// that uploads them, and both backends' images through them: blocks are
+// reused by size, staged uploads arrive intact, and images added again
+// after removal (their blocks recycled) match as before.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+#include <vector>
+
+#include "synthetic_sift.h"
+#include "cashash/matchers/feature_matcher.h"
+#include "gpu_test_support.h"
+#include "cashash_cuda/utils/device_memory.cuh"
+
+namespace cashash {
+namespace {
+
+TEST(DeviceBlockPool, BlocksAreDistinctAlignedAndReusedBySize) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  cuda::DeviceBlockPool pool;
+  char* a = static_cast<char*>(pool.Acquire(1000, "test"));
+  char* b = static_cast<char*>(pool.Acquire(1000, "test"));
+  EXPECT_NE(a, b);
+  EXPECT_GE(static_cast<size_t>(std::max(a, b) - std::min(a, b)), 1000u);  // no overlap
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(b) % cuda::DeviceBlockPool::kAlignment, 0u);
+  pool.Release(a, 1000);
+  EXPECT_EQ(pool.Acquire(1000, "test"), a);  // same size: the freed block
+  void* big = pool.Acquire(cuda::DeviceBlockPool::kChunkBytes + 1, "test");  // a chunk of its own
+  EXPECT_NE(big, nullptr);
+  // Blocks are device memory: a round trip through one of them.
+  std::vector<int> host(250, 7), back(250, 0);
+  ASSERT_EQ(cudaMemcpy(b, host.data(), 1000, cudaMemcpyHostToDevice), cudaSuccess);
+  ASSERT_EQ(cudaMemcpy(back.data(), b, 1000, cudaMemcpyDeviceToHost), cudaSuccess);
+  EXPECT_EQ(back, host);
+}
+
+TEST(PinnedUploadRing, MoreUploadsThanSlotsArriveIntact) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  cudaStream_t stream = nullptr;
+  ASSERT_EQ(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), cudaSuccess);
+  cuda::DeviceBlockPool pool;
+  std::vector<void*> blocks;
+  std::vector<std::vector<uint8_t>> sent;
+  {
+    cuda::PinnedUploadRing ring;
+    for (int k = 0; k < 3 * cuda::PinnedUploadRing::kSlots + 1; ++k) {
+      const size_t bytes = 1000 + 4096 * static_cast<size_t>(k % 3);  // slots grow and are reused
+      std::vector<uint8_t> host(bytes);
+      for (size_t i = 0; i < bytes; ++i) host[i] = static_cast<uint8_t>(31 * k + i);
+      sent.push_back(host);
+      blocks.push_back(pool.Acquire(bytes, "test"));
+      ring.Upload(host.data(), bytes, blocks.back(), stream);
+      host.assign(bytes, 0xff);  // the ring has its own copy: the caller's may change at once
+    }
+  }
+  ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+  for (size_t k = 0; k < blocks.size(); ++k) {
+    std::vector<uint8_t> back(sent[k].size());
+    ASSERT_EQ(cudaMemcpy(back.data(), blocks[k], back.size(), cudaMemcpyDeviceToHost), cudaSuccess);
+    EXPECT_EQ(back, sent[k]) << "upload " << k;
+  }
+  cudaStreamDestroy(stream);
+}
+
+// Both GPU backends keep their images in a pool and upload them staged.
+class GpuImages : public ::testing::TestWithParam<MatcherType> {};
+
+TEST_P(GpuImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  std::mt19937 rng(11);
+  std::vector<std::vector<uint8_t>> base;
+  for (int k = 0; k < 600; ++k) base.push_back(testing_support::RandomSift(&rng));
+  std::uniform_int_distribution<int> noise(-4, 4);
+  std::vector<FeatureDescriptors> images(6);
+  for (FeatureDescriptors& d : images) {
+    for (const std::vector<uint8_t>& b : base) {
+      for (uint8_t x : b) d.data.push_back(static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255)));
+    }
+  }
+  std::vector<const FeatureDescriptors*> pointers;
+  for (const FeatureDescriptors& d : images) pointers.push_back(&d);
+  const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
+  std::vector<ImagePair> pairs;
+  for (image_t i = 0; i < 6; ++i)
+    for (image_t j = i + 1; j < 6; ++j) pairs.emplace_back(i, j);
+
+  CasHashOptions cashash;
+  cashash.matcher = GetParam();
+  auto matcher = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cashash, mean, 0);
+  for (image_t i = 0; i < 6; ++i) matcher->AddImage(i, images[i]);
+  const std::vector<FeatureMatches> first = matcher->MatchPairs(pairs);
+  size_t total = 0;
+  for (const FeatureMatches& m : first) total += m.size();
+  ASSERT_GT(total, 1000u);
+  // Remove half, add them back in another order (recycled blocks), plus a
+  // shared handle for one of them.
+  for (image_t i : {1u, 3u, 5u}) matcher->RemoveImage(i);
+  matcher->AddImage(5, images[5]);
+  matcher->AddSharedImage(1, std::make_shared<const FeatureDescriptors>(images[1]));
+  matcher->AddImage(3, images[3]);
+  EXPECT_EQ(matcher->MatchPairs(pairs), first);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, GpuImages, ::testing::Values(MatcherType::kCascade, MatcherType::kBruteForce));
+
+}  // namespace
+}  // namespace cashash

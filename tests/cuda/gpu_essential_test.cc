@@ -1,0 +1,383 @@
+// E on the GPU: the device 5-point solver on exact correspondences, the
+// batched 5-point LO-RANSAC against the CPU's EstimateEssential on synthetic
+// pairs with known pose and outlier ratios, repeatability, and, when
+// CASHASH_VERIFY_PAIRS_FILE names a verification pairs file
+// (scripts/bench/dump_verification_pairs), real calibrated pairs: E inlier
+// counts and whole-verifier configurations against the CPU, next to the CPU
+// against itself under another seed. Skipped without a CUDA device.
+#include <gtest/gtest.h>
+
+#include "gpu_test_support.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "synthetic_two_view.h"
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/geometry/five_point_solver.h"
+#include "cashash/base/pair_id.h"
+#include "cashash/pipeline/thread_pool.h"
+#include "cashash/geometry/two_view_geometry.h"
+#include "cashash/pipeline/verification_pairs_file.h"
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/geometry/two_view_geometry.h"
+#include "cashash_cuda/geometry/ransac.cuh"
+
+namespace cashash {
+namespace {
+
+using testing_support::MakeScene;
+using testing_support::SceneOptions;
+using testing_support::SyntheticScene;
+
+bool Close(int a, int reference, double ratio = 0.03, int slack = 3) {
+  return std::abs(a - reference) <= std::max(static_cast<double>(slack), ratio * reference);
+}
+
+Eigen::Matrix3d FromRowMajor(const double* v) {
+  Eigen::Matrix3d m;
+  m << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
+  return m;
+}
+
+double Distance(Eigen::Matrix3d a, Eigen::Matrix3d b) {
+  a /= a.norm();
+  b /= b.norm();
+  return std::min((a - b).norm(), (a + b).norm());
+}
+
+EssentialPoints ScenePoints(const SyntheticScene& scene, const TwoViewGeometryOptions& options) {
+  const Camera camera = scene.MakeCamera(true);
+  return PrepareEssentialPoints(camera, camera, scene.Pairs(), options);
+}
+
+TEST(GpuEssential, DeviceFivePointRecoversTrueE) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  SceneOptions o;
+  o.num_inliers = 40;
+  o.outlier_ratio = 0;
+  o.noise_px = 0;
+  std::vector<float> samples;
+  std::vector<Eigen::Matrix3d> truth;
+  for (unsigned seed = 1; seed <= 40; ++seed) {
+    o.seed = seed;
+    const SyntheticScene scene = MakeScene(o);
+    const PointPairs world = ScenePoints(scene, TwoViewGeometryOptions()).world;
+    for (int s = 0; s < 5; ++s) {
+      for (int k = 0; k < 5; ++k) {
+        const int i = s + 7 * k;
+        samples.insert(samples.end(), {world.fx1[i], world.fy1[i], world.fx2[i], world.fy2[i]});
+      }
+      truth.push_back(scene.TrueE());
+    }
+  }
+  const int num = static_cast<int>(truth.size());
+  std::vector<double> models(static_cast<size_t>(num) * 90);
+  std::vector<int> counts(num);
+  cuda::EssentialFivePointOnDevice(samples.data(), num, models.data(), counts.data());
+  int found = 0, host_solutions = 0, matched = 0;
+  for (int i = 0; i < num; ++i) {
+    double best = 1e9;
+    for (int m = 0; m < counts[i]; ++m) best = std::min(best, Distance(FromRowMajor(&models[(i * 10 + m) * 9]), truth[i]));
+    // Inputs are floats: the exact E is recovered to float precision (the
+    // host solver on the same floats: median 4e-7, 98th percentile 2e-5, one
+    // sample in 200 loses the true root).
+    found += best < 1e-3;
+    // The host instantiation of the same solver on the same floats.
+    double pairs[20];
+    for (int k = 0; k < 20; ++k) pairs[k] = samples[20 * i + k];
+    double host[10][9];
+    const int nh = five_point::EssentialFromFivePoints(pairs, host);
+    host_solutions += nh;
+    for (int h = 0; h < nh; ++h) {
+      double d = 1e9;
+      for (int m = 0; m < counts[i]; ++m) d = std::min(d, Distance(FromRowMajor(&models[(i * 10 + m) * 9]), FromRowMajor(host[h])));
+      matched += d < 1e-6;
+    }
+  }
+  std::printf("device 5-point: true E among the solutions of %d/%d samples; %d/%d host solutions found on the device\n",
+              found, num, matched, host_solutions);
+  EXPECT_GE(found, 0.97 * num);
+  EXPECT_GE(matched, 0.98 * host_solutions);
+}
+
+struct EssentialCase {
+  SyntheticScene scene;
+  std::string name;
+};
+
+std::vector<EssentialCase> EssentialCases() {
+  std::vector<EssentialCase> cases;
+  for (const double outliers : {0.1, 0.3, 0.5, 0.7}) {
+    for (unsigned seed = 1; seed <= 3; ++seed) {
+      SceneOptions o;
+      o.outlier_ratio = outliers;
+      o.seed = seed * 31 + static_cast<unsigned>(outliers * 10);
+      o.num_inliers = 200 + 200 * static_cast<int>(seed);
+      char name[64];
+      std::snprintf(name, sizeof(name), "outliers %.0f%% seed %u", 100 * outliers, seed);
+      cases.push_back({MakeScene(o), name});
+    }
+  }
+  return cases;
+}
+
+TEST(GpuEssential, RansacAgreesWithCpuOnSyntheticPairs) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const std::vector<EssentialCase> cases = EssentialCases();
+  const TwoViewGeometryOptions options;
+  std::vector<TwoViewPoints> points;
+  std::vector<EssentialPoints> essential;
+  std::vector<uint64_t> seeds;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const SyntheticScene& s = cases[k].scene;
+    points.push_back(PrepareTwoViewPoints(s.points1, s.points2, s.matches));
+    essential.push_back(ScenePoints(s, options));
+    seeds.push_back(PairRandomSeed(5, ImagePair(1, static_cast<image_t>(k + 2))));
+  }
+  std::vector<const TwoViewPoints*> pointers;
+  std::vector<const EssentialPoints*> essential_pointers;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    pointers.push_back(&points[k]);
+    essential_pointers.push_back(&essential[k]);
+  }
+  cuda::GpuTwoViewRansac ransac(options, 0);
+  std::vector<TwoViewModelEstimate> F, H, E;
+  ransac.Estimate(pointers, seeds, essential_pointers, &F, &H, &E);
+  ASSERT_EQ(E.size(), cases.size());
+  std::printf("%-22s %7s %7s %7s %8s %8s %7s %7s\n", "case", "matches", "E cpu", "E gpu", "err cpu", "err gpu",
+              "trials", "refits");
+  for (size_t k = 0; k < cases.size(); ++k) {
+    SCOPED_TRACE(cases[k].name);
+    TwoViewGeometryOptions o = options;
+    o.random_seed = seeds[k];
+    const TwoViewModelEstimate cpu = EstimateEssential(essential[k], o);
+    const double err_cpu = cpu.success ? Distance(cpu.model, cases[k].scene.TrueE()) : -1;
+    const double err_gpu = E[k].success ? Distance(E[k].model, cases[k].scene.TrueE()) : -1;
+    std::printf("%-22s %7zu %7d %7d %8.4f %8.4f %7d\n", cases[k].name.c_str(), points[k].pixels.size(),
+                cpu.num_inliers, E[k].num_inliers, err_cpu, err_gpu, E[k].num_trials);
+    ASSERT_TRUE(E[k].success);
+    ASSERT_EQ(E[k].inlier_mask.size(), points[k].pixels.size());
+    int mask_count = 0, true_kept = 0, true_total = 0;
+    for (size_t i = 0; i < E[k].inlier_mask.size(); ++i) {
+      mask_count += E[k].inlier_mask[i];
+      true_total += cases[k].scene.is_inlier[i];
+      true_kept += cases[k].scene.is_inlier[i] && E[k].inlier_mask[i];
+    }
+    EXPECT_EQ(mask_count, E[k].num_inliers);
+    EXPECT_TRUE(Close(E[k].num_inliers, cpu.num_inliers)) << E[k].num_inliers << " vs " << cpu.num_inliers;
+    EXPECT_GT(static_cast<double>(true_kept) / true_total, 0.95);
+    EXPECT_LT(err_gpu, std::max(0.1, 2 * err_cpu));
+    EXPECT_GE(E[k].num_trials, options.min_num_trials);
+    EXPECT_LE(E[k].num_trials, options.max_num_trials);
+    // F and H are estimated alongside, as without E.
+    EXPECT_TRUE(F[k].success);
+  }
+  const cuda::GpuRansacStats& st = ransac.stats();
+  EXPECT_EQ(st.pairs_E, cases.size());
+  std::printf("E: %.0f trials, %.1f local refits per pair\n", static_cast<double>(st.trials_E) / st.pairs_E,
+              static_cast<double>(st.local_refits_E) / st.pairs_E);
+}
+
+TEST(GpuEssential, SameSeedSameResultAndOnlyCalibratedPairs) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  SceneOptions o;
+  o.outlier_ratio = 0.6;
+  const SyntheticScene scene = MakeScene(o);
+  const TwoViewGeometryOptions options;
+  const TwoViewPoints points = PrepareTwoViewPoints(scene.points1, scene.points2, scene.matches);
+  const EssentialPoints essential = ScenePoints(scene, options);
+  // The same pair four times with one seed, once with another, once without E.
+  const std::vector<const TwoViewPoints*> pointers(6, &points);
+  const std::vector<const EssentialPoints*> e = {&essential, &essential, &essential, &essential, &essential, nullptr};
+  const std::vector<uint64_t> seeds = {11, 11, 11, 11, 12, 11};
+  cuda::GpuTwoViewRansac ransac(options, 0);
+  std::vector<TwoViewModelEstimate> F, H, E, F2, H2, E2;
+  ransac.Estimate(pointers, seeds, e, &F, &H, &E);
+  ransac.Estimate(pointers, seeds, e, &F2, &H2, &E2);
+  for (size_t k = 0; k < 4; ++k) {
+    for (const auto* other : {&E[0], &E2[k]}) {
+      EXPECT_EQ(E[k].num_inliers, other->num_inliers);
+      EXPECT_EQ(E[k].inlier_mask, other->inlier_mask);
+      EXPECT_EQ(E[k].model, other->model);
+    }
+  }
+  EXPECT_TRUE(Close(E[4].num_inliers, E[0].num_inliers));
+  EXPECT_FALSE(E[5].success);
+  // F and H do not depend on whether E ran beside them.
+  std::vector<TwoViewModelEstimate> F3, H3;
+  ransac.Estimate(pointers, seeds, &F3, &H3);
+  for (size_t k = 0; k < 6; ++k) {
+    EXPECT_EQ(F3[k].inlier_mask, F[k].inlier_mask);
+    EXPECT_EQ(H3[k].model, H[k].model);
+  }
+}
+
+TEST(GpuEssential, DegenerateInputsFailCleanly) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  // All matches at one point, four matches, and pure noise.
+  auto make = [](size_t n, auto position) {
+    std::vector<Eigen::Vector2d> p1, p2;
+    FeatureMatches m;
+    for (size_t i = 0; i < n; ++i) {
+      const auto [a, b] = position(i);
+      p1.push_back(a);
+      p2.push_back(b);
+      m.push_back({static_cast<point2D_t>(i), static_cast<point2D_t>(i)});
+    }
+    return std::make_tuple(p1, p2, m);
+  };
+  std::vector<std::tuple<std::vector<Eigen::Vector2d>, std::vector<Eigen::Vector2d>, FeatureMatches>> raw = {
+      make(50, [](size_t) { return std::make_pair(Eigen::Vector2d(10, 10), Eigen::Vector2d(20, 20)); }),
+      make(4, [](size_t i) { return std::make_pair(Eigen::Vector2d(100.0 * i, 37.0 * i * i), Eigen::Vector2d(90.0 * i + 3, 41.0 * i)); }),
+      make(300, [](size_t i) {
+        const double a = std::sin(12.9898 * i) * 43758.5453, b = std::sin(78.233 * i) * 12345.678;
+        return std::make_pair(Eigen::Vector2d(std::fmod(std::fabs(a), 1000.0), std::fmod(std::fabs(b), 800.0)),
+                              Eigen::Vector2d(std::fmod(std::fabs(a * 1.7), 1000.0), std::fmod(std::fabs(b * 2.3), 800.0)));
+      }),
+  };
+  SceneOptions o;
+  const Camera camera = MakeScene(o).MakeCamera(true);
+  const TwoViewGeometryOptions options;
+  std::vector<TwoViewPoints> points;
+  std::vector<EssentialPoints> essential;
+  for (auto& [p1, p2, m] : raw) {
+    points.push_back(PrepareTwoViewPoints(p1, p2, m));
+    essential.push_back(PrepareEssentialPoints(camera, camera, points.back().pixels, options));
+  }
+  std::vector<const TwoViewPoints*> pointers;
+  std::vector<const EssentialPoints*> e;
+  for (size_t k = 0; k < points.size(); ++k) {
+    pointers.push_back(&points[k]);
+    e.push_back(&essential[k]);
+  }
+  cuda::GpuTwoViewRansac ransac(options, 0);
+  std::vector<TwoViewModelEstimate> F, H, E;
+  ransac.Estimate(pointers, {1, 2, 3}, e, &F, &H, &E);
+  EXPECT_FALSE(E[0].success);
+  EXPECT_FALSE(E[1].success);
+  TwoViewGeometryOptions o3 = options;
+  o3.random_seed = 3;
+  const TwoViewModelEstimate cpu = EstimateEssential(essential[2], o3);
+  std::printf("noise: E inliers cpu %d gpu %d of 300\n", cpu.num_inliers, E[2].num_inliers);
+  EXPECT_LT(E[2].num_inliers, 100);  // a chance subset at most
+}
+
+// Real calibrated pairs: E of the GPU against the CPU's, and the whole GPU
+// verifier (E on the device) against the CPU verifier, each next to the CPU
+// under another seed (RANSAC's own spread).
+TEST(GpuEssential, RealPairsAgreeWithCpu) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const char* path = std::getenv("CASHASH_VERIFY_PAIRS_FILE");
+  if (path == nullptr || *path == '\0') {
+    GTEST_SKIP() << "CASHASH_VERIFY_PAIRS_FILE is not set (a file from scripts/bench/dump_verification_pairs)";
+  }
+  const std::vector<StoredVerificationPair> stored = ReadVerificationPairsFile(path);
+  ASSERT_FALSE(stored.empty());
+  std::vector<VerificationPair> pairs, other_seed;
+  for (const StoredVerificationPair& p : stored) {
+    pairs.push_back(p.View(PairRandomSeed(0, p.pair)));
+    other_seed.push_back(p.View(PairRandomSeed(1, p.pair)));
+  }
+  const TwoViewGeometryOptions options;
+  std::vector<TwoViewPoints> points(pairs.size());
+  std::vector<EssentialPoints> essential(pairs.size());
+  std::vector<const TwoViewPoints*> pointers;
+  std::vector<const EssentialPoints*> e_pointers;
+  std::vector<uint64_t> seeds;
+  size_t calibrated = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    const VerificationPair& p = pairs[k];
+    points[k] = PrepareTwoViewPoints(*p.points1, *p.points2, *p.matches);
+    const bool cal = TwoViewIsCalibrated(*p.camera1, *p.camera2) && !TooFewMatchesForTwoView(p.matches->size(), options);
+    if (cal) essential[k] = PrepareEssentialPoints(*p.camera1, *p.camera2, points[k].pixels, options);
+    calibrated += cal;
+    pointers.push_back(&points[k]);
+    e_pointers.push_back(cal ? &essential[k] : nullptr);
+    seeds.push_back(p.random_seed);
+  }
+  if (calibrated == 0) GTEST_SKIP() << "no calibrated pairs in " << path;
+  cuda::GpuTwoViewRansac ransac(options, 0);
+  std::vector<TwoViewModelEstimate> F, H, E;
+  const auto t0 = std::chrono::steady_clock::now();
+  ransac.Estimate(pointers, seeds, e_pointers, &F, &H, &E);
+  const double gpu_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  // The CPU path's steps under the reference seed and under another, on all
+  // cores: F, H, E and the decision, i.e. EstimateTwoViewGeometry.
+  std::vector<TwoViewModelEstimate> ref_E(pairs.size()), other_E(pairs.size());
+  std::vector<TwoViewGeometry> cpu(pairs.size()), cpu2(pairs.size());
+  const auto t1 = std::chrono::steady_clock::now();
+  ParallelFor(pairs.size(), -1, [&](size_t k) {
+    if (TooFewMatchesForTwoView(pairs[k].matches->size(), options)) {
+      cpu[k].config = cpu2[k].config = kDegenerate;
+      return;
+    }
+    for (int run = 0; run < 2; ++run) {
+      const VerificationPair& p = run == 0 ? pairs[k] : other_seed[k];
+      TwoViewGeometryOptions o = options;
+      o.random_seed = p.random_seed;
+      const TwoViewModelEstimate f = EstimateFundamental(points[k], o);
+      const TwoViewModelEstimate h = EstimateHomography(points[k], o);
+      TwoViewModelEstimate& e = run == 0 ? ref_E[k] : other_E[k];
+      if (e_pointers[k] != nullptr) e = EstimateEssential(essential[k], o);
+      (run == 0 ? cpu : cpu2)[k] = DecideTwoViewGeometry(*p.camera1, *p.camera2, points[k].pixels, *p.matches,
+                                                         e_pointers[k] != nullptr, f, h, e, o);
+    }
+  });
+  const double cpu_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+  int compared = 0, gpu_close = 0, other_close = 0, gpu_success = 0, cpu_success = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    if (e_pointers[k] == nullptr) continue;
+    cpu_success += ref_E[k].success;
+    gpu_success += E[k].success;
+    if (ref_E[k].num_inliers < 30) continue;  // chance matches: counts of a few matches vary widely
+    ++compared;
+    gpu_close += Close(E[k].num_inliers, ref_E[k].num_inliers, 0.05, 5);
+    other_close += Close(other_E[k].num_inliers, ref_E[k].num_inliers, 0.05, 5);
+  }
+  std::printf("E on %zu calibrated pairs (%.3f s GPU with F and H; CPU all cores, F, H, E and decision under two "
+              "seeds %.3f s): E inlier counts within 5%% of the CPU's on pairs with >= 30: gpu %d/%d, cpu other "
+              "seed %d/%d; success cpu %d gpu %d\n",
+              calibrated, gpu_seconds, cpu_seconds, gpu_close, compared, other_close, compared, cpu_success,
+              gpu_success);
+  EXPECT_GE(gpu_close, other_close - std::max(2.0, 0.03 * compared));
+
+  // The whole GPU verifier (E on the device) against the CPU path.
+  ASSERT_TRUE(cuda::GpuEssentialFromEnvironment()) << "unset CASHASH_GPU_ESSENTIAL for this test";
+  const auto t2 = std::chrono::steady_clock::now();
+  const std::vector<TwoViewGeometry> gpu = cuda::CreateGpuBatchVerifier(options, 0, -1)->Verify(pairs);
+  const double verifier_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count();
+  int same_gpu = 0, same_other = 0, verified_gpu = 0, verified_other = 0, close_gpu = 0, close_other = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    same_gpu += gpu[k].config == cpu[k].config;
+    same_other += cpu2[k].config == cpu[k].config;
+    if (cpu[k].config >= kCalibrated && gpu[k].config == cpu[k].config) {
+      ++verified_gpu;
+      close_gpu += Close(static_cast<int>(gpu[k].inlier_matches.size()), static_cast<int>(cpu[k].inlier_matches.size()), 0.05, 5);
+    }
+    if (cpu[k].config >= kCalibrated && cpu2[k].config == cpu[k].config) {
+      ++verified_other;
+      close_other += Close(static_cast<int>(cpu2[k].inlier_matches.size()), static_cast<int>(cpu[k].inlier_matches.size()), 0.05, 5);
+    }
+  }
+  std::printf("verifier on %zu pairs (GPU %.3f s, first call): same config gpu %d, cpu other seed %d; verified with "
+              "inliers within 5%%: gpu %d/%d, cpu other seed %d/%d\n",
+              pairs.size(), verifier_seconds, same_gpu, same_other, close_gpu, verified_gpu, close_other,
+              verified_other);
+  const double n = static_cast<double>(pairs.size());
+  EXPECT_GE(same_gpu, 0.9 * n);
+  EXPECT_GE(same_gpu, same_other - std::max(2.0, 0.03 * n));
+  EXPECT_GE(close_gpu, close_other - std::max(2.0, 0.03 * verified_other));
+}
+
+}  // namespace
+}  // namespace cashash

@@ -1,0 +1,260 @@
+// Ga-CasHash on the GPU against the CPU: the band filter of the select
+// kernel (and of the per-query kernel it falls back to) must give the CPU
+// cascade's matches; the guided matcher built from GPU parts must decide
+// stage 1 as the CPU one does. Skipped when no CUDA device is usable.
+//
+// CASHASH_GUIDED_DB=db.db (a COLMAP feature database, e.g. sceaux_castle)
+// adds real keypoints: F of the first pairs from the CPU's exhaustive
+// matches, then CPU and GPU guided matching with that F.
+#include <gtest/gtest.h>
+
+#include "gpu_test_support.h"
+
+#include <cstdlib>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/matching/cascade_hashing.h"
+#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matching/guided_matching.h"
+#include "cashash/geometry/two_view_geometry.h"
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/matching/guided_matching.h"
+#include "colmap_bridge/database_pipeline_io.h"
+#include "synthetic_guided.h"
+
+namespace cashash {
+namespace {
+
+using testing_support::GuidedScene;
+using testing_support::MakeGuidedScene;
+using testing_support::MakeRepeatedStructureScene;
+using testing_support::MakeUnrelatedImage;
+
+// Matches of a and b that differ, counted both ways.
+size_t Differences(const FeatureMatches& a, const FeatureMatches& b) {
+  size_t common = 0, i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (a[i] == b[j]) {
+      ++common;
+      ++i;
+      ++j;
+    } else if (a[i] < b[j]) {
+      ++i;
+    } else {
+      ++j;
+    }
+  }
+  return a.size() + b.size() - 2 * common;
+}
+
+// CPU and GPU guided matching of the same pairs; the band test is the same
+// double arithmetic on both, so only a point within rounding of the band's
+// edge could differ.
+void ExpectSameGuidedMatches(const std::vector<const ImageFeatures*>& images, const std::vector<GuidedPair>& pairs,
+                             double max_distance, const char* kernel) {
+  if (kernel != nullptr) setenv("CASHASH_GPU_CASCADE_KERNEL", kernel, 1);
+  std::vector<const FeatureDescriptors*> descriptors;
+  for (const ImageFeatures* f : images) descriptors.push_back(&f->descriptors);
+  const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
+  const SiftMatchingOptions sift;
+  const CasHashOptions cashash;
+  auto cpu = CreateCpuFeatureMatcher(sift, cashash, mean);
+  auto gpu = cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0);
+  unsetenv("CASHASH_GPU_CASCADE_KERNEL");
+  ASSERT_TRUE(gpu->SupportsEpipolarGuidance());
+  for (size_t k = 0; k < images.size(); ++k) {
+    cpu->AddImage(images[k]->image_id, images[k]->descriptors);
+    gpu->AddImage(images[k]->image_id, images[k]->descriptors);
+  }
+  const std::vector<FeatureMatches> want = cpu->MatchPairsGuided(pairs, max_distance);
+  const std::vector<FeatureMatches> got = gpu->MatchPairsGuided(pairs, max_distance);
+  ASSERT_EQ(got.size(), pairs.size());
+  size_t total = 0, differ = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    total += want[k].size();
+    differ += Differences(want[k], got[k]);
+  }
+  std::printf("[ guided ] %s kernel, d = %.1f: %zu pairs, %zu CPU matches, %zu differ on the GPU\n",
+              kernel != nullptr ? kernel : "tiled", max_distance, pairs.size(), total, differ);
+  EXPECT_GT(total, 0u);
+  EXPECT_LE(differ, total / 1000) << "GPU guided matching differs from the CPU's";
+}
+
+struct SyntheticPairs {
+  std::vector<GuidedScene> scenes;
+  std::vector<ImageFeatures> images;
+};
+
+// Three scenes (6 images), matched as 3 guided pairs plus one pair listed
+// twice, so that keypoint arrays are shared between tasks.
+SyntheticPairs MakeSyntheticPairs(std::vector<GuidedPair>* pairs) {
+  SyntheticPairs s;
+  for (unsigned seed : {31u, 32u, 33u}) s.scenes.push_back(MakeGuidedScene(2000, seed));
+  for (size_t k = 0; k < s.scenes.size(); ++k) {
+    s.images.push_back(s.scenes[k].image1);
+    s.images.back().image_id = static_cast<image_t>(2 * k + 1);
+    s.images.push_back(s.scenes[k].image2);
+    s.images.back().image_id = static_cast<image_t>(2 * k + 2);
+  }
+  for (size_t k = 0; k < s.scenes.size(); ++k) {
+    GuidedPair p;
+    p.pair = {static_cast<image_t>(2 * k + 1), static_cast<image_t>(2 * k + 2)};
+    p.F = s.scenes[k].F;
+    p.points1 = &s.scenes[k].xy1;
+    p.points2 = &s.scenes[k].xy2;
+    pairs->push_back(p);
+  }
+  pairs->push_back(pairs->front());
+  return s;
+}
+
+TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnSyntheticScenes) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  std::vector<GuidedPair> pairs;
+  const SyntheticPairs s = MakeSyntheticPairs(&pairs);
+  std::vector<const ImageFeatures*> images;
+  for (const ImageFeatures& f : s.images) images.push_back(&f);
+  for (const double d : {2.0, 8.0}) {
+    ExpectSameGuidedMatches(images, pairs, d, nullptr);
+    ExpectSameGuidedMatches(images, pairs, d, "direct");
+  }
+}
+
+TEST(GpuGuidedMatching, UnboundedBandEqualsUnguidedMatching) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  std::vector<GuidedPair> pairs;
+  const SyntheticPairs s = MakeSyntheticPairs(&pairs);
+  std::vector<const FeatureDescriptors*> descriptors;
+  for (const ImageFeatures& f : s.images) descriptors.push_back(&f.descriptors);
+  const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
+  auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+  for (const ImageFeatures& f : s.images) gpu->AddImage(f.image_id, f.descriptors);
+  std::vector<ImagePair> plain_pairs;
+  for (const GuidedPair& p : pairs) plain_pairs.push_back(p.pair);
+  EXPECT_EQ(gpu->MatchPairsGuided(pairs, 1e9), gpu->MatchPairs(plain_pairs));
+  // Too few positions for an image is refused.
+  std::vector<float> short_xy(10, 0.f);
+  pairs[0].points2 = &short_xy;
+  EXPECT_THROW(gpu->MatchPairsGuided(pairs, 4.0), std::invalid_argument);
+}
+
+// Images 1 and 2 of a scene and an unrelated image 3, served to a guided
+// matcher built from GPU parts.
+struct GpuGuidedRig {
+  struct Source : FeatureSource {
+    std::vector<ImageFeatures> images;
+    Camera camera;
+    ImageFeatures LoadFeatures(image_t id) override { return images[id - 1]; }
+    const Camera& CameraOfImage(image_t) const override { return camera; }
+  } source;
+  std::unique_ptr<KeypointRecordingSource> recording;
+  std::unique_ptr<GuidedFeatureMatcher> matcher;
+
+  GpuGuidedRig(const GuidedScene& scene, const GuidedMatchingOptions& options) {
+    source.images = {scene.image1, scene.image2, MakeUnrelatedImage(1500, 22)};
+    const MeanDescriptor mean =
+        ComputeMeanDescriptor({&source.images[0].descriptors, &source.images[1].descriptors});
+    const SiftMatchingOptions sift;
+    const CasHashOptions cashash;
+    recording = std::make_unique<KeypointRecordingSource>(&source);
+    matcher = std::make_unique<GuidedFeatureMatcher>(
+        cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0), cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0),
+        cuda::CreateGpuFundamentalEstimator(TwoViewGeometryOptions(), 0), recording.get(), options, 32768, 0, -1);
+    for (image_t id : {1u, 2u, 3u}) matcher->AddImage(id, recording->LoadFeatures(id).descriptors);
+  }
+};
+
+TEST(GpuGuidedMatching, GuidedMatcherFromGpuPartsDecidesAsTheCpuOne) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const GuidedScene scene = MakeGuidedScene(1500, 21);
+  for (const bool search_in_band : {false, true}) {
+    GuidedMatchingOptions options;
+    options.restrict_search_to_band = search_in_band;
+    GpuGuidedRig rig(scene, options);
+    EXPECT_NE(rig.matcher->Name().find("gpu-cascade"), std::string::npos);
+    const std::vector<FeatureMatches> result = rig.matcher->MatchPairs({{1, 2}, {1, 3}, {3, 2}});
+    EXPECT_EQ(rig.matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
+    EXPECT_EQ(rig.matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
+    EXPECT_EQ(rig.matcher->last_outcomes()[2], GuidedStage1Outcome::kTooFewMatches);
+    EXPECT_TRUE(result[1].empty());
+    EXPECT_TRUE(result[2].empty());
+    size_t right = 0;
+    for (const FeatureMatch& m : result[0]) right += scene.truth[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
+    // The band search also recovers the features whose decoy lies off the
+    // line; exact matches filtered by the band do not (tests/matching/guided_matching_test.cc).
+    EXPECT_GT(result[0].size(), search_in_band ? 1100u : 900u) << "search_in_band " << search_in_band;
+    EXPECT_GE(right, result[0].size() * 99 / 100);
+  }
+}
+
+TEST(GpuGuidedMatching, RejectsRepeatedStructureOnTheEpipolarLine) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const GuidedScene scene = MakeRepeatedStructureScene(1500, 23);
+  GpuGuidedRig rig(scene, GuidedMatchingOptions());
+  const FeatureMatches guided = rig.matcher->MatchPairs({{1, 2}})[0];
+  ASSERT_EQ(rig.matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
+  size_t right = 0, on_line = 0;
+  for (const FeatureMatch& m : guided) {
+    right += scene.truth[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
+    on_line += scene.decoy[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
+  }
+  EXPECT_EQ(on_line, 0u);
+  EXPECT_EQ(right, guided.size());
+  EXPECT_GT(right, 750u);
+}
+
+TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnARealDatabase) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const char* path = std::getenv("CASHASH_GUIDED_DB");
+  if (path == nullptr) GTEST_SKIP() << "CASHASH_GUIDED_DB is not set (a COLMAP feature database)";
+  colmap::DatabaseFeatureSource source(path);
+  std::vector<ImageFeatures> images;
+  for (const Image& image : source.images()) {
+    if (images.size() == 6) break;
+    images.push_back(source.LoadFeatures(image.image_id));
+    images.back().image_id = image.image_id;
+  }
+  ASSERT_GE(images.size(), 2u);
+  std::vector<const FeatureDescriptors*> descriptors;
+  for (const ImageFeatures& f : images) descriptors.push_back(&f.descriptors);
+  const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
+  auto cpu = CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean);
+  std::vector<std::vector<float>> xy(images.size());
+  for (size_t k = 0; k < images.size(); ++k) {
+    cpu->AddImage(images[k].image_id, images[k].descriptors);
+    xy[k] = InterleavedPositions(images[k].keypoints, images[k].keypoints.size());
+  }
+  // F of every pair from the CPU's exhaustive matches.
+  std::vector<GuidedPair> pairs;
+  for (size_t a = 0; a < images.size(); ++a) {
+    for (size_t b = a + 1; b < images.size(); ++b) {
+      const ImagePair pair{images[a].image_id, images[b].image_id};
+      const FeatureMatches matches = cpu->MatchPairs({pair})[0];
+      if (matches.size() < 16) continue;
+      const TwoViewPoints points = PrepareTwoViewPoints(KeypointPositions(images[a].keypoints),
+                                                        KeypointPositions(images[b].keypoints), matches);
+      const TwoViewModelEstimate F = EstimateFundamental(points, TwoViewGeometryOptions());
+      if (!F.success) continue;
+      GuidedPair g;
+      g.pair = pair;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F.model(r, c);
+      g.points1 = &xy[a];
+      g.points2 = &xy[b];
+      pairs.push_back(g);
+    }
+  }
+  ASSERT_FALSE(pairs.empty());
+  std::vector<const ImageFeatures*> pointers;
+  for (const ImageFeatures& f : images) pointers.push_back(&f);
+  for (const double d : {4.0, 8.0}) {
+    ExpectSameGuidedMatches(pointers, pairs, d, nullptr);
+    ExpectSameGuidedMatches(pointers, pairs, d, "direct");
+  }
+}
+
+}  // namespace
+}  // namespace cashash

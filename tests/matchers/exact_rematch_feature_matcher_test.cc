@@ -1,0 +1,152 @@
+// The cascade screens, exact matching decides: pairs with at least
+// min_matches cascade matches get the backend's exact matches, the others
+// keep the cascade's, in the callers' order. On the CPU the exact matches
+// are brute force's, match for match.
+#include "cashash/matchers/exact_rematch_feature_matcher.h"
+
+#include <random>
+#include <set>
+#include <stdexcept>
+
+#include <gtest/gtest.h>
+
+#include "synthetic_sift.h"
+
+namespace cashash {
+namespace {
+
+// Answers pair (a, b) with a + b cascade matches whose idx2 is 1, or
+// exactly with a + b + 1 matches whose idx2 is 2, and records what it is
+// asked.
+class CannedMatcher : public FeatureMatcher {
+ public:
+  explicit CannedMatcher(bool exact = true) : exact_(exact) {}
+  void AddImage(image_t id, const FeatureDescriptors&) override { images.insert(id); }
+  void RemoveImage(image_t id) override { images.erase(id); }
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    asked.insert(asked.end(), pairs.begin(), pairs.end());
+    return Answer(pairs, 0, 1);
+  }
+  std::string Name() const override { return "canned"; }
+  bool SupportsEpipolarGuidance() const override { return true; }
+  std::vector<FeatureMatches> MatchPairsGuided(const std::vector<GuidedPair>& pairs, double) override {
+    guided_calls += pairs.size();
+    return std::vector<FeatureMatches>(pairs.size());
+  }
+  bool SupportsExactMatching() const override { return exact_; }
+  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
+    asked_exact.insert(asked_exact.end(), pairs.begin(), pairs.end());
+    return Answer(pairs, 1, 2);
+  }
+  std::set<image_t> images;
+  std::vector<ImagePair> asked, asked_exact;
+  size_t guided_calls = 0;
+
+ private:
+  static std::vector<FeatureMatches> Answer(const std::vector<ImagePair>& pairs, size_t extra, point2D_t tag) {
+    std::vector<FeatureMatches> out;
+    for (const ImagePair& p : pairs) {
+      FeatureMatches m;
+      for (size_t k = 0; k < p.first + p.second + extra; ++k) m.push_back({static_cast<point2D_t>(k), tag});
+      out.push_back(std::move(m));
+    }
+    return out;
+  }
+  bool exact_;
+};
+
+TEST(ExactRematchFeatureMatcher, PairsThatMayVerifyGetTheExactMatches) {
+  auto cascade = std::make_unique<CannedMatcher>();
+  CannedMatcher* c = cascade.get();
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 5);
+  for (image_t id = 0; id < 6; ++id) matcher.AddImage(id, FeatureDescriptors{});
+  matcher.RemoveImage(5);
+  EXPECT_EQ(c->images, (std::set<image_t>{0, 1, 2, 3, 4}));
+
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 4}, {0, 2}, {2, 3}, {0, 4}, {1, 2}};
+  const std::vector<FeatureMatches> results = matcher.MatchPairs(pairs);
+  ASSERT_EQ(results.size(), pairs.size());
+  EXPECT_EQ(c->asked, pairs);
+  // Cascade counts: 1, 5, 2, 5, 4, 3 -> (1,4) and (2,3) are matched again.
+  EXPECT_EQ(c->asked_exact, (std::vector<ImagePair>{{1, 4}, {2, 3}}));
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const size_t cascade_count = pairs[i].first + pairs[i].second;
+    const bool again = cascade_count >= 5;
+    ASSERT_EQ(results[i].size(), again ? cascade_count + 1 : cascade_count) << i;
+    for (const FeatureMatch& m : results[i]) EXPECT_EQ(m.point2D_idx2, again ? 2u : 1u) << i;
+  }
+  EXPECT_EQ(matcher.pairs_matched(), 6u);
+  EXPECT_EQ(matcher.pairs_rematched(), 2u);
+  EXPECT_EQ(matcher.Name(), "canned+exact-rematch");
+}
+
+TEST(ExactRematchFeatureMatcher, GuidedMatchingStaysWithTheCascade) {
+  auto cascade = std::make_unique<CannedMatcher>();
+  CannedMatcher* c = cascade.get();
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 1);
+  EXPECT_TRUE(matcher.SupportsEpipolarGuidance());
+  matcher.MatchPairsGuided(std::vector<GuidedPair>(3), 4.0);
+  EXPECT_EQ(c->guided_calls, 3u);
+  EXPECT_TRUE(c->asked_exact.empty());
+}
+
+TEST(ExactRematchFeatureMatcher, RejectsABackendWithoutExactMatchingOrAZeroThreshold) {
+  EXPECT_THROW(ExactRematchFeatureMatcher(nullptr, 5), std::invalid_argument);
+  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(false), 5), std::invalid_argument);
+  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(), 0), std::invalid_argument);
+}
+
+// With the CPU cascade the rematched pairs' matches are brute force's, match
+// for match, and the others the cascade's.
+TEST(ExactRematchFeatureMatcher, RematchedPairsEqualBruteForceOnTheCpu) {
+  std::mt19937 rng(11);
+  std::vector<std::vector<uint8_t>> base;
+  for (int k = 0; k < 300; ++k) base.push_back(testing_support::RandomSift(&rng));
+  std::uniform_int_distribution<int> noise(-6, 6);
+  std::vector<FeatureDescriptors> images(4);
+  for (int i = 0; i < 4; ++i) {
+    // Images 0-2 share the base descriptors (with noise); image 3 is unrelated.
+    for (int k = 0; k < 300; ++k) {
+      const std::vector<uint8_t> b = i < 3 ? base[k] : testing_support::RandomSift(&rng);
+      for (uint8_t x : b) images[i].data.push_back(static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255)));
+    }
+  }
+  std::vector<const FeatureDescriptors*> pointers;
+  for (const FeatureDescriptors& d : images) pointers.push_back(&d);
+  const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
+  SiftMatchingOptions sift;
+  sift.num_threads = 1;
+  CasHashOptions cascade_options, brute_options;
+  brute_options.matcher = MatcherType::kBruteForce;
+  auto cascade_ref = CreateCpuFeatureMatcher(sift, cascade_options, mean);
+  auto brute_ref = CreateCpuFeatureMatcher(sift, brute_options, mean);
+  ExactRematchFeatureMatcher matcher(CreateCpuFeatureMatcher(sift, cascade_options, mean), 15);
+  for (image_t id = 0; id < 4; ++id) {
+    matcher.AddImage(id, images[id]);
+    cascade_ref->AddImage(id, images[id]);
+    brute_ref->AddImage(id, images[id]);
+  }
+  const std::vector<ImagePair> pairs = {{0, 1}, {0, 3}, {1, 2}, {2, 3}};
+  const auto results = matcher.MatchPairs(pairs);
+  const auto cascade_results = cascade_ref->MatchPairs(pairs);
+  const auto brute_results = brute_ref->MatchPairs(pairs);
+  size_t rematched = 0;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const bool again = cascade_results[i].size() >= 15;
+    rematched += again;
+    const FeatureMatches& expected = again ? brute_results[i] : cascade_results[i];
+    ASSERT_EQ(results[i].size(), expected.size()) << i;
+    for (size_t k = 0; k < expected.size(); ++k) {
+      EXPECT_EQ(results[i][k].point2D_idx1, expected[k].point2D_idx1);
+      EXPECT_EQ(results[i][k].point2D_idx2, expected[k].point2D_idx2);
+    }
+  }
+  // Pairs of overlapping images are matched again, those of the unrelated
+  // image are not.
+  EXPECT_GE(rematched, 2u);
+  EXPECT_LT(cascade_results[1].size(), 15u);
+  EXPECT_EQ(matcher.pairs_rematched(), rematched);
+}
+
+}  // namespace
+}  // namespace cashash

@@ -1,0 +1,136 @@
+#include "cashash/matchers/fallback_feature_matcher.h"
+
+#include <memory>
+#include <random>
+#include <stdexcept>
+
+#include <gtest/gtest.h>
+
+#include "synthetic_sift.h"
+
+namespace cashash {
+namespace {
+
+// Stands in for the GPU backend: wraps a CPU matcher and throws the given
+// error at the n-th call (AddImage and MatchPairs counted together).
+class FailingMatcher : public FeatureMatcher {
+ public:
+  FailingMatcher(std::unique_ptr<FeatureMatcher> inner, int fail_at_call, std::string message)
+      : inner_(std::move(inner)), fail_at_call_(fail_at_call), message_(std::move(message)) {}
+  void AddImage(image_t id, const FeatureDescriptors& d) override {
+    MaybeFail();
+    inner_->AddImage(id, d);
+  }
+  void RemoveImage(image_t id) override { inner_->RemoveImage(id); }
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    MaybeFail();
+    return inner_->MatchPairs(pairs);
+  }
+  std::string Name() const override { return "failing-gpu"; }
+
+ private:
+  void MaybeFail() {
+    if (++calls_ == fail_at_call_) throw std::runtime_error(message_);
+  }
+  std::unique_ptr<FeatureMatcher> inner_;
+  int calls_ = 0;
+  int fail_at_call_;
+  std::string message_;
+};
+
+struct Scene {
+  std::vector<FeatureDescriptors> images;
+  std::vector<ImagePair> pairs;
+  MeanDescriptor mean{};
+};
+
+Scene MakeScene() {
+  std::mt19937 rng(3);
+  Scene scene;
+  std::vector<std::vector<uint8_t>> base;
+  for (int k = 0; k < 300; ++k) base.push_back(testing_support::RandomSift(&rng));
+  std::uniform_int_distribution<int> noise(-3, 3);
+  for (int i = 0; i < 5; ++i) {
+    FeatureDescriptors d;
+    for (const std::vector<uint8_t>& b : base) {
+      for (uint8_t x : b) d.data.push_back(static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255)));
+    }
+    scene.images.push_back(std::move(d));
+  }
+  for (image_t i = 0; i < 5; ++i)
+    for (image_t j = i + 1; j < 5; ++j) scene.pairs.emplace_back(i, j);
+  std::vector<const FeatureDescriptors*> pointers;
+  for (const FeatureDescriptors& d : scene.images) pointers.push_back(&d);
+  scene.mean = ComputeMeanDescriptor(pointers);
+  return scene;
+}
+
+std::vector<FeatureMatches> AddAndMatch(FeatureMatcher* matcher, const Scene& scene) {
+  for (size_t i = 0; i < scene.images.size(); ++i) matcher->AddImage(static_cast<image_t>(i), scene.images[i]);
+  matcher->RemoveImage(4);
+  matcher->AddImage(4, scene.images[4]);
+  return matcher->MatchPairs(scene.pairs);
+}
+
+std::unique_ptr<FeatureMatcher> Cpu(const Scene& scene) {
+  return CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), scene.mean);
+}
+
+TEST(FallbackFeatureMatcher, DeviceMemoryErrorsMoveTheRunToTheFallback) {
+  const Scene scene = MakeScene();
+  const std::vector<FeatureMatches> expected = AddAndMatch(Cpu(scene).get(), scene);
+  size_t total = 0;
+  for (const FeatureMatches& m : expected) total += m.size();
+  ASSERT_GT(total, 100u);
+  // Fail while adding images (call 3) and while matching (call 7).
+  for (int fail_at : {3, 7}) {
+    std::vector<std::string> warnings;
+    auto matcher = CreateFallbackFeatureMatcher(
+        std::make_unique<FailingMatcher>(Cpu(scene), fail_at, "GPU out of memory allocating 2 MiB for image 2"),
+        [&] { return Cpu(scene); }, IsDeviceMemoryError,
+        [&](const std::string& text) { warnings.push_back(text); });
+    EXPECT_EQ(matcher->Name(), "failing-gpu");
+    EXPECT_EQ(AddAndMatch(matcher.get(), scene), expected) << "fail at call " << fail_at;
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("failing-gpu failed (GPU out of memory"), std::string::npos) << warnings[0];
+    EXPECT_NE(warnings[0].find("continuing on cpu-"), std::string::npos) << warnings[0];
+    EXPECT_NE(matcher->Name(), "failing-gpu");
+  }
+}
+
+// The pipeline shares its features with the matcher: the fallback keeps
+// that handle (no copy) until the image is removed, and rebuilds from it.
+TEST(FallbackFeatureMatcher, SharedImagesAreKeptWithoutACopyAndRebuiltFrom) {
+  const Scene scene = MakeScene();
+  const std::vector<FeatureMatches> expected = AddAndMatch(Cpu(scene).get(), scene);
+  std::vector<std::shared_ptr<const FeatureDescriptors>> shared;
+  for (const FeatureDescriptors& d : scene.images) shared.push_back(std::make_shared<const FeatureDescriptors>(d));
+  // Fails at the first MatchPairs (call 6: five adds first).
+  auto matcher = CreateFallbackFeatureMatcher(
+      std::make_unique<FailingMatcher>(Cpu(scene), 6, "GPU out of memory allocating 2 MiB for codes"),
+      [&] { return Cpu(scene); }, IsDeviceMemoryError, nullptr);
+  for (size_t i = 0; i < shared.size(); ++i) matcher->AddSharedImage(static_cast<image_t>(i), shared[i]);
+  for (const auto& handle : shared) EXPECT_EQ(handle.use_count(), 2) << "held once by the fallback, not copied";
+  matcher->RemoveImage(4);
+  EXPECT_EQ(shared[4].use_count(), 1) << "released with the image";
+  matcher->AddSharedImage(4, shared[4]);
+  EXPECT_EQ(matcher->MatchPairs(scene.pairs), expected);  // rebuilt on the CPU from the handles
+  EXPECT_NE(matcher->Name(), "failing-gpu");
+}
+
+TEST(FallbackFeatureMatcher, OtherErrorsPropagate) {
+  const Scene scene = MakeScene();
+  auto matcher = CreateFallbackFeatureMatcher(std::make_unique<FailingMatcher>(Cpu(scene), 2, "kernel launch failed"),
+                                              [&] { return Cpu(scene); }, IsDeviceMemoryError, nullptr);
+  EXPECT_THROW(AddAndMatch(matcher.get(), scene), std::runtime_error);
+}
+
+TEST(FallbackFeatureMatcher, RecognisesTheGpuBackendsMemoryErrors) {
+  EXPECT_TRUE(IsDeviceMemoryError(std::runtime_error("GPU out of memory allocating 3 MiB for codes")));
+  EXPECT_TRUE(IsDeviceMemoryError(std::runtime_error("GPU memory budget exceeded by image 11: it needs 2 MiB")));
+  EXPECT_TRUE(IsDeviceMemoryError(std::runtime_error("cascade.cu:10: cudaMalloc: out of memory")));
+  EXPECT_FALSE(IsDeviceMemoryError(std::runtime_error("invalid device function")));
+}
+
+}  // namespace
+}  // namespace cashash

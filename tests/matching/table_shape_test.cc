@@ -1,0 +1,165 @@
+// The rule that chooses the hash tables from the features per image
+// (table_shape.h): today's 8 x 7 at 8,192 features, one bit more per
+// doubling while the GPU limits allow the collision probability to hold,
+// tables chosen to keep it, explicit values kept.
+#include "cashash/matching/table_shape.h"
+
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "cashash/matchers/feature_matcher.h"
+#include "synthetic_sift.h"
+
+namespace cashash {
+namespace {
+
+TEST(TableShape, DefaultsAt8192FeaturesAreEightTablesOfSevenBits) {
+  const TableShape shape = ChooseTableShape(8192);
+  EXPECT_EQ(shape.num_tables, 8);
+  EXPECT_EQ(shape.bits_per_table, 7);
+  // 0 = size unknown: the same shape.
+  EXPECT_EQ(ChooseTableShape(0).num_tables, 8);
+  EXPECT_EQ(ChooseTableShape(0).bits_per_table, 7);
+  // Between 8,192 and 16,383 features nothing changes (real SIFT images of
+  // 10k-12.5k features keep the measured defaults).
+  EXPECT_EQ(ChooseTableShape(12500).bits_per_table, 7);
+  EXPECT_EQ(ChooseTableShape(16383).bits_per_table, 7);
+}
+
+TEST(TableShape, OneBitPerDoublingWithTablesKeepingTheCollisionProbability) {
+  struct Expected {
+    size_t features;
+    int tables, bits;
+  };
+  for (const Expected& e : {Expected{100, 8, 7}, Expected{2048, 8, 7}, Expected{4096, 8, 7}, Expected{8192, 8, 7},
+                            Expected{16384, 8, 8}, Expected{32768, 8, 8}, Expected{1 << 20, 8, 8}}) {
+    const TableShape shape = ChooseTableShape(e.features);
+    EXPECT_EQ(shape.num_tables, e.tables) << e.features;
+    EXPECT_EQ(shape.bits_per_table, e.bits) << e.features;
+  }
+  const double target = TableCollisionProbability(8, 7);
+  EXPECT_NEAR(target, 0.9746, 1e-3);
+  // For fewer bits, the tables reach the target and one table fewer would
+  // not: 6 x 5, 7 x 6, 8 x 7.
+  for (int bits : {5, 6, 7}) {
+    const int tables = TablesForBits(bits);
+    EXPECT_EQ(tables, bits + 1);
+    EXPECT_GE(TableCollisionProbability(tables, bits), target - 1e-12);
+    EXPECT_LT(TableCollisionProbability(tables - 1, bits), target);
+  }
+  // 8 bits would need 10 tables (80 bits): capped at 64 / 8.
+  EXPECT_EQ(TablesForBits(8), 8);
+  EXPECT_EQ(TablesForBits(10), 6);
+}
+
+TEST(TableShape, CandidatesPerQueryStayAtMostTheDefaultsUpTo32768Features) {
+  // Bucket entries a query visits: tables x features / 2^bits.
+  auto entries = [](size_t features) {
+    const TableShape s = ChooseTableShape(features);
+    return static_cast<double>(s.num_tables) * static_cast<double>(features) / double(size_t{1} << s.bits_per_table);
+  };
+  const double reference = entries(8192);  // 8 x 8192 / 128 = 512
+  EXPECT_DOUBLE_EQ(reference, 512.0);
+  for (size_t features : {2048, 4096, 16384, 32768}) {
+    EXPECT_LE(entries(features), 2.0 * reference) << features;
+  }
+  EXPECT_DOUBLE_EQ(entries(16384), reference);  // 8 x 16384 / 256
+}
+
+TEST(TableShape, EveryShapeFitsTheGpuLimits) {
+  for (size_t features = 1; features <= (size_t{1} << 24); features = features * 3 / 2 + 1) {
+    const TableShape shape = ChooseTableShape(features);
+    EXPECT_GE(shape.num_tables, 1);
+    EXPECT_LE(shape.num_tables, kMaxShapeTables);
+    EXPECT_GE(shape.bits_per_table, 1);
+    EXPECT_LE(shape.num_tables * shape.bits_per_table, kMaxSignatureBits) << features;
+  }
+  // Past 8 bits no number of tables within 64 bits holds the probability:
+  // the bits stop there.
+  EXPECT_LT(TableCollisionProbability(64 / 9, 9), TableCollisionProbability(8, 7) - kMaxCollisionLoss);
+  EXPECT_GE(TableCollisionProbability(64 / 8, 8), TableCollisionProbability(8, 7) - kMaxCollisionLoss);
+}
+
+TEST(TableShape, ExplicitValuesWin) {
+  // Both given: kept as they are, whatever the size.
+  for (size_t features : {500, 8192, 65536}) {
+    const TableShape shape = ChooseTableShape(features, 10, 10);
+    EXPECT_EQ(shape.num_tables, 10);
+    EXPECT_EQ(shape.bits_per_table, 10);
+  }
+  // Bits given: the tables that keep the probability for them.
+  EXPECT_EQ(ChooseTableShape(65536, 0, 7).num_tables, 8);
+  EXPECT_EQ(ChooseTableShape(65536, 0, 6).num_tables, 7);
+  EXPECT_EQ(ChooseTableShape(65536, 0, 7).bits_per_table, 7);
+  // Tables given: bits from the size, within 64 bits in all.
+  EXPECT_EQ(ChooseTableShape(16384, 8, 0).num_tables, 8);
+  EXPECT_EQ(ChooseTableShape(16384, 8, 0).bits_per_table, 8);
+  // 6 tables of 8 bits would lose too much (0.90): 6 x 7.
+  EXPECT_EQ(ChooseTableShape(16384, 6, 0).num_tables, 6);
+  EXPECT_EQ(ChooseTableShape(16384, 6, 0).bits_per_table, 7);
+  EXPECT_EQ(ChooseTableShape(4096, 6, 0).bits_per_table, 7);
+  EXPECT_EQ(ChooseTableShape(1 << 20, 12, 0).bits_per_table, 5);
+
+  CasHashOptions options;
+  options.num_tables = 9;
+  options.bits_per_table = 11;
+  const CasHashOptions resolved = ResolveTableShape(options, 2048);
+  EXPECT_EQ(resolved.num_tables, 9);
+  EXPECT_EQ(resolved.bits_per_table, 11);
+  const CasHashOptions chosen = ResolveTableShape(CasHashOptions(), 16384);
+  EXPECT_EQ(chosen.num_tables, 8);
+  EXPECT_EQ(chosen.bits_per_table, 8);
+  EXPECT_EQ(chosen.tau, CasHashOptions().tau);
+}
+
+TEST(TableShape, RunSizeIsTheMedianAfterMaxNumMatches) {
+  EXPECT_EQ(TypicalFeatureCount({}, 32768), 0u);
+  EXPECT_EQ(TypicalFeatureCount({100, 9000, 20000}, 32768), 9000u);
+  // The upper middle value of an even count; rows beyond max_num_matches
+  // are not matched, so they do not count.
+  EXPECT_EQ(TypicalFeatureCount({100, 40000, 40000, 200}, 32768), 32768u);
+  EXPECT_EQ(TypicalFeatureCount({20000, 20000, 20000}, 8192), 8192u);
+}
+
+TEST(TableShape, DescriptionSaysWhereTheShapeComesFrom) {
+  CasHashOptions requested;
+  const CasHashOptions resolved = ResolveTableShape(requested, 16384);
+  EXPECT_EQ(DescribeTableShape(requested, resolved, 16384, 300),
+            "Hash tables: 8 x 8 bits (chosen for 16384 features per image, the median of 300 images)");
+  requested.num_tables = 10;
+  requested.bits_per_table = 10;
+  EXPECT_EQ(DescribeTableShape(requested, requested, 16384, 300), "Hash tables: 10 x 10 bits (as set by the options)");
+}
+
+TEST(TableShape, MatcherFromOptionsAtZeroEqualsEightBySeven) {
+  // A matcher created without a run's feature counts uses the reference
+  // shape: the same matches as 8 x 7 given explicitly.
+  std::mt19937 rng(3);
+  FeatureDescriptors a, b;
+  for (int k = 0; k < 400; ++k) {
+    const auto row = testing_support::RandomSift(&rng);
+    a.data.insert(a.data.end(), row.begin(), row.end());
+    std::vector<uint8_t> noisy = row;
+    noisy[k % 128] = static_cast<uint8_t>(noisy[k % 128] ^ 3);
+    b.data.insert(b.data.end(), noisy.begin(), noisy.end());
+  }
+  const MeanDescriptor mean = ComputeMeanDescriptor({&a, &b});
+  CasHashOptions automatic;
+  automatic.matcher = MatcherType::kCascade;
+  CasHashOptions explicit_shape = automatic;
+  explicit_shape.num_tables = 8;
+  explicit_shape.bits_per_table = 7;
+  auto run = [&](const CasHashOptions& options) {
+    auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), options, mean);
+    matcher->AddImage(1, a);
+    matcher->AddImage(2, b);
+    return matcher->MatchPairs({{1, 2}}).front();
+  };
+  const FeatureMatches expected = run(explicit_shape);
+  EXPECT_GT(expected.size(), 300u);
+  EXPECT_EQ(run(automatic), expected);
+}
+
+}  // namespace
+}  // namespace cashash

@@ -1,0 +1,291 @@
+// The pipeline's verification stage hands whole chunks to the batch verifier
+// it is given (the GPU one in production) and stores what it returns.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+
+#include "cashash/pipeline/batch_verifier.h"
+#include "cashash/pipeline/matching_pipeline.h"
+#include "cashash/pipeline/pair_generation.h"
+
+namespace cashash {
+namespace {
+
+class PointSource : public FeatureSource {
+ public:
+  ImageFeatures LoadFeatures(image_t image_id) override {
+    ImageFeatures f;
+    f.image_id = image_id;
+    f.keypoints.resize(30);
+    for (size_t i = 0; i < f.keypoints.size(); ++i) {
+      f.keypoints[i].x = static_cast<float>(i * image_id);
+      f.keypoints[i].y = static_cast<float>(i + image_id);
+    }
+    f.descriptors.data.assign(f.keypoints.size() * kDescriptorDim, 0);
+    return f;
+  }
+  const Camera& CameraOfImage(image_t) const override { return camera_; }
+
+ private:
+  Camera camera_;
+};
+
+// 20 matches (k, k) per pair.
+class IdentityMatcher : public FeatureMatcher {
+ public:
+  void AddImage(image_t, const FeatureDescriptors&) override {}
+  void RemoveImage(image_t) override {}
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    std::vector<FeatureMatches> out(pairs.size());
+    for (FeatureMatches& m : out)
+      for (point2D_t k = 0; k < 20; ++k) m.push_back({k, k});
+    return out;
+  }
+  std::string Name() const override { return "identity"; }
+};
+
+// An IdentityMatcher that is still choosing its backend during its first
+// `choosing_calls` MatchPairs calls (auto probing) and counts its calls.
+class ChoosingMatcher : public IdentityMatcher {
+ public:
+  explicit ChoosingMatcher(int choosing_calls) : choosing_calls_(choosing_calls) {}
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    ++calls;
+    return IdentityMatcher::MatchPairs(pairs);
+  }
+  bool ChoosingBackend() const override { return calls < choosing_calls_; }
+  std::atomic<int> calls{0};
+
+ private:
+  const int choosing_calls_;
+};
+
+// Marks every pair UNCALIBRATED with its first match as the only inlier and
+// records the batch sizes and what it was shown.
+class RecordingVerifier : public BatchVerifier {
+ public:
+  std::string Name() const override { return "recording"; }
+  std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+    batch_sizes.push_back(pairs.size());
+    std::vector<TwoViewGeometry> out(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      EXPECT_EQ(pairs[k].matches->size(), 20u);
+      EXPECT_EQ(pairs[k].points1->size(), 30u);
+      seeds.push_back(pairs[k].random_seed);
+      out[k].config = kUncalibrated;
+      out[k].inlier_matches.push_back(pairs[k].matches->front());
+    }
+    return out;
+  }
+  std::vector<size_t> batch_sizes;
+  std::vector<uint64_t> seeds;
+};
+
+// Verifies up to three chunks at once. Every third call is slow, so calls
+// finish out of order; call `fail_at` (if any) throws.
+class ConcurrentVerifier : public BatchVerifier {
+ public:
+  explicit ConcurrentVerifier(int fail_at = -1) : fail_at_(fail_at) {}
+  std::string Name() const override { return "concurrent"; }
+  int MaxConcurrentCalls() const override { return 3; }
+  std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+    const int now = ++in_flight_;
+    int seen = max_in_flight.load();
+    while (now > seen && !max_in_flight.compare_exchange_weak(seen, now)) {
+    }
+    const int call = calls_++;
+    std::this_thread::sleep_for(std::chrono::milliseconds(call % 3 == 0 ? 60 : 5));
+    --in_flight_;
+    if (call == fail_at_) throw std::runtime_error("verifier failed on purpose");
+    std::vector<TwoViewGeometry> out(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      out[k].config = kUncalibrated;
+      out[k].inlier_matches.push_back(pairs[k].matches->front());
+    }
+    return out;
+  }
+  std::atomic<int> max_in_flight{0};
+
+ private:
+  const int fail_at_;
+  std::atomic<int> calls_{0};
+  std::atomic<int> in_flight_{0};
+};
+
+class Sink : public ResultSink {
+ public:
+  void WriteChunk(const std::vector<PairResult>& results) override {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (const PairResult& r : results) configs[r.pair] = r.geometry.config;
+    if (!results.empty()) first_pairs.push_back(results.front().pair);
+  }
+  std::mutex mutex;
+  std::map<ImagePair, int> configs;
+  std::vector<ImagePair> first_pairs;  // of each chunk, in the order written
+};
+
+// Exhaustive chunks of images 1..num_images in blocks of `block`.
+std::vector<PairChunk> Chunks(image_t num_images, size_t block) {
+  std::vector<image_t> ids;
+  for (image_t i = 1; i <= num_images; ++i) ids.push_back(i);
+  return ExhaustivePairChunks(ids, block);
+}
+
+size_t NumPairs(const std::vector<PairChunk>& chunks) {
+  size_t num_pairs = 0;
+  for (const PairChunk& c : chunks) num_pairs += c.pairs.size();
+  return num_pairs;
+}
+
+std::vector<ImagePair> FirstPairs(const std::vector<PairChunk>& chunks) {
+  std::vector<ImagePair> first;
+  for (const PairChunk& c : chunks) first.push_back(c.pairs.front());
+  return first;
+}
+
+// Runs `chunks` through a pipeline of two threads from a PointSource, with
+// `matcher`, `verifier` and `sink`; what Run throws passes through.
+PipelineStats RunPipeline(const std::vector<PairChunk>& chunks, FeatureMatcher* matcher, BatchVerifier* verifier,
+                          Sink* sink) {
+  PointSource source;
+  PipelineOptions options;
+  options.num_threads = 2;
+  MatchingPipeline pipeline(options, &source, matcher, sink);
+  pipeline.SetBatchVerifier(verifier);
+  return pipeline.Run(chunks);
+}
+
+TEST(BatchVerifierPipeline, WholeChunksGoToTheGivenVerifier) {
+  const std::vector<PairChunk> chunks = Chunks(9, 4);
+  const size_t num_pairs = NumPairs(chunks);
+  PointSource source;
+  IdentityMatcher matcher;
+  Sink sink;
+  RecordingVerifier verifier;
+  PipelineOptions options;
+  options.num_threads = 2;
+  options.two_view.random_seed = 5;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  pipeline.SetBatchVerifier(&verifier);
+  const PipelineStats stats = pipeline.Run(chunks);
+  EXPECT_EQ(stats.pairs_done, num_pairs);
+  EXPECT_EQ(stats.verified_pairs, num_pairs);
+  EXPECT_EQ(stats.inlier_matches, num_pairs);
+  ASSERT_EQ(verifier.batch_sizes.size(), chunks.size());
+  for (size_t c = 0; c < chunks.size(); ++c) EXPECT_EQ(verifier.batch_sizes[c], chunks[c].pairs.size());
+  ASSERT_EQ(sink.configs.size(), num_pairs);
+  for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUncalibrated);
+  // Each pair is seeded from the run's seed and the pair alone.
+  size_t i = 0;
+  for (const PairChunk& c : chunks)
+    for (const ImagePair& p : c.pairs) EXPECT_EQ(verifier.seeds[i++], PairRandomSeed(5, p));
+}
+
+TEST(BatchVerifierPipeline, SkippingVerificationNeverCallsTheVerifier) {
+  PointSource source;
+  IdentityMatcher matcher;
+  Sink sink;
+  RecordingVerifier verifier;
+  PipelineOptions options;
+  options.skip_geometric_verification = true;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  pipeline.SetBatchVerifier(&verifier);
+  pipeline.Run(ExhaustivePairChunks({1, 2, 3}, 2));
+  EXPECT_TRUE(verifier.batch_sizes.empty());
+  for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUndefined);
+}
+
+TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
+  const std::vector<PairChunk> chunks = Chunks(16, 3);
+  ASSERT_GE(chunks.size(), 10u);
+  const size_t num_pairs = NumPairs(chunks);
+  IdentityMatcher matcher;
+  Sink sink;
+  ConcurrentVerifier verifier;
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
+  EXPECT_EQ(stats.verification_threads, 3);
+  EXPECT_EQ(stats.pairs_done, num_pairs);
+  EXPECT_EQ(stats.verified_pairs, num_pairs);
+  // The slow calls let the next chunks overtake them; they still wait.
+  EXPECT_GE(verifier.max_in_flight.load(), 2);
+  EXPECT_LE(verifier.max_in_flight.load(), 3);
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+  ASSERT_EQ(sink.configs.size(), num_pairs);
+  for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUncalibrated);
+}
+
+TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChunk) {
+  const std::vector<PairChunk> chunks = Chunks(16, 3);
+  IdentityMatcher matcher;
+  Sink sink;
+  ConcurrentVerifier verifier(/*fail_at=*/4);
+  try {
+    RunPipeline(chunks, &matcher, &verifier, &sink);
+    FAIL() << "the verifier's error was not rethrown";
+  } catch (const std::runtime_error& e) {
+    EXPECT_STREQ(e.what(), "verifier failed on purpose");
+  }
+  // Whole chunks only, in matching order, and none after the failed one.
+  const std::vector<ImagePair> all = FirstPairs(chunks);
+  ASSERT_LT(sink.first_pairs.size(), all.size());
+  EXPECT_TRUE(std::equal(sink.first_pairs.begin(), sink.first_pairs.end(), all.begin()));
+  size_t written_pairs = 0;
+  for (size_t c = 0; c < sink.first_pairs.size(); ++c) written_pairs += chunks[c].pairs.size();
+  EXPECT_EQ(sink.configs.size(), written_pairs);
+}
+
+// While the matcher times its backends nothing is verified: the probe has
+// the device to itself. Verification starts after the call that chose.
+TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {
+  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
+  ASSERT_GE(chunks.size(), 4u);
+  ChoosingMatcher matcher(2);
+  Sink sink;
+  std::vector<int> matcher_calls_at_verify;
+  std::mutex mutex;
+  class GatedVerifier : public RecordingVerifier {
+   public:
+    GatedVerifier(ChoosingMatcher* m, std::vector<int>* seen, std::mutex* mu) : m_(m), seen_(seen), mu_(mu) {}
+    std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+      {
+        std::lock_guard<std::mutex> lock(*mu_);
+        seen_->push_back(m_->calls.load());
+      }
+      return RecordingVerifier::Verify(pairs);
+    }
+
+   private:
+    ChoosingMatcher* m_;
+    std::vector<int>* seen_;
+    std::mutex* mu_;
+  } verifier(&matcher, &matcher_calls_at_verify, &mutex);
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
+  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+  ASSERT_EQ(matcher_calls_at_verify.size(), chunks.size());
+  for (int calls : matcher_calls_at_verify) EXPECT_GE(calls, 2);
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+}
+
+// A matcher that never chooses (one pair, or a run too short to time)
+// cannot stall the run: the gate opens before the queue would block
+// matching, and when matching ends.
+TEST(BatchVerifierPipeline, AMatcherThatNeverChoosesStillFinishes) {
+  for (const size_t block : {size_t{2}, size_t{20}}) {
+    const std::vector<PairChunk> chunks = Chunks(12, block);
+    ChoosingMatcher matcher(1 << 30);
+    Sink sink;
+    ConcurrentVerifier verifier;
+    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
+    EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+    EXPECT_EQ(sink.configs.size(), NumPairs(chunks));
+  }
+}
+
+}  // namespace
+}  // namespace cashash

@@ -1,0 +1,149 @@
+#include "cashash/pipeline/matching_pipeline.h"
+
+#include <map>
+#include <mutex>
+#include <set>
+#include <stdexcept>
+
+#include <gtest/gtest.h>
+
+#include "cashash/base/pair_id.h"
+
+namespace cashash {
+namespace {
+
+class FakeSource : public FeatureSource {
+ public:
+  explicit FakeSource(int throw_on_image = -1) : throw_on_image_(throw_on_image) { camera_.params = {100, 50, 50}; }
+  ImageFeatures LoadFeatures(image_t image_id) override {
+    if (static_cast<int>(image_id) == throw_on_image_) throw std::runtime_error("image 3 is broken");
+    ++loads[image_id];
+    ImageFeatures f;
+    f.image_id = image_id;
+    f.keypoints.resize(image_id);  // image i has i features
+    f.descriptors.data.assign(image_id * kDescriptorDim, static_cast<uint8_t>(image_id));
+    return f;
+  }
+  const Camera& CameraOfImage(image_t) const override { return camera_; }
+  std::map<image_t, int> loads;
+
+ private:
+  Camera camera_;
+  int throw_on_image_;
+};
+
+// Returns min(n1, n2) matches (k, k) and checks the images were added.
+class FakeMatcher : public FeatureMatcher {
+ public:
+  void AddImage(image_t id, const FeatureDescriptors& d) override { sizes_[id] = d.rows(); }
+  void RemoveImage(image_t id) override { sizes_.erase(id); }
+  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    std::vector<FeatureMatches> out;
+    for (const ImagePair& p : pairs) {
+      if (!sizes_.count(p.first) || !sizes_.count(p.second)) throw std::logic_error("image not added");
+      FeatureMatches m;
+      for (point2D_t k = 0; k < std::min(sizes_[p.first], sizes_[p.second]); ++k) m.push_back({k, k});
+      out.push_back(m);
+    }
+    return out;
+  }
+  std::string Name() const override { return "fake"; }
+  size_t num_added() const { return sizes_.size(); }
+
+ private:
+  std::map<image_t, size_t> sizes_;
+};
+
+class CollectingSink : public ResultSink {
+ public:
+  void WriteChunk(const std::vector<PairResult>& results) override {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (const PairResult& r : results) {
+      EXPECT_TRUE(written.emplace(ImagePairToPairId(r.pair.first, r.pair.second), r.matches.size()).second)
+          << "pair written twice";
+    }
+    ++chunks;
+  }
+  std::mutex mutex;
+  std::map<pair_t, size_t> written;
+  int chunks = 0;
+};
+
+std::vector<image_t> Ids(image_t n) {
+  std::vector<image_t> ids;
+  for (image_t i = 1; i <= n; ++i) ids.push_back(i);
+  return ids;
+}
+
+PipelineOptions NoVerification() {
+  PipelineOptions options;
+  options.skip_geometric_verification = true;
+  options.num_threads = 2;
+  return options;
+}
+
+TEST(MatchingPipeline, EveryPairMatchedAndWrittenOnce) {
+  FakeSource source;
+  FakeMatcher matcher;
+  CollectingSink sink;
+  MatchingPipeline pipeline(NoVerification(), &source, &matcher, &sink);
+  size_t progress_calls = 0;
+  pipeline.SetProgressCallback([&](const PipelineProgress& p) {
+    ++progress_calls;
+    EXPECT_LE(p.pairs_done, p.pairs_total);
+  });
+  const PipelineStats stats = pipeline.Run(ExhaustivePairChunks(Ids(13), 4));
+  EXPECT_EQ(stats.pairs_total, 78u);
+  EXPECT_EQ(stats.pairs_done, 78u);
+  EXPECT_EQ(sink.written.size(), 78u);
+  EXPECT_EQ(sink.written.at(ImagePairToPairId(3, 9)), 3u);
+  EXPECT_EQ(progress_calls, static_cast<size_t>(sink.chunks));
+  EXPECT_FALSE(stats.stopped);
+  // Blocks stay loaded while needed: the first block is loaded once.
+  EXPECT_EQ(source.loads.at(1), 1);
+  // Images not needed by the last chunks were released from the matcher.
+  EXPECT_LE(matcher.num_added(), 8u);
+}
+
+TEST(MatchingPipeline, StopFlagEndsAfterCommittedChunks) {
+  FakeSource source;
+  FakeMatcher matcher;
+  CollectingSink sink;
+  MatchingPipeline pipeline(NoVerification(), &source, &matcher, &sink);
+  std::atomic<bool> stop{false};
+  pipeline.SetStopFlag(&stop);
+  pipeline.SetProgressCallback([&](const PipelineProgress&) { stop = true; });
+  const PipelineStats stats = pipeline.Run(ExhaustivePairChunks(Ids(20), 3));
+  EXPECT_TRUE(stats.stopped);
+  EXPECT_LT(stats.pairs_done, stats.pairs_total);
+  EXPECT_EQ(sink.written.size(), stats.pairs_done);  // whatever is counted was written
+}
+
+TEST(MatchingPipeline, SourceErrorPropagatesAndNothingHalfWritten) {
+  FakeSource source(/*throw_on_image=*/3);
+  FakeMatcher matcher;
+  CollectingSink sink;
+  MatchingPipeline pipeline(NoVerification(), &source, &matcher, &sink);
+  EXPECT_THROW(pipeline.Run(ExhaustivePairChunks(Ids(6), 2)), std::runtime_error);
+  // Only whole chunks reached the sink: chunk (block 0, block 0) = pair (1,2).
+  for (const auto& [pair_id, n] : sink.written) {
+    const ImagePair p = PairIdToImagePair(pair_id);
+    EXPECT_NE(p.first, 3u);
+    EXPECT_NE(p.second, 3u);
+  }
+}
+
+TEST(MatchingPipeline, TooFewMatchesAreDegenerate) {
+  FakeSource source;
+  FakeMatcher matcher;
+  CollectingSink sink;
+  PipelineOptions options;
+  options.num_threads = 2;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  const PipelineStats stats = pipeline.Run(ExhaustivePairChunks(Ids(5), 50));
+  EXPECT_EQ(stats.pairs_done, 10u);
+  EXPECT_EQ(stats.verified_pairs, 0u);  // at most 4 matches per pair < min_num_inliers
+}
+
+}  // namespace
+}  // namespace cashash
