@@ -42,6 +42,8 @@ class OptionTable {
 
 }  // namespace
 
+// One function because the option table reads best as one list in --help
+// order, every entry binding into the one options_description parsed below.
 ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
                                         MatcherCommandOptions* options) {
   po::options_description description("cashash " + command + " options");

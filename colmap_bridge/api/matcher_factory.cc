@@ -1,0 +1,161 @@
+#include "colmap_bridge/api/matcher_factory.h"
+
+#include <algorithm>
+#include <functional>
+#include <memory>
+#include <stdexcept>
+#include <utility>
+
+#include "cashash/matchers/auto_feature_matcher.h"
+#include "cashash/matchers/exact_rematch_feature_matcher.h"
+#include "cashash/matchers/fallback_feature_matcher.h"
+#include "cashash/matchers/split_feature_matcher.h"
+#include "cashash/matching/table_shape.h"
+#include "colmap_bridge/api/matching_api.h"
+#ifdef CASHASH_WITH_CUDA
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#endif
+
+namespace cashash {
+namespace colmap {
+
+std::vector<int> GpuIndices(const std::string& gpu_index) {
+  std::vector<int> indices;
+  size_t at = 0;
+  while (at <= gpu_index.size()) {
+    const size_t comma = std::min(gpu_index.find(',', at), gpu_index.size());
+    const std::string item = gpu_index.substr(at, comma - at);
+    size_t used = 0;
+    int value = -1;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size()) {
+      throw std::invalid_argument("--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+                                  gpu_index + "'");
+    }
+    value = std::max(0, value);
+    if (std::find(indices.begin(), indices.end(), value) == indices.end()) indices.push_back(value);
+    at = comma + 1;
+  }
+  return indices;
+}
+
+// The device the matcher will run on, or -1 for the CPU.
+int GpuIndexForRun(const MatcherCommandOptions& options) {
+#ifdef CASHASH_WITH_CUDA
+  if (!options.use_gpu) return -1;
+  const int gpu_index = GpuIndices(options.gpu_index).front();
+  std::string reason;
+  return cuda::CudaDeviceUsable(gpu_index, &reason) ? gpu_index : -1;
+#else
+  (void)options;
+  return -1;
+#endif
+}
+
+namespace {
+
+// The backend of one matcher type (cascade or brute force): on the GPUs of
+// the options where usable, else on the CPU. *on_gpu says which.
+std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        bool* on_gpu) {
+  *on_gpu = false;
+  if (options.use_gpu) {
+#ifdef CASHASH_WITH_CUDA
+    std::vector<std::unique_ptr<FeatureMatcher>> parts;
+    std::string reason;
+    for (const int gpu_index : GpuIndices(options.gpu_index)) {
+      std::string why;
+      if (!cuda::CudaDeviceUsable(gpu_index, &why)) {
+        reason += (reason.empty() ? "" : "; ") + std::string("device ") + std::to_string(gpu_index) + ": " + why;
+        continue;
+      }
+      // A run that outgrows the card (device memory) finishes on the CPU.
+      parts.push_back(CreateFallbackFeatureMatcher(
+          cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, gpu_index),
+          [sift = options.sift, cashash = options.cashash, mean]() {
+            return CreateCpuFeatureMatcher(sift, cashash, mean);
+          },
+          IsDeviceMemoryError, warning));
+    }
+    if (!parts.empty()) {
+      *on_gpu = true;
+      if (!reason.empty() && warning) warning("not every listed GPU is usable (" + reason + "); matching on the others");
+      if (parts.size() == 1) return std::move(parts[0]);
+      // Several devices share every chunk of pairs.
+      return std::make_unique<SplitFeatureMatcher>(std::move(parts));
+    }
+    if (warning) warning("no usable CUDA device (" + reason + "); matching on the CPU");
+#else
+    if (warning) warning("cashash was built without CUDA; matching on the CPU");
+#endif
+  }
+  return CreateCpuFeatureMatcher(options.sift, options.cashash, mean);
+}
+
+// The cascade backend of a run; with --CasHash.exact_rematch_min_matches > 0
+// it also matches the pairs that may verify again exactly, from the
+// descriptors it holds (exact_rematch_feature_matcher.h). Guided matching
+// keeps the bare cascade: its stage 2 screens by the epipolar band.
+std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        const std::shared_ptr<ExactRematchCounts>& counts,
+                                                        bool* on_gpu) {
+  MatcherCommandOptions cascade = options;
+  cascade.cashash.matcher = MatcherType::kCascade;
+  std::unique_ptr<FeatureMatcher> matcher = CreateBackendForOptions(cascade, mean, warning, on_gpu);
+  if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
+  return std::make_unique<ExactRematchFeatureMatcher>(
+      std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts);
+}
+
+}  // namespace
+
+std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
+                                                        const MeanDescriptor& mean,
+                                                        const std::function<void(const std::string&)>& warning,
+                                                        const std::function<void(const std::string&)>& info,
+                                                        const std::shared_ptr<ExactRematchCounts>& counts) {
+  bool on_gpu = false;
+  if (options.cashash.matcher == MatcherType::kCascade) {
+    return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
+  }
+  if (options.cashash.matcher != MatcherType::kAuto) return CreateBackendForOptions(options, mean, warning, &on_gpu);
+  // Guided matching filters candidates inside the cascade.
+  if (options.guided.enabled) return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
+  MatcherCommandOptions brute_force = options;
+  brute_force.cashash.matcher = MatcherType::kBruteForce;
+  // Both on the same devices (or both on the CPU); the warnings once.
+  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
+  bool brute_force_on_gpu = false;
+  std::unique_ptr<FeatureMatcher> brute_force_matcher =
+      CreateBackendForOptions(brute_force, mean, nullptr, &brute_force_on_gpu);
+  return std::make_unique<AutoFeatureMatcher>(std::move(cascade_matcher), std::move(brute_force_matcher),
+                                              on_gpu ? GpuAutoMatcherOptions() : CpuAutoMatcherOptions(options.sift),
+                                              info);
+}
+
+MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
+                                           const std::vector<size_t>& rows_per_image,
+                                           const std::function<void(const std::string&)>& info) {
+  MatcherCommandOptions resolved = options;
+  if (resolved.guided.enabled && resolved.cashash.matcher == MatcherType::kAuto) {
+    resolved.cashash.matcher = MatcherType::kCascade;
+    if (info) info("Matcher: cascade (guided matching needs it)");
+  }
+  const size_t features = TypicalFeatureCount(rows_per_image, options.sift.max_num_matches);
+  resolved.cashash = ResolveTableShape(resolved.cashash, features);
+  if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {
+    info(DescribeTableShape(options.cashash, resolved.cashash, features, rows_per_image.size()));
+  }
+  return resolved;
+}
+
+}  // namespace colmap
+}  // namespace cashash

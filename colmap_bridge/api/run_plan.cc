@@ -1,0 +1,404 @@
+#include "colmap_bridge/api/run_plan.h"
+
+#include <algorithm>
+#include <chrono>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "cashash/matchers/exact_rematch_feature_matcher.h"
+#include "cashash/matchers/retaining_feature_matcher.h"
+#include "cashash/matching/guided_matching.h"
+#include "cashash/pipeline/feature_cache.h"
+#include "cashash/pipeline/schedule_sizing.h"
+#include "colmap_bridge/api/gpu_memory_query.h"
+#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/verifier_selection.h"
+#include "colmap_bridge/completed_pairs.h"
+#include "distributed/mpi_distributed.h"
+#include "distributed/mpi_world.h"
+#ifdef CASHASH_WITH_CUDA
+#include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#endif
+
+namespace cashash {
+namespace colmap {
+
+using distributed::ChunkListChecksum;
+using distributed::ChunksOfRank;
+using distributed::LockedSink;
+using distributed::MpiAbortJob;
+using distributed::MpiBarrier;
+using distributed::MpiLocalRank;
+using distributed::MpiMax;
+using distributed::MpiMin;
+using distributed::MpiRank;
+using distributed::MpiResultReceiver;
+using distributed::MpiResultSender;
+using distributed::MpiSize;
+using distributed::RankReport;
+
+// Callers that set no warning sink still see warnings, on stderr as the
+// command line prints them.
+void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.warning) {
+    callbacks.warning(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
+}
+
+void Info(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.info) callbacks.info(text);
+}
+
+namespace {
+
+void WarnAboutSmallImages(DatabaseFeatureSource& source, const std::vector<image_t>& image_ids,
+                          const MatchingCallbacks& callbacks) {
+  for (image_t image_id : image_ids) {
+    const size_t rows = source.database().NumDescriptors(image_id);
+    if (rows < 2) {
+      Warn(callbacks, "image " + std::to_string(image_id) + " (" + source.image(image_id).name + ") has " +
+                          std::to_string(rows) + " feature" + (rows == 1 ? "" : "s") +
+                          "; its pairs get empty matches");
+    }
+  }
+}
+
+// Adds the statistics of another rank's pipeline to rank 0's: counts add
+// up, times are the longest rank's.
+void MergeStats(const PipelineStats& other, PipelineStats* stats) {
+  stats->pairs_total += other.pairs_total;
+  stats->pairs_done += other.pairs_done;
+  stats->raw_matches += other.raw_matches;
+  stats->verified_pairs += other.verified_pairs;
+  stats->inlier_matches += other.inlier_matches;
+  stats->seconds_total = std::max(stats->seconds_total, other.seconds_total);
+  stats->seconds_loading = std::max(stats->seconds_loading, other.seconds_loading);
+  stats->seconds_hashing = std::max(stats->seconds_hashing, other.seconds_hashing);
+  stats->seconds_matching = std::max(stats->seconds_matching, other.seconds_matching);
+  stats->seconds_verification = std::max(stats->seconds_verification, other.seconds_verification);
+  stats->seconds_writing = std::max(stats->seconds_writing, other.seconds_writing);
+  stats->seconds_matching_wait_queue = std::max(stats->seconds_matching_wait_queue, other.seconds_matching_wait_queue);
+  stats->seconds_verification_wait_input =
+      std::max(stats->seconds_verification_wait_input, other.seconds_verification_wait_input);
+  stats->seconds_verification_wait_writer =
+      std::max(stats->seconds_verification_wait_writer, other.seconds_verification_wait_writer);
+  stats->seconds_writing_wait_input = std::max(stats->seconds_writing_wait_input, other.seconds_writing_wait_input);
+  stats->stopped = stats->stopped || other.stopped;
+}
+
+// Device memory in use on the run's GPU: before the matcher exists, then
+// after every committed block (the writer thread, and the MPI receiver's).
+class GpuMemorySampler {
+ public:
+  explicit GpuMemorySampler(int gpu_index) : gpu_index_(gpu_index) {
+    size_t free_bytes = 0;
+    if (gpu_index_ < 0 || !GpuMemoryInfo(gpu_index_, &free_bytes, &total_bytes_)) {
+      gpu_index_ = -1;
+      return;
+    }
+    before_bytes_ = total_bytes_ - free_bytes;
+    peak_bytes_ = before_bytes_;
+  }
+
+  void Sample() {
+    if (gpu_index_ < 0) return;
+    size_t free_bytes = 0, total_bytes = 0;
+    if (!GpuMemoryInfo(gpu_index_, &free_bytes, &total_bytes)) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    peak_bytes_ = std::max(peak_bytes_, total_bytes - free_bytes);
+  }
+
+  void Fill(MatchingSummary* summary) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    summary->gpu_index = gpu_index_;
+    summary->gpu_total_bytes = total_bytes_;
+    summary->gpu_used_before_bytes = before_bytes_;
+    summary->gpu_peak_used_bytes = peak_bytes_;
+  }
+
+ private:
+  int gpu_index_;
+  size_t total_bytes_ = 0, before_bytes_ = 0, peak_bytes_ = 0;
+  std::mutex mutex_;
+};
+
+// What this process matches: the pairs not yet in the database, and of
+// those this rank's chunks.
+struct RunShare {
+  int rank = 0;
+  int num_ranks = 1;
+  size_t num_pairs = 0;  // of every rank
+  size_t pairs_skipped = 0;
+  std::vector<PairChunk> my_chunks;
+};
+
+// Everything a run is made of, built once by PlanRun. Members point into
+// each other (the pipeline's features into the cache, wrappers into the
+// matcher), so a plan is neither copied nor moved once built.
+struct RunPlan {
+  RunShare share;
+  MatcherCommandOptions options;  // with this rank's GPU
+  std::unique_ptr<GroupFeatureCache> cache;
+  std::unique_ptr<KeypointRecordingSource> keypoint_source;  // guided only
+  FeatureSource* features = nullptr;
+  std::unique_ptr<GpuMemorySampler> gpu_memory;
+  std::shared_ptr<ExactRematchCounts> rematch_counts;
+  std::unique_ptr<FeatureMatcher> matcher;
+  GuidedFeatureMatcher* guided = nullptr;       // inside matcher, if any
+  RetainingFeatureMatcher* retaining = nullptr;  // inside matcher, if any
+  size_t keep_bytes = 0;                          // the retaining matcher's cap
+  // Rank 0 writes (through a lock: its pipeline and the MPI receiver);
+  // the other ranks send.
+  std::unique_ptr<DatabaseResultSink> database_sink;
+  std::unique_ptr<LockedSink> locked_sink;
+  std::unique_ptr<MpiResultSender> sender;
+  ResultSink* sink = nullptr;
+  std::unique_ptr<BatchVerifier> verifier;  // none when verification is skipped
+};
+
+// The pairs left after resume, checked to be the same on every rank, and
+// this rank's share of them.
+RunShare ShareOfRun(const RunRequest& request, const MatchingCallbacks& callbacks) {
+  RunShare share;
+  share.rank = MpiRank();
+  share.num_ranks = MpiSize();
+  std::vector<PairChunk> chunks = request.chunks;
+  if (!request.options.overwrite) {
+    // One bit per pair of the run, whatever the database holds.
+    const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, chunks);
+    if (done.num_completed() > 0) {
+      chunks = RemovePairs(std::move(chunks),
+                           [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
+    }
+  }
+  if (share.num_ranks > 1) {
+    const uint64_t checksum = ChunkListChecksum(chunks);
+    if (MpiMin(checksum) != MpiMax(checksum)) {
+      throw std::runtime_error("MPI ranks disagree on the pairs to match (same database and options on every rank?)");
+    }
+    // Every rank has read the completed pairs: rank 0 may start writing.
+    MpiBarrier();
+  }
+  for (const PairChunk& chunk : chunks) share.num_pairs += chunk.pairs.size();
+  share.pairs_skipped = request.num_pairs_requested - share.num_pairs;
+  if (share.pairs_skipped > 0) {
+    Info(callbacks, "Skipping " + std::to_string(share.pairs_skipped) + " of " +
+                        std::to_string(request.num_pairs_requested) +
+                        " pairs already in the database (use --overwrite 1 to match them again)");
+  }
+  share.my_chunks = share.num_ranks > 1 ? ChunksOfRank(chunks, share.rank, share.num_ranks) : std::move(chunks);
+  return share;
+}
+
+// The run's matcher: the backend the options ask for, inside Ga-CasHash's
+// two stages when guided matching is on, inside a RetainingFeatureMatcher
+// when released images are to be kept.
+void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const MatchingCallbacks& callbacks,
+                    RunPlan* plan) {
+  const MatcherCommandOptions& options = plan->options;
+  plan->rematch_counts = std::make_shared<ExactRematchCounts>();
+  plan->matcher = CreateMatcherForOptions(options, mean, [&](const std::string& text) { Warn(callbacks, text); },
+                                          [&](const std::string& text) { Info(callbacks, text); },
+                                          plan->rematch_counts);
+  // Guided matching (Ga-CasHash, cashash/matching/guided_matching.h): a
+  // second matcher for the top-scale subsets, the stage-1 F estimator, and
+  // the pipeline's features read through a source that keeps the keypoints.
+  if (options.guided.enabled) {
+    plan->keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
+    auto guided = std::make_unique<GuidedFeatureMatcher>(
+        std::move(plan->matcher), CreateMatcherForOptions(options, mean, nullptr),
+        CreateFundamentalEstimatorForOptions(options), plan->keypoint_source.get(), options.guided,
+        options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
+    plan->guided = guided.get();
+    plan->matcher = std::move(guided);
+  }
+  if (request.matcher_keep_bytes > 0) {
+    const size_t max_rows = static_cast<size_t>(std::max(1, options.sift.max_num_matches));
+    // A guided matcher also holds the top-scale subset and the positions.
+    const double share = options.guided.enabled ? 1.0 + options.guided.top_scale_fraction : 1.0;
+    const size_t position_bytes = options.guided.enabled ? 24 : 0;
+    auto keeping = std::make_unique<RetainingFeatureMatcher>(
+        std::move(plan->matcher), request.matcher_keep_bytes,
+        [max_rows, tables = options.cashash.num_tables, share, position_bytes](const FeatureDescriptors& d) {
+          const size_t rows = std::min(d.rows(), max_rows);
+          return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
+                 rows * position_bytes;
+        });
+    plan->retaining = keeping.get();
+    plan->keep_bytes = request.matcher_keep_bytes;
+    plan->matcher = std::move(keeping);
+  }
+}
+
+// Rank 0 alone opens the database for writing (and takes the writer lock);
+// the other ranks send their results to it.
+void OpenSink(RunPlan* plan) {
+  const MatcherCommandOptions& options = plan->options;
+  if (plan->share.rank == 0) {
+    plan->database_sink = std::make_unique<DatabaseResultSink>(
+        options.database_path, DatabaseResultSink::Options{!options.skip_geometric_verification,
+                                                           options.write_empty_pairs, options.overwrite});
+    plan->locked_sink = std::make_unique<LockedSink>(plan->database_sink.get());
+    plan->sink = plan->locked_sink.get();
+  } else {
+    plan->sender = std::make_unique<MpiResultSender>(plan->share.my_chunks);
+    plan->sink = plan->sender.get();
+  }
+}
+
+// Builds everything the run needs, in the order that lets slow starts
+// overlap: the feature cache first (its thread reads the first chunk's
+// features while the GPU, the matcher and the verifier start; device run 27:
+// the matching thread's first wait for features was 0.05-0.14 s at 300
+// images, and the setup 0.3 s), then the device, the matcher, the writer
+// and the verifier.
+void PlanRun(const RunRequest& request, RunShare share, const MatchingCallbacks& callbacks, RunPlan* plan) {
+  plan->share = std::move(share);
+  if (plan->share.rank == 0) WarnAboutSmallImages(*request.source, request.image_ids, callbacks);
+  if (request.cache_groups) {
+    plan->cache = std::make_unique<GroupFeatureCache>(request.source, plan->share.my_chunks);
+  }
+  plan->features = plan->cache ? static_cast<FeatureSource*>(plan->cache.get()) : request.source;
+
+  plan->options = request.options;
+#ifdef CASHASH_WITH_CUDA
+  // Ranks sharing a machine share its GPUs unless a device is named.
+  if (plan->share.num_ranks > 1 && request.options.gpu_index == "-1") {
+    const int devices = cuda::NumCudaDevices();
+    if (devices > 1) plan->options.gpu_index = std::to_string(MpiLocalRank() % devices);
+  }
+#endif
+  plan->gpu_memory = std::make_unique<GpuMemorySampler>(GpuIndexForRun(plan->options));
+  ComposeMatcher(request, request.mean.get(), callbacks, plan);
+  if (plan->keypoint_source) {
+    plan->keypoint_source->SetInner(plan->features);
+    plan->features = plan->keypoint_source.get();
+  }
+  OpenSink(plan);
+  // Verification on the GPU too when use_gpu is set (the matcher has
+  // already warned when no GPU can be used).
+  if (!plan->options.skip_geometric_verification) {
+    plan->verifier = CreateBatchVerifierForOptions(plan->options, nullptr);
+  }
+}
+
+// What the matcher's wrappers and the feature cache did, for the log.
+void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCallbacks& callbacks) {
+  const MatcherCommandOptions& options = plan.options;
+  if (plan.retaining != nullptr) {
+    const RetainingStats& kept = plan.retaining->stats();
+    Info(callbacks, "Hashing: " + std::to_string(kept.images_added) + " images hashed, " +
+                        std::to_string(kept.images_reused) + " times reused, " +
+                        std::to_string(kept.images_dropped) + " dropped to stay within " +
+                        FormatMemorySize(plan.keep_bytes));
+  }
+  if (plan.guided != nullptr) {
+    Info(callbacks, DescribeGuidedMatching(plan.guided->stats(), options.guided));
+  }
+  if (plan.rematch_counts->rematched > 0) {
+    std::ostringstream text;
+    text << "Exact rematch: " << plan.rematch_counts->rematched << " of " << plan.rematch_counts->pairs
+         << " pairs had at least " << options.cashash.exact_rematch_min_matches
+         << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
+         << plan.rematch_counts->exact_us * 1e-6 << " s";
+    Info(callbacks, text.str());
+  }
+  if (!plan.cache) return;
+  const FeatureCacheStats stats = plan.cache->stats();
+  Info(callbacks, "Features: " + std::to_string(stats.source_loads) + " image reads for " +
+                      std::to_string(num_images) + " images in " + std::to_string(stats.steps) +
+                      " group steps, at most " + FormatMemorySize(stats.peak_bytes) + " cached");
+}
+
+// Runs the pipeline over the plan and reports. Progress counts the pairs of
+// every rank written so far; rank 0 merges the other ranks' statistics.
+MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCallbacks& callbacks) {
+  const RunShare& share = plan.share;
+  PipelineOptions pipeline_options;
+  pipeline_options.num_threads = plan.options.sift.num_threads;
+  pipeline_options.skip_geometric_verification = plan.options.skip_geometric_verification;
+  pipeline_options.two_view = plan.options.two_view;
+  MatchingPipeline pipeline(pipeline_options, plan.features, plan.matcher.get(), plan.sink);
+
+  std::mutex progress_mutex;
+  const auto run_start = std::chrono::steady_clock::now();
+  auto report_progress = [&](PipelineProgress progress) {
+    plan.gpu_memory->Sample();
+    if (!callbacks.progress || plan.locked_sink == nullptr) return;
+    std::lock_guard<std::mutex> lock(progress_mutex);
+    progress.pairs_done = plan.locked_sink->pairs_written();
+    progress.pairs_total = share.num_pairs;
+    progress.elapsed_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - run_start).count();
+    callbacks.progress(progress);
+  };
+  pipeline.SetProgressCallback(report_progress);
+  if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
+  if (plan.verifier) pipeline.SetBatchVerifier(plan.verifier.get());
+
+  MatchingSummary summary;
+  summary.matcher_name = plan.matcher->Name();
+  Info(callbacks, "Matcher: " + summary.matcher_name);
+  if (share.rank > 0) {
+    RankReport report;
+    report.stats = pipeline.Run(share.my_chunks);
+    report.matcher_name = plan.matcher->Name();
+    MpiResultSender::SendReport(report);
+    return MatchingSummary();  // rank 0 reports the run
+  }
+  if (share.num_ranks == 1) {
+    summary.pipeline = pipeline.Run(share.my_chunks);
+  } else {
+    MpiResultReceiver receiver(plan.sink, [&](const PairChunk& chunk) {
+      PipelineProgress progress;
+      progress.chunk = &chunk;
+      report_progress(progress);
+    });
+    try {
+      summary.pipeline = pipeline.Run(share.my_chunks);
+    } catch (const std::exception& e) {
+      MpiAbortJob(e.what());  // the other ranks cannot be told otherwise
+    }
+    for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
+  }
+  // The GPU matcher may have handed over to the CPU on running out of memory.
+  summary.matcher_name = plan.matcher->Name();
+  plan.gpu_memory->Sample();
+  plan.gpu_memory->Fill(&summary);  // rank 0's device
+  ReportMatcherStats(plan, num_images, callbacks);  // rank 0's share
+  if (share.num_ranks > 1) {
+    Info(callbacks, "Matched by " + std::to_string(share.num_ranks) + " MPI processes");
+  } else if (plan.verifier != nullptr && !plan.verifier->StatsSummary().empty()) {
+    Info(callbacks, plan.verifier->StatsSummary());
+  }
+  return summary;
+}
+
+}  // namespace
+
+MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks) {
+  RunShare share = ShareOfRun(request, callbacks);
+  MatchingSummary summary;
+  summary.pairs_requested = request.num_pairs_requested;
+  summary.pairs_skipped = share.pairs_skipped;
+  if (share.num_pairs == 0) {
+    Info(callbacks, "Nothing to match.");
+    return summary;
+  }
+  RunPlan plan;
+  PlanRun(request, std::move(share), callbacks, &plan);
+  MatchingSummary result = ExecutePlan(plan, request.image_ids.size(), callbacks);
+  if (plan.share.rank > 0) return result;
+  result.pairs_requested = summary.pairs_requested;
+  result.pairs_skipped = summary.pairs_skipped;
+  return result;
+}
+
+}  // namespace colmap
+}  // namespace cashash

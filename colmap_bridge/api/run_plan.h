@@ -1,0 +1,54 @@
+// One run of the matcher over a list of pair chunks, read top-down:
+//
+//   MatchChunks(request, callbacks)
+//     PlanRun      the pairs left to match (resume, this rank's share), then
+//                  built once: feature cache, matcher and its wrappers,
+//                  verifier, writer (or, on ranks > 0, the sender)
+//     ExecutePlan  the pipeline over the plan, on one process or many (MPI),
+//                  then the run's report
+//
+// matching_api.cc turns the public calls (MatchExhaustive, MatchPairs,
+// MatchPairList) into a RunRequest; this file is the only place where the
+// parts of a run are put together.
+#pragma once
+
+#include <future>
+#include <string>
+#include <vector>
+
+#include "cashash/pipeline/pair_generation.h"
+#include "colmap_bridge/api/matching_api.h"
+#include "colmap_bridge/database_pipeline_io.h"
+
+namespace cashash {
+namespace colmap {
+
+struct RunRequest {
+  MatcherCommandOptions options;  // resolved (ResolveOptionsForRun)
+  DatabaseFeatureSource* source = nullptr;
+  std::vector<image_t> image_ids;
+  std::vector<PairChunk> chunks;
+  size_t num_pairs_requested = 0;
+  // Features through a GroupFeatureCache (chunks of ScheduledPairChunks):
+  // one group pair in host memory, the next one loaded meanwhile.
+  bool cache_groups = false;
+  // > 0: the matcher keeps released images up to that many bytes
+  // (RetainingFeatureMatcher), so that most images are hashed once.
+  size_t matcher_keep_bytes = 0;
+  std::shared_future<MeanDescriptor> mean;
+};
+
+// Runs the pipeline over the request's chunks, leaving out pairs already in
+// the database unless options.overwrite is set. Under MPI every rank
+// computes the same chunk list (the database is read by all, read-only,
+// before rank 0 opens it for writing) and matches its share; rank 0 writes
+// everything (distributed/mpi_distributed.h).
+MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks);
+
+// Callers that set no warning sink still see warnings, on stderr as the
+// command line prints them.
+void Warn(const MatchingCallbacks& callbacks, const std::string& text);
+void Info(const MatchingCallbacks& callbacks, const std::string& text);
+
+}  // namespace colmap
+}  // namespace cashash
