@@ -11,6 +11,9 @@
 //   serialized Camera, not an id) hold cameras *estimated* by focal-solving
 //   configurations; geometries verified with the database intrinsics leave
 //   them NULL, and so do we.
+//
+// Over 600 lines because it is the whole of class Database: every table's reads
+// and writes share the private Impl (one connection, cached statements, schema).
 #include "colmap_bridge/database.h"
 
 #include <algorithm>

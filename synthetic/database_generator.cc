@@ -398,6 +398,9 @@ std::string DatabaseGeneratorOptions::Check() const {
   return "";
 }
 
+// One function because the pipelined write loop (batch t + 1 made on a future
+// while batch t is written) and its catch, which must wait for that future
+// before removing the file, share the scene, generator and database locals.
 GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
                                   const std::function<void(const GeneratorProgress&)>& progress) {
   const std::string problem = options.Check();

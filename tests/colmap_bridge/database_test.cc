@@ -2,6 +2,8 @@
 // database from `colmap database_creator` and a 4.x one from pycolmap
 // (scripts/make_colmap4_database.py). Rows are inserted and inspected with
 // raw SQLite so the checks do not trust the code under test.
+// Over 600 lines because it is one suite for class Database: one fixture run on
+// both COLMAP schemas (DatabaseTest) with the raw-SQLite helpers it needs.
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <unistd.h>

@@ -3,6 +3,8 @@
 // would go on), never a crash, a hang or a silently wrong result. The
 // databases are built here with raw SQLite in COLMAP 3.8's (or 4.x's) layout,
 // so no COLMAP is needed. docs/RELIABILITY.md lists the cases.
+// Over 600 lines because it is one suite of damaged-database cases that share
+// the raw-SQLite builders defined here (RawDb, CreateSchema, AddImage).
 #include <fcntl.h>
 #include <signal.h>
 #include <sqlite3.h>

@@ -203,6 +203,9 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   __syncthreads();
 }
 
+// One function because each round's phases (per-thread sample and score in
+// registers, trial-order walk, stopping rule) share round state and block-wide
+// __syncthreads barriers; scoring and refits are already BlockScore/BlockLocalSolve.
 template <typename Model, int Threads>
 __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cached_points, BlockScratch<Threads>& s) {
   const RansacPairInput input = launch.pairs[pair];

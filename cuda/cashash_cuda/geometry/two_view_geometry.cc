@@ -86,6 +86,9 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   Estimate(pairs, seeds, {}, F, H, nullptr, while_running);
 }
 
+// One function because one batch's slot layout (order, order_E, offsets,
+// total) drives the packing, the F/H/E launches on two streams and the
+// unpacking, around async copies and events that must run in this order.
 void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
                                 const std::vector<const EssentialPoints*>& essential,
                                 std::vector<TwoViewModelEstimate>* F, std::vector<TwoViewModelEstimate>* H,

@@ -453,6 +453,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
     slot->row_capacity = new_rows;
   }
 
+  // One function because a batch's staging (task offsets, items, rows), uploads,
+  // memsets and kernels are enqueued in this order on slot->stream, the later
+  // launches reading the sizes summed first.
   void Launch(BatchSlot* slot, const std::vector<PairTask>& all_tasks, const std::vector<size_t>& pair_of_task,
               size_t start, size_t end) {
     const size_t num_tasks = end - start;

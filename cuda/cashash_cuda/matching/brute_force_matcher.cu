@@ -50,6 +50,9 @@ constexpr int kAngleTableMaxDot = 512 * 512;
 #endif
 constexpr int kStripUnroll = CASHASH_BF_STRIP_UNROLL;
 
+// One function because the warp's A fragments (a[4][4][4]) and best-two slots
+// must stay in registers across the whole double-buffered sweep over b; the
+// fully unrolled mma and fold loops index those arrays with constants only.
 __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
     BestTwoKernel(const BestTwoProblem* __restrict__ problems, const int2* __restrict__ items, int key_scale) {
   __shared__ __align__(128) uint8_t tiles[2][kTileBytes];

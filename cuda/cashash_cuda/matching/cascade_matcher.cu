@@ -12,6 +12,9 @@
 // and best / second best decide with COLMAP's ratio and distance rule. Ties
 // follow cascade_hashing.h: keys are unique and ordered by (distance, index);
 // dots by (dot descending, index ascending).
+//
+// Over 600 lines because it is one kernel family (match, select, guided, compact)
+// built from the same inlined device helpers (QueryRanking, DecideFromRanked, ...).
 #include "cashash_cuda/matching/cascade_matcher.cuh"
 
 #include "cashash/matching/cascade_hashing.h"

@@ -58,6 +58,9 @@ constexpr uint32_t kDropped = 0xffffffffu;
 
 __device__ __forceinline__ uint32_t Popc128(uint4 v) { return __popc(v.x) + __popc(v.y) + __popc(v.z) + __popc(v.w); }
 
+// One function because the warp's TileScratch in shared memory and its A
+// fragments and row limits in registers stay live across the whole B sweep,
+// and the queue passes are ordered by __syncwarp on those same arrays.
 __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
                                                                   MatchParams params, CandidateLists lists) {
   __shared__ TileScratch s;

@@ -99,6 +99,9 @@ void NullSpace(const PointPairs& pairs, const int* idx, int count,
 
 }  // namespace
 
+// One function because it is Nister's derivation in straight-line order
+// (null-space basis, constraint matrix, elimination, action matrix, eigen
+// solve), each step consuming the previous step's matrices and indices.
 int EssentialFivePoint(const PointPairs& pairs, const int* idx, int count,
                        Eigen::Matrix3d* models) {
   if (count < 5) return 0;

@@ -281,6 +281,8 @@ CASHASH_HOST_DEVICE inline double PolishRoot(const double* p, int degree, double
 // Real roots of sum_{i <= degree} c[i] t^i (degree <= 10), by a Sturm
 // sequence: intervals are split until each holds one root, which is then
 // polished. A cluster narrower than the working precision counts once.
+// One function because the Sturm table S/deg (fixed 11 x 11, no allocation in
+// device code) is built and then queried in place by the bisection's `variations`.
 CASHASH_HOST_DEVICE inline int RealRoots(const double* coefficients, int degree, double* roots) {
   double scale = 0;
   for (int i = 0; i <= degree; ++i) scale = fmax(scale, fabs(coefficients[i]));
@@ -375,6 +377,9 @@ CASHASH_HOST_DEVICE inline void PolyMulAdd(const double* a, const double* b, dou
 
 // Every essential matrix E = x b0 + y b1 + z b2 + b3 (row-major, unit norm)
 // that satisfies the cubic constraints; returns their number (<= 10).
+// One function because it is one straight-line derivation on fixed device
+// arrays: elimination of C, the px/py/p1 rows, their determinant in z, then
+// x and y at each real root from the same px/py/p1.
 CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (*models)[9]) {
   double C[10][20];
   ConstraintMatrix(basis, C);

@@ -100,6 +100,9 @@ inline int RansacMaxTrials(const RansacOptions& options, int sample_size) {
   return std::min(options.max_num_trials, from_ratio);
 }
 
+// One function because the trial loop, the local optimisation and the three
+// stopping rules (adaptive, relevant_inliers, early exit) read and update the
+// same best support, model and trial counters, in COLMAP's order.
 template <typename Estimator>
 RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
                                                  const RansacOptions& options) {

@@ -9,14 +9,11 @@
 #include <string>
 #include <vector>
 
-#include "cashash/matching/matching_options.h"
 #include "cashash/base/types.h"
+#include "cashash/matching/matching_options.h"
+#include "cashash/matching/mean_descriptor.h"
 
 namespace cashash {
-
-// The global mean descriptor subtracted before hashing (zero-mean hashing, as
-// the original CasHash). Computed once per run over the images to match.
-using MeanDescriptor = std::array<float, kDescriptorDim>;
 
 // One pair of guided matching (Ga-CasHash stage 2, guided_matching.h): its
 // fundamental matrix and the keypoint pixels of both images. The pointers
@@ -79,10 +76,5 @@ class FeatureMatcher {
 std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean);
-
-// Mean of all descriptor rows of the given sets (uint8 -> float), rounded to
-// the nearest integer so that hashing stays exact integer arithmetic in every
-// backend (cascade_hashing.h, step 1).
-MeanDescriptor ComputeMeanDescriptor(const std::vector<const FeatureDescriptors*>& descriptors);
 
 }  // namespace cashash

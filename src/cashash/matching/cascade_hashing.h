@@ -47,7 +47,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matching/mean_descriptor.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/base/types.h"
 

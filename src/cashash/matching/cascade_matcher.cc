@@ -133,6 +133,9 @@ class CascadeQuery {
   }
 
  private:
+  // One function because the branch-free bucket scan, the top_k cut and the
+  // best-two pass (with the thin-list rescan) share the query's codes, the
+  // scratch keys and histogram, and the best/second state of `consider`.
   template <bool kBand>
   int MatchInBand(size_t q, const EpipolarLine& line, const float* target_points) {
     const double max_band_distance = kBand ? guidance_->max_distance : 0.0;

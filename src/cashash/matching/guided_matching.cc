@@ -243,6 +243,9 @@ const GuidedFeatureMatcher::GuidedImage& GuidedFeatureMatcher::Find(image_t imag
   return it->second;
 }
 
+// One function because the chunk's stages (stage 1, batched F, stage 2,
+// fallback) hand per-pair index maps (candidates, guided_index,
+// fallback_index) and the stats and timings from one stage to the next.
 std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
   // Every image of the chunk is added by now; keypoints left over belong to
   // images a wrapper kept (RetainingFeatureMatcher) and are not needed.

@@ -1,6 +1,6 @@
 #include <cmath>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matching/mean_descriptor.h"
 
 namespace cashash {
 

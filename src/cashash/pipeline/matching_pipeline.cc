@@ -146,6 +146,11 @@ void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop
 
 void MatchingPipeline::SetBatchVerifier(BatchVerifier* verifier) { verifier_ = verifier; }
 
+// One function because its three stages (the writer thread, the verifier
+// threads, matching on this thread) are lambdas over one scope: the queues,
+// the turnstile, the gate, the first error and the stats' lock they share
+// live exactly until the joins at the end, which is what makes a failure on
+// any stage safe to stop the others.
 PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   PipelineStats stats;
   for (const PairChunk& chunk : chunks) stats.pairs_total += chunk.pairs.size();

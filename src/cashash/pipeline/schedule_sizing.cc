@@ -72,6 +72,9 @@ size_t MatcherBytesPerImage(size_t num_features, int num_tables) {
   return num_features * per_feature + per_image;
 }
 
+// One function because block size, blocks per group and the matcher's keep
+// budget are derived in turn from the same caps through the fixed_host and
+// group_bytes lambdas, each step reading the one before.
 ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image, const ScheduleLimits& limits) {
   ScheduleSizes sizes;
   size_t largest = 1;
