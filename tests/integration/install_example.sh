@@ -24,6 +24,17 @@ cmake -S "$REPO/examples" -B "$WORK/example" -DCMAKE_PREFIX_PATH="$WORK/prefix" 
   "${launcher[@]}" > "$WORK/configure.log" || { cat "$WORK/configure.log"; exit 1; }
 cmake --build "$WORK/example" -j2 > "$WORK/build.log" || { cat "$WORK/build.log"; exit 1; }
 
+# The installed cashash::cashash target links no MPI (only the cashash
+# executable does), neither directly nor through its package config.
+if readelf -d "$WORK/example/cashash_example" | grep -i 'NEEDED.*libmpi'; then
+  echo "FAIL: a program linked with cashash::cashash needs an MPI library"
+  exit 1
+fi
+if grep -qi 'find_dependency(MPI' "$WORK/prefix/lib/cmake/cashash/cashashConfig.cmake"; then
+  echo "FAIL: the installed package config asks for MPI"
+  exit 1
+fi
+
 echo "== in memory"
 "$WORK/example/cashash_example"
 
