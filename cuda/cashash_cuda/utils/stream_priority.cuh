@@ -3,16 +3,11 @@
 // while one RANSAC block can run for thousands of trials. Matching streams
 // therefore take the highest priority, so that its blocks are scheduled as
 // soon as an SM frees up instead of queueing behind a chunk's verification.
-//
-// Priority cannot take back an SM that an E block already holds (255
-// registers a thread: one block fills an SM for a pair's rounds). With
-// CASHASH_GPU_MATCHING_RESERVED_SMS=N (an experiment, off by default)
-// verification streams belong to a green context without N of the
-// device's SMs, so those N are always free for matching; matching streams
-// keep the whole device.
 #pragma once
 
 #include <cuda_runtime.h>
+
+#include "cashash_cuda/utils/cuda_check.cuh"
 
 namespace cashash {
 namespace cuda {
@@ -20,7 +15,14 @@ namespace cuda {
 enum class StreamRole { kMatching, kVerification };
 
 // A non-blocking stream with the role's priority on the current device.
-cudaStream_t CreateStageStream(StreamRole role);
+inline cudaStream_t CreateStageStream(StreamRole role) {
+  int least = 0, greatest = 0;  // numerically: least >= greatest
+  CUDA_CHECK(cudaDeviceGetStreamPriorityRange(&least, &greatest));
+  cudaStream_t stream = nullptr;
+  CUDA_CHECK(cudaStreamCreateWithPriority(&stream, cudaStreamNonBlocking,
+                                          role == StreamRole::kMatching ? greatest : least));
+  return stream;
+}
 
 }  // namespace cuda
 }  // namespace cashash
