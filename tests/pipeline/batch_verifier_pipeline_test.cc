@@ -152,9 +152,8 @@ std::vector<ImagePair> FirstPairs(const std::vector<PairChunk>& chunks) {
 // Runs `chunks` through a pipeline of two threads from a PointSource, with
 // `matcher`, `verifier` and `sink`; what Run throws passes through.
 PipelineStats RunPipeline(const std::vector<PairChunk>& chunks, FeatureMatcher* matcher, BatchVerifier* verifier,
-                          Sink* sink) {
+                          Sink* sink, PipelineOptions options = PipelineOptions()) {
   PointSource source;
-  PipelineOptions options;
   options.num_threads = 2;
   MatchingPipeline pipeline(options, &source, matcher, sink);
   pipeline.SetBatchVerifier(verifier);
@@ -284,6 +283,48 @@ TEST(BatchVerifierPipeline, AMatcherThatNeverChoosesStillFinishes) {
     const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
     EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
     EXPECT_EQ(sink.configs.size(), NumPairs(chunks));
+  }
+}
+
+// Chunks differ in cost, so matching may run ahead of a slow verification
+// by the queue's depth, and no further: the first chunk's verification is
+// held until matching has stopped, then released.
+TEST(BatchVerifierPipeline, MatchingRunsAheadOfASlowChunkByTheQueueDepth) {
+  const std::vector<PairChunk> chunks = Chunks(40, 4);  // 55 chunks
+  for (const size_t depth : {size_t{2}, size_t{6}}) {
+    ChoosingMatcher matcher(0);
+    Sink sink;
+    class HeldVerifier : public RecordingVerifier {
+     public:
+      HeldVerifier(ChoosingMatcher* m, int expected) : m_(m), expected_(expected) {}
+      std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+        if (first_) {
+          first_ = false;
+          // Matching fills the queue, then blocks: wait for the full
+          // queue, then long enough to see it go no further.
+          const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+          while (m_->calls.load() < expected_ && std::chrono::steady_clock::now() < give_up) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+          }
+          std::this_thread::sleep_for(std::chrono::milliseconds(200));
+          calls_while_held = m_->calls.load();
+        }
+        return RecordingVerifier::Verify(pairs);
+      }
+      int calls_while_held = 0;
+
+     private:
+      ChoosingMatcher* m_;
+      const int expected_;
+      bool first_ = true;
+    } verifier(&matcher, static_cast<int>(depth) + 2);
+    PipelineOptions options;
+    options.chunks_in_queue = depth;
+    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+    EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+    // The chunk held, `depth` queued, and one matched that waits to be queued.
+    EXPECT_EQ(verifier.calls_while_held, static_cast<int>(depth) + 2) << "depth " << depth;
+    EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
   }
 }
 

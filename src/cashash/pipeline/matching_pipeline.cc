@@ -1,5 +1,6 @@
 #include "cashash/pipeline/matching_pipeline.h"
 
+#include <algorithm>
 #include <chrono>
 #include <exception>
 #include <condition_variable>
@@ -156,11 +157,9 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   for (const PairChunk& chunk : chunks) stats.pairs_total += chunk.pairs.size();
   const Clock::time_point run_start = Clock::now();
 
-  // Two chunks in flight between stages: enough to overlap the stages while
-  // bounding memory to a few chunks' matches.
-  constexpr size_t kChunksInQueue = 2;
-  BlockingQueue<MatchedChunk> to_verify(kChunksInQueue);
-  BlockingQueue<VerifiedChunk> to_write(2);
+  const size_t chunks_in_queue = std::max<size_t>(1, options_.chunks_in_queue);
+  BlockingQueue<MatchedChunk> to_verify(chunks_in_queue);
+  BlockingQueue<VerifiedChunk> to_write(std::max<size_t>(1, options_.chunks_to_write));
   FirstError error;
   std::mutex stats_mutex;
   // Adds the time since `start` to one of the stats' times (any thread).
@@ -301,7 +300,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         stats.seconds_matching += SecondsSince(t_match);
       }
       for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
-      if (!matcher_->ChoosingBackend() || pushed_while_gated >= kChunksInQueue) gate.Open();
+      if (!matcher_->ChoosingBackend() || pushed_while_gated >= chunks_in_queue) gate.Open();
       ++pushed_while_gated;
       const Clock::time_point t_push = Clock::now();
       const bool pushed = to_verify.Push(std::move(item));

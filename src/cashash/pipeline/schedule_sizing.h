@@ -28,10 +28,11 @@ std::string FormatMemorySize(size_t bytes);
 size_t PhysicalMemoryBytes();
 
 constexpr int kMatcherBlocks = 4;
-// The loader's current and next chunk, two chunks queued for verification,
-// two being verified (the GPU verifier's default; the CPU's one), one
-// waiting to be queued: 7 chunks of 2 blocks.
-constexpr int kPipelineBlocks = 14;
+// The loader's current and next chunk, six chunks queued for verification
+// (PipelineOptions::chunks_in_queue), two being verified (the GPU
+// verifier's default; the CPU's one), one waiting to be queued: 11 chunks
+// of 2 blocks.
+constexpr int kPipelineBlocks = 22;
 constexpr int kCacheGroups = 3;
 // Blocks are never made larger than COLMAP's default on their own: a chunk
 // (block_size^2 pairs) is the unit of progress and of commits.
