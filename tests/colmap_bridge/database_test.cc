@@ -477,6 +477,8 @@ TEST_P(DatabaseTest, RejectsAlikedDescriptors) {
   EXPECT_EQ(db.ReadDescriptors(1).rows(), 5u);
 }
 
+// One test because every assertion reads back the rows written at its
+// start: through our reader in both pair orders, then as raw SQLite rows.
 TEST_P(DatabaseTest, WritesMatchesAndGeometriesAsColmap) {
   const FeatureMatches matches12 = {{0, 1}, {1, 1}, {2, 0}, {4, 2}};
   const FeatureMatches matches31 = {{0, 4}, {3, 2}, {1, 1}};

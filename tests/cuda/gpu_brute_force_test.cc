@@ -189,7 +189,8 @@ const std::vector<Case> kCases = {{0, 0}, {0, 5}, {5, 0}, {1, 1}, {7, 7}, {1, 30
                                   {1000, 1000}, {5000, 5000}, {40000, 1000}};
 
 // Runs every search of `images` pairs (both directions) in one launch and
-// compares each with the naive reference.
+// compares each with the naive reference. One test because the single
+// launch over every case is what it checks.
 TEST_F(GpuBruteForceTest, BestTwoEqualsNaiveReferenceInOneBatch) {
   std::mt19937 rng(1234);
   std::vector<Image> first, second;

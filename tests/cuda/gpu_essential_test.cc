@@ -273,7 +273,9 @@ TEST(GpuEssential, DegenerateInputsFailCleanly) {
 
 // Real calibrated pairs: E of the GPU against the CPU's, and the whole GPU
 // verifier (E on the device) against the CPU verifier, each next to the CPU
-// under another seed (RANSAC's own spread).
+// under another seed (RANSAC's own spread). One test because the three
+// runs (CPU reference, CPU under another seed, GPU) share the loaded pairs
+// and every assertion compares two of them.
 TEST(GpuEssential, RealPairsAgreeWithCpu) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const char* path = std::getenv("CASHASH_VERIFY_PAIRS_FILE");

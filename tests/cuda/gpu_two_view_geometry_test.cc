@@ -346,6 +346,8 @@ struct Agreement {
   int same_config = 0, verified = 0, close_inliers = 0, f_compared = 0, f_close = 0, f_explains = 0;
 };
 
+// One test because the three runs (CPU reference, CPU under another seed,
+// GPU) share the loaded pairs and every assertion compares two of them.
 TEST(GpuBatchVerifier, RealPairsAgreeWithCpu) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const char* path = std::getenv("CASHASH_VERIFY_PAIRS_FILE");

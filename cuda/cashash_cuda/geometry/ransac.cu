@@ -15,7 +15,9 @@
 #include <cfloat>
 
 #include "cashash/geometry/five_point_solver.h"
-#include "cashash_cuda/geometry/ransac_solvers.cuh"
+#include "cashash_cuda/geometry/essential_matrix.cuh"
+#include "cashash_cuda/geometry/fundamental_matrix.cuh"
+#include "cashash_cuda/geometry/homography_matrix.cuh"
 #include "cashash_cuda/utils/cuda_check.cuh"
 
 namespace cashash {
@@ -26,86 +28,6 @@ using namespace ransac;  // NOLINT: the solvers of this kernel
 
 constexpr int kMaxLocalIterations = 10;
 constexpr int kMaxLocalModels = five_point::kMaxSolutions;  // models of one local refit
-
-struct FundamentalModel {
-  static constexpr int kSampleSize = 7;
-  static constexpr int kMaxModels = 3;
-  static constexpr int kMinLocalSize = 8;
-  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
-    return FundamentalSevenPoint(sample, models);
-  }
-  __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
-  __device__ static void AddRows(float4 p, double* upper) {
-    double row[9];
-    EpipolarRow(p, row);
-    AddOuter(row, upper);
-  }
-  // Smallest eigenvector of the normal matrix by inverse iteration from the
-  // model being refined (a full Jacobi decomposition where the factorisation
-  // breaks down), projected to rank 2.
-  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
-    if (!SmallestEigenvectorNear(upper, start, models[0])) {
-      double full[81];
-      ExpandNormalMatrix(upper, full);
-      SmallestEigenvector<9>(full, models[0]);
-    }
-    return ProjectRankTwo(models[0]) ? 1 : 0;
-  }
-};
-
-struct HomographyModel {
-  static constexpr int kSampleSize = 4;
-  static constexpr int kMaxModels = 1;
-  static constexpr int kMinLocalSize = 4;
-  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
-    return HomographyFourPoint(sample, models[0]) ? 1 : 0;
-  }
-  __device__ static float Residual(const float* m, float4 p) { return TransferSquared(m, p); }
-  __device__ static void AddRows(float4 p, double* upper) {
-    double r1[9], r2[9];
-    HomographyRows(p, r1, r2);
-    AddOuter(r1, upper);
-    AddOuter(r2, upper);
-  }
-  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
-    if (!SmallestEigenvectorNear(upper, start, models[0])) {
-      double full[81];
-      ExpandNormalMatrix(upper, full);
-      SmallestEigenvector<9>(full, models[0]);
-    }
-    return NormalizeModel(models[0]) ? 1 : 0;
-  }
-};
-
-// E on normalised camera coordinates (x2^T E x1 = 0): 5-point hypotheses,
-// Sampson residuals as F, and the CPU path's local refit, the 5-point solver
-// on the least-squares null space of all inliers (up to 10 models).
-struct EssentialModel {
-  static constexpr int kSampleSize = 5;
-  static constexpr int kMaxModels = five_point::kMaxSolutions;
-  static constexpr int kMinLocalSize = 5;
-  __device__ static int Minimal(const float4* sample, double (*models)[9]) {
-    double pairs[20];
-    for (int k = 0; k < 5; ++k) {
-      pairs[4 * k] = sample[k].x;
-      pairs[4 * k + 1] = sample[k].y;
-      pairs[4 * k + 2] = sample[k].z;
-      pairs[4 * k + 3] = sample[k].w;
-    }
-    return five_point::EssentialFromFivePoints(pairs, models);
-  }
-  __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
-  __device__ static void AddRows(float4 p, double* upper) {
-    double row[9];
-    EpipolarRow(p, row);
-    AddOuter(row, upper);
-  }
-  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
-    double basis[4][9];
-    if (!five_point::LeastSquaresNullSpace(upper, basis)) return 0;
-    return five_point::SolveFromBasis(basis, models);
-  }
-};
 
 // Orders supports: more inliers first, then the smaller residual sum
 // (non-negative floats order as their bit patterns). 0 = no model.

@@ -1,7 +1,9 @@
-// Per-thread solvers and residuals of the GPU RANSAC, in double (solvers)
-// and float (residuals, as the CPU path scores): the 7-point fundamental
-// matrix, the 4-point homography, a small Jacobi eigen solver for the
-// least-squares refits, and the counter-based sampler.
+// What the GPU RANSAC's models share, per thread and in double: the
+// counter-based sampler, COLMAP's trial count, small dense linear algebra
+// (3 x 3 inverse, a Jacobi eigen solver for the least-squares refits) and
+// polynomial roots. The models themselves are in fundamental_matrix.cuh,
+// homography_matrix.cuh and essential_matrix.cuh, beside their CPU twins'
+// names in src/cashash/geometry/.
 #pragma once
 
 #include <cstdint>
@@ -60,26 +62,6 @@ __device__ inline int RequiredTrials(int num_inliers, int num_samples, double co
   if (denom == 1.0) return 0x7fffffff;
   const double trials = ceil(log(nom) / log(denom) * multiplier);
   return trials >= 2147483647.0 ? 0x7fffffff : static_cast<int>(trials);
-}
-
-// --- Residuals (float, the CPU path's formulas) ----------------------------
-
-__device__ inline float SampsonSquared(const float* f, float4 p) {
-  const float a = f[0] * p.x + f[1] * p.y + f[2];
-  const float b = f[3] * p.x + f[4] * p.y + f[5];
-  const float c = f[6] * p.x + f[7] * p.y + f[8];
-  const float d = f[0] * p.z + f[3] * p.w + f[6];
-  const float e = f[1] * p.z + f[4] * p.w + f[7];
-  const float num = p.z * a + p.w * b + c;
-  return num * num / (a * a + b * b + d * d + e * e);
-}
-
-__device__ inline float TransferSquared(const float* h, float4 p) {
-  const float w = h[6] * p.x + h[7] * p.y + h[8];
-  const float inv_w = 1.0f / w;
-  const float du = (h[0] * p.x + h[1] * p.y + h[2]) * inv_w - p.z;
-  const float dv = (h[3] * p.x + h[4] * p.y + h[5]) * inv_w - p.w;
-  return du * du + dv * dv;
 }
 
 // --- Small dense linear algebra (double) -----------------------------------
@@ -303,148 +285,6 @@ __device__ inline int CubicRoots(double c3, double c2, double c1, double c0, dou
     roots[i] = x;
   }
   return n;
-}
-
-// --- Fundamental matrix ----------------------------------------------------
-
-// Coefficients of x2^T F x1 in the row-major entries of F, for a packed
-// correspondence (x1, y1, x2, y2).
-__device__ inline void EpipolarRow(float4 p, double* row) { EpipolarCoefficients(p.x, p.y, p.z, p.w, row); }
-
-// Two vectors spanning the null space of the 7 x 9 system, by Gauss-Jordan
-// elimination with full pivoting; false when the sample is degenerate
-// (rank below 7).
-__device__ inline bool SevenPointNullSpace(const float4* sample, double* n1, double* n2) {
-  double A[7][9];
-  for (int i = 0; i < 7; ++i) EpipolarRow(sample[i], A[i]);
-  int col[9];
-  for (int j = 0; j < 9; ++j) col[j] = j;
-  double max_abs = 0;
-  for (int i = 0; i < 7; ++i)
-    for (int j = 0; j < 9; ++j) max_abs = fmax(max_abs, fabs(A[i][j]));
-  for (int r = 0; r < 7; ++r) {
-    int pr = r, pc = r;
-    double best = -1;
-    for (int i = r; i < 7; ++i)
-      for (int j = r; j < 9; ++j) {
-        const double v = fabs(A[i][col[j]]);
-        if (v > best) {
-          best = v;
-          pr = i;
-          pc = j;
-        }
-      }
-    if (!(best > 1e-12 * max_abs)) return false;
-    if (pr != r)
-      for (int j = 0; j < 9; ++j) {
-        const double t = A[r][j];
-        A[r][j] = A[pr][j];
-        A[pr][j] = t;
-      }
-    const int tc = col[r];
-    col[r] = col[pc];
-    col[pc] = tc;
-    const int c = col[r];
-    const double inv = 1.0 / A[r][c];
-    for (int j = 0; j < 9; ++j) A[r][j] *= inv;
-    for (int i = 0; i < 7; ++i) {
-      if (i == r) continue;
-      const double f = A[i][c];
-      if (f == 0) continue;
-      for (int j = 0; j < 9; ++j) A[i][j] -= f * A[r][j];
-    }
-  }
-  // Pivot variables x[col[r]] = -A[r][free] for each free column set to 1.
-  double* out[2] = {n1, n2};
-  for (int f = 0; f < 2; ++f) {
-    const int free_col = col[7 + f];
-    for (int j = 0; j < 9; ++j) out[f][j] = 0;
-    out[f][free_col] = 1;
-    for (int r = 0; r < 7; ++r) out[f][col[r]] = -A[r][free_col];
-  }
-  return true;
-}
-
-// Up to 3 rank-2 F (unit norm) through 7 normalised correspondences.
-__device__ inline int FundamentalSevenPoint(const float4* sample, double (*models)[9]) {
-  double F1[9], F2[9];
-  if (!SevenPointNullSpace(sample, F1, F2)) return 0;
-  double G[9], P[9];
-  for (int i = 0; i < 9; ++i) {
-    G[i] = F1[i] - F2[i];
-    P[i] = F2[i] - G[i];
-  }
-  // det(F2 + a G) = c0 + c1 a + c2 a^2 + c3 a^3, from a = 0, 1, -1 and det(G).
-  const double c0 = Det3(F2), c3 = Det3(G), p1 = Det3(F1), pm1 = Det3(P);
-  const double c2 = 0.5 * (p1 + pm1) - c0;
-  const double c1 = 0.5 * (p1 - pm1) - c3;
-  double roots[3];
-  const int num_roots = CubicRoots(c3, c2, c1, c0, roots);
-  int n = 0;
-  for (int k = 0; k < num_roots; ++k) {
-    for (int i = 0; i < 9; ++i) models[n][i] = F2[i] + roots[k] * G[i];
-    if (NormalizeModel(models[n])) ++n;
-  }
-  return n;
-}
-
-// The closest rank-2 matrix: F (I - v v^T) with v the right singular vector
-// of the smallest singular value (smallest eigenvector of F^T F).
-__device__ inline bool ProjectRankTwo(double* f) {
-  double FtF[9];
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) FtF[3 * r + c] = f[r] * f[c] + f[3 + r] * f[3 + c] + f[6 + r] * f[6 + c];
-  double v[3];
-  SmallestEigenvector<3>(FtF, v);
-  for (int r = 0; r < 3; ++r) {
-    const double fv = f[3 * r] * v[0] + f[3 * r + 1] * v[1] + f[3 * r + 2] * v[2];
-    for (int c = 0; c < 3; ++c) f[3 * r + c] -= fv * v[c];
-  }
-  return NormalizeModel(f);
-}
-
-// --- Homography ------------------------------------------------------------
-
-// The projective map sending the basis to p0, p1, p2 and (1,1,1) to p3
-// (homogeneous points, row-major result); false when three are collinear.
-__device__ inline bool BasisToPoints(const double (*p)[3], double* M) {
-  double A[9] = {p[0][0], p[1][0], p[2][0], p[0][1], p[1][1], p[2][1], p[0][2], p[1][2], p[2][2]};
-  if (fabs(Det3(A)) < 1e-10) return false;
-  double inv[9];
-  if (!Inverse3(A, inv)) return false;
-  double l[3];
-  for (int r = 0; r < 3; ++r) {
-    l[r] = inv[3 * r] * p[3][0] + inv[3 * r + 1] * p[3][1] + inv[3 * r + 2] * p[3][2];
-    if (fabs(l[r]) < 1e-10) return false;
-  }
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) M[3 * r + c] = A[3 * r + c] * l[c];
-  return true;
-}
-
-__device__ inline bool HomographyFourPoint(const float4* sample, double* h) {
-  double p1[4][3], p2[4][3];
-  for (int i = 0; i < 4; ++i) {
-    p1[i][0] = sample[i].x;
-    p1[i][1] = sample[i].y;
-    p1[i][2] = 1;
-    p2[i][0] = sample[i].z;
-    p2[i][1] = sample[i].w;
-    p2[i][2] = 1;
-  }
-  double M1[9], M2[9], M1_inv[9];
-  if (!BasisToPoints(p1, M1) || !BasisToPoints(p2, M2) || !Inverse3(M1, M1_inv)) return false;
-  Mul3(M2, M1_inv, h);
-  return NormalizeModel(h);
-}
-
-// The two DLT rows of a correspondence.
-__device__ inline void HomographyRows(float4 p, double* r1, double* r2) {
-  const double x1 = p.x, y1 = p.y, x2 = p.z, y2 = p.w;
-  r1[0] = -x1; r1[1] = -y1; r1[2] = -1; r1[3] = 0; r1[4] = 0; r1[5] = 0;
-  r1[6] = x2 * x1; r1[7] = x2 * y1; r1[8] = x2;
-  r2[0] = 0; r2[1] = 0; r2[2] = 0; r2[3] = -x1; r2[4] = -y1; r2[5] = -1;
-  r2[6] = y2 * x1; r2[7] = y2 * y1; r2[8] = y2;
 }
 
 }  // namespace ransac
