@@ -4,7 +4,9 @@
 #include <functional>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <utility>
+#include <vector>
 
 #include "cashash/matchers/auto_feature_matcher.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
@@ -19,6 +21,12 @@
 namespace cashash {
 namespace colmap {
 
+namespace {
+
+#ifdef CASHASH_WITH_CUDA
+// The devices of --FeatureMatching.gpu_index: "-1" (the first), "2", or a
+// comma-separated list "0,1" (one matcher per device, SplitFeatureMatcher).
+// Throws std::invalid_argument for anything else.
 std::vector<int> GpuIndices(const std::string& gpu_index) {
   std::vector<int> indices;
   size_t at = 0;
@@ -42,6 +50,9 @@ std::vector<int> GpuIndices(const std::string& gpu_index) {
   }
   return indices;
 }
+#endif
+
+}  // namespace
 
 // The device the matcher will run on, or -1 for the CPU.
 int GpuIndexForRun(const MatcherCommandOptions& options) {

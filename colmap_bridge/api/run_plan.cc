@@ -163,13 +163,13 @@ struct RunPlan {
   std::unique_ptr<BatchVerifier> verifier;  // none when verification is skipped
 };
 
-// The pairs left after resume, checked to be the same on every rank, and
+// The pairs left of `chunks` (the request's, moved: at 20,000 images the
+// list is 1.6 GB) after resume, checked to be the same on every rank, and
 // this rank's share of them.
-RunShare ShareOfRun(const RunRequest& request, const MatchingCallbacks& callbacks) {
+RunShare ShareOfRun(std::vector<PairChunk> chunks, const RunRequest& request, const MatchingCallbacks& callbacks) {
   RunShare share;
   share.rank = MpiRank();
   share.num_ranks = MpiSize();
-  std::vector<PairChunk> chunks = request.chunks;
   if (!request.options.overwrite) {
     // One bit per pair of the run, whatever the database holds.
     const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, chunks);
@@ -383,7 +383,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCall
 }  // namespace
 
 MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks) {
-  RunShare share = ShareOfRun(request, callbacks);
+  RunShare share = ShareOfRun(std::move(request.chunks), request, callbacks);
   MatchingSummary summary;
   summary.pairs_requested = request.num_pairs_requested;
   summary.pairs_skipped = share.pairs_skipped;
