@@ -81,6 +81,7 @@ struct Database::Impl {
   bool write_nulls_for_unset = false;  // 4.x convention
   bool in_transaction = false;
   std::vector<std::string> tables;  // as found when opening
+  std::function<void(int)> on_commit_to_log;  // see HandOverLogFolding
 
   // Prepared on first use, then reused.
   std::unique_ptr<SqliteStatement> image_name, keypoints, descriptors, num_keypoints,
@@ -599,6 +600,24 @@ void Database::Rollback() {
   // then there is nothing to undo and the caller's original error matters.
   if (sqlite3_get_autocommit(impl_->db) != 0) return;
   ExecuteSql(impl_->db, "ROLLBACK");
+}
+
+bool Database::UsesWriteAheadLog() const {
+  SqliteStatement s(impl_->db, "PRAGMA journal_mode");
+  return s.Step() && s.ColumnText(0) == "wal";
+}
+
+void Database::HandOverLogFolding(std::function<void(int logged_pages)> logged) {
+  impl_->RequireWritable();
+  impl_->on_commit_to_log = std::move(logged);
+  // Replaces the hook through which SQLite folds the log itself.
+  sqlite3_wal_hook(
+      impl_->db,
+      [](void* impl, sqlite3*, const char*, int pages) {
+        static_cast<Impl*>(impl)->on_commit_to_log(pages);
+        return SQLITE_OK;
+      },
+      impl_.get());
 }
 
 }  // namespace colmap

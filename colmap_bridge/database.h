@@ -106,6 +106,14 @@ class Database {
   void Commit();
   void Rollback();
 
+  // True when the file keeps SQLite's write-ahead log (COLMAP's databases do).
+  bool UsesWriteAheadLog() const;
+  // Hands the folding of the write-ahead log to someone else
+  // (WalCheckpointer): this connection's commits stop folding it themselves
+  // (SQLite's default: the commit that takes the log past 1,000 pages), and
+  // after each commit `logged` gets the pages the log now holds.
+  void HandOverLogFolding(std::function<void(int logged_pages)> logged);
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

@@ -117,7 +117,12 @@ DatabaseResultSink::DatabaseResultSink(const std::string& database_path, bool wr
     : DatabaseResultSink(database_path, Options{write_two_view_geometries, true, false}) {}
 
 DatabaseResultSink::DatabaseResultSink(const std::string& database_path, const Options& options)
-    : lock_(database_path), database_(database_path, /*read_only=*/false), options_(options) {}
+    : lock_(database_path), database_(database_path, /*read_only=*/false), options_(options) {
+  if (database_.UsesWriteAheadLog()) {
+    checkpointer_ = std::make_unique<WalCheckpointer>(database_path);
+    database_.HandOverLogFolding([this](int pages) { logged_pages_ = pages; });
+  }
+}
 
 void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
   std::vector<pair_t> empty_pairs;
@@ -143,6 +148,13 @@ void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
   } catch (...) {
     database_.Rollback();
     throw;
+  }
+  if (checkpointer_) {
+    if (logged_pages_ >= options_.log_pages_before_catch_up) {
+      checkpointer_->CatchUp();
+    } else {
+      checkpointer_->Nudge();
+    }
   }
   rows_written_ += rows;
   empty_pairs_recorded_ += empty_pairs.size();

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <unordered_map>
@@ -13,6 +14,7 @@
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_writer_lock.h"
+#include "colmap_bridge/wal_checkpointer.h"
 
 namespace cashash {
 namespace colmap {
@@ -67,6 +69,11 @@ class DatabaseResultSink : public ResultSink {
     // The pairs may have rows from an earlier run (--overwrite): a pair now
     // without a match has its old rows deleted when no rows are written for it.
     bool replace_existing = false;
+    // With a write-ahead log (COLMAP's databases): its size in pages at which
+    // the writer waits for the checkpointer to fold it, so that the next
+    // chunk starts it over. 16,384 pages are 64 MiB with COLMAP's 4 KiB
+    // pages, 16 times SQLite's own bound, so that most chunks never wait.
+    int log_pages_before_catch_up = 16384;
   };
 
   // Throws DatabaseError when another cashash process writes to the same
@@ -85,7 +92,11 @@ class DatabaseResultSink : public ResultSink {
  private:
   DatabaseWriterLock lock_;  // taken before opening, released after closing
   Database database_;
+  // Folds the log off the writer's thread; null for a rollback-journal file.
+  // Declared after database_: stopped before the writer's connection closes.
+  std::unique_ptr<WalCheckpointer> checkpointer_;
   Options options_;
+  int logged_pages_ = 0;  // in the log after the last commit
   size_t rows_written_ = 0;
   size_t empty_pairs_recorded_ = 0;
 };
