@@ -157,6 +157,11 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   MatcherCommandOptions resolved = options;
   resolved.cashash =
       ResolveTableShape(options.cashash, TypicalFeatureCount({d1.rows(), d2.rows()}, options.sift.max_num_matches));
+  // The CPU path (MatchImagePair's own matcher) keeps the cascade's
+  // matches, so its tau is the one for precision; the GPU matcher rematches
+  // as a run does.
+  if (!options.use_gpu) resolved.cashash.exact_rematch_min_matches = 0;
+  resolved.cashash.tau = colmap::RunTau(resolved);
   PairMatchingOptions pair_options;
   pair_options.sift = resolved.sift;
   pair_options.cashash = resolved.cashash;

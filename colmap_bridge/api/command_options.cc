@@ -117,7 +117,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "8 x 8 from there)");
   table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table,
             "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
-  table.Add({"CasHash.tau"}, &o.cashash.tau, "Largest 128-bit remap Hamming distance ranked");
+  table.Add({"CasHash.tau"}, &o.cashash.tau,
+            "Largest 128-bit remap Hamming distance ranked; 0 = chosen: 32 while the exact rematch decides the pairs "
+            "that may verify, 43 where the cascade's own matches are kept (no rematch, guided matching)");
   table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
   table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
             "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's)");

@@ -18,11 +18,13 @@ struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
   // --CasHash.matcher defaults to auto here: a run measures both matchers;
-  // and the pairs that may verify are matched again exactly.
+  // and the pairs that may verify are matched again exactly. tau 0: chosen
+  // for the run (ChooseCascadeTau), 32 while the rematch decides.
   CasHashOptions cashash = [] {
     CasHashOptions options;
     options.matcher = MatcherType::kAuto;
     options.exact_rematch_min_matches = 12;
+    options.tau = 0;
     return options;
   }();
   TwoViewGeometryOptions two_view;

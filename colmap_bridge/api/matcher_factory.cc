@@ -128,11 +128,19 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOpti
 
 }  // namespace
 
-std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
+int RunTau(const MatcherCommandOptions& options) {
+  if (options.cashash.tau > 0) return options.cashash.tau;
+  return ChooseCascadeTau(options.cashash.exact_rematch_min_matches, options.guided.enabled);
+}
+
+std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& given,
                                                         const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
                                                         const std::function<void(const std::string&)>& info,
                                                         const std::shared_ptr<ExactRematchCounts>& counts) {
+  // Options not passed through ResolveOptionsForRun get their tau here too.
+  MatcherCommandOptions options = given;
+  options.cashash.tau = RunTau(given);
   bool on_gpu = false;
   if (options.cashash.matcher == MatcherType::kCascade) {
     return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
@@ -162,8 +170,16 @@ MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
   }
   const size_t features = TypicalFeatureCount(rows_per_image, options.sift.max_num_matches);
   resolved.cashash = ResolveTableShape(resolved.cashash, features);
+  resolved.cashash.tau = RunTau(resolved);
   if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {
-    info(DescribeTableShape(options.cashash, resolved.cashash, features, rows_per_image.size()));
+    std::string text = DescribeTableShape(options.cashash, resolved.cashash, features, rows_per_image.size());
+    text += "; tau " + std::to_string(resolved.cashash.tau);
+    if (options.cashash.tau == 0) {
+      text += resolved.cashash.tau == kCascadeTauForScreening
+                  ? " (chosen: the exact rematch decides the pairs that may verify)"
+                  : " (chosen: the cascade's own matches are kept)";
+    }
+    info(text);
   }
   return resolved;
 }

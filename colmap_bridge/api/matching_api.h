@@ -86,11 +86,16 @@ std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOpti
                                                         const std::function<void(const std::string&)>& info = nullptr,
                                                         const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
 
+// The tau a run ranks with: --CasHash.tau where set, else ChooseCascadeTau
+// (32 while the exact rematch decides the pairs that may verify, 43 where
+// the cascade's own matches are kept).
+int RunTau(const MatcherCommandOptions& options);
+
 // The options a run matches with, decided once from the feature rows of its
 // images: the hash tables chosen for their median size where
 // --CasHash.num_tables / --CasHash.bits_per_table are 0 (table_shape.h), and
-// auto resolved to the cascade for guided matching. Says what it chose
-// through `info`.
+// auto resolved to the cascade for guided matching, and tau where
+// --CasHash.tau is 0 (RunTau). Says what it chose through `info`.
 MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
                                            const std::vector<size_t>& rows_per_image,
                                            const std::function<void(const std::string&)>& info);

@@ -4,6 +4,7 @@
 //
 //   chance_matches_bench --database DB [--threads T] [--seed S]
 //       [--settings "tables,bits,tau,top_k[,rematch];..."] [--max_chance_ratio R]
+//       [--min_kept K]
 //
 // A pair overlaps when brute force's matches pass geometric verification
 // (config >= CALIBRATED, COLMAP's defaults). For each setting it prints, on
@@ -16,8 +17,9 @@
 // with at least that many cascade matches get brute force's matches, as a
 // run's ExactRematchFeatureMatcher does (0 or absent: the cascade's kept).
 // With --max_chance_ratio it exits 1 when a setting leaves more than R times
-// brute force's raw matches on the pairs that do not overlap (a check for
-// the integration tests).
+// brute force's raw matches on the pairs that do not overlap, and with
+// --min_kept K when it verifies fewer than K times brute force's verified
+// pairs or inlier matches (checks for the integration tests).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -75,6 +77,7 @@ int main(int argc, char** argv) {
   int threads = -1;
   uint64_t seed = 0;
   double max_chance_ratio = 0;
+  double min_kept = 0;
   bool failed = false;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string flag = argv[i], value = argv[i + 1];
@@ -83,6 +86,7 @@ int main(int argc, char** argv) {
     else if (flag == "--seed") seed = std::strtoull(value.c_str(), nullptr, 10);
     else if (flag == "--settings") settings_text = value;
     else if (flag == "--max_chance_ratio") max_chance_ratio = std::atof(value.c_str());
+    else if (flag == "--min_kept") min_kept = std::atof(value.c_str());
     else {
       std::fprintf(stderr, "unknown option %s\n", flag.c_str());
       return 2;
@@ -199,6 +203,11 @@ int main(int argc, char** argv) {
       if (max_chance_ratio > 0 && chance_raw > max_chance_ratio * exact_chance_raw) {
         std::printf("FAILED: %zu chance raw matches, more than %.2f x brute force's %zu\n", chance_raw,
                     max_chance_ratio, exact_chance_raw);
+        failed = true;
+      }
+      if (min_kept > 0 && (verified < min_kept * overlap || inliers < min_kept * exact_inliers)) {
+        std::printf("FAILED: %zu verified pairs and %zu inlier matches, below %.3f x brute force's %zu and %zu\n",
+                    verified, inliers, min_kept, overlap, exact_inliers);
         failed = true;
       }
     }

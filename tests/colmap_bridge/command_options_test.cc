@@ -106,6 +106,36 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
 }
 
+TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
+  MatcherCommandOptions defaults;
+  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  EXPECT_EQ(defaults.cashash.tau, 0);
+  EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
+  std::vector<std::string> said;
+  const auto say = [&](const std::string& text) { said.push_back(text); };
+  // The default run: the rematch decides every pair that may verify.
+  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, say).cashash.tau, kCascadeTauForScreening);
+  ASSERT_FALSE(said.empty());
+  EXPECT_NE(said.back().find("tau 32 (chosen: the exact rematch"), std::string::npos) << said.back();
+  // Without the rematch the cascade's matches are kept: tau for precision.
+  MatcherCommandOptions kept;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "0"}, &kept), ParseOutcome::kRun);
+  EXPECT_EQ(ResolveOptionsForRun(kept, {8192, 8192}, nullptr).cashash.tau, kCascadeTauForPrecision);
+  EXPECT_EQ(RunTau(kept), kCascadeTauForPrecision);
+  // Guided matching fits F to stage 1's cascade matches.
+  const char* guided_argv[] = {"guided_matcher", "--database_path", "x"};
+  MatcherCommandOptions guided;
+  ASSERT_EQ(ParseMatcherCommandOptions("guided_matcher", 3, guided_argv, &guided), ParseOutcome::kRun);
+  EXPECT_EQ(ResolveOptionsForRun(guided, {8192, 8192}, nullptr).cashash.tau, kCascadeTauForPrecision);
+  // Given on the command line, tau is kept whatever the rematch.
+  MatcherCommandOptions set;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.tau", "40"}, &set), ParseOutcome::kRun);
+  said.clear();
+  EXPECT_EQ(ResolveOptionsForRun(set, {8192, 8192}, say).cashash.tau, 40);
+  ASSERT_FALSE(said.empty());
+  EXPECT_EQ(said.back().find("chosen: the exact"), std::string::npos) << said.back();
+}
+
 TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {
   const char* argv[] = {"guided_matcher", "--database_path", "x"};
   MatcherCommandOptions o;

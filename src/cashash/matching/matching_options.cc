@@ -41,6 +41,10 @@ std::string CasHashOptions::Check() const {
   return error.str();
 }
 
+int ChooseCascadeTau(int exact_rematch_min_matches, bool guided) {
+  return exact_rematch_min_matches > 0 && !guided ? kCascadeTauForScreening : kCascadeTauForPrecision;
+}
+
 std::string MatcherTypeToString(MatcherType type) {
   switch (type) {
     case MatcherType::kCascade:

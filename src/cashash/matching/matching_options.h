@@ -70,6 +70,10 @@ struct CasHashOptions {
   // -1.9) at about 10 % more CPU matching time than 40 / 10 (within-tau
   // candidates grow about 2x per +4 of tau: 48 / 16 costs +60 %).
   // docs/cascade_parameters.md and docs/ACCURACY.md have the tables.
+  // That is tau for the cascade's own matches (kCascadeTauForPrecision). When
+  // the exact rematch decides every pair that may verify, the cascade only
+  // screens, and a tighter tau screens as well for less
+  // (kCascadeTauForScreening); the commands choose between them (0 there).
   int tau = 43;
   int top_k = 16;
   // Seed of the random projections; the same seed gives the same matches.
@@ -86,6 +90,27 @@ struct CasHashOptions {
 
   std::string Check() const;
 };
+
+// tau where the cascade's matches are kept: its precision then matters (see
+// CasHashOptions::tau).
+constexpr int kCascadeTauForPrecision = 43;
+// tau where the exact rematch replaces the matches of every pair with at
+// least exact_rematch_min_matches cascade matches: the cascade then only
+// decides which pairs reach that count, and its precision does not reach
+// the output. True matches lie close in remap distance; chance candidates
+// near 64. At 32 the within-tau candidates per query fall 6x (sceaux_castle,
+// 101 -> 16) while recall moves from 0.980 to 0.977 (sacre_coeur: 0.952 ->
+// 0.943); below 32 it falls faster (30: 0.974, 28: 0.967). On the 300-image
+// street the whole command ran 17 % faster with the same verified pairs and
+// inlier matches (docs/cascade_parameters.md, "tau when the exact rematch
+// decides").
+constexpr int kCascadeTauForScreening = 32;
+
+// The tau a run uses when its options leave it at 0 (the commands'
+// default): for screening when the exact rematch is on and the cascade's
+// matches are not used otherwise, for precision when they are kept
+// (no rematch) or feed a model (guided matching's stage 1).
+int ChooseCascadeTau(int exact_rematch_min_matches, bool guided);
 
 std::string MatcherTypeToString(MatcherType type);
 // Returns false on an unknown name.
