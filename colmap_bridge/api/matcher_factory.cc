@@ -1,6 +1,7 @@
 #include "colmap_bridge/api/matcher_factory.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <functional>
 #include <memory>
 #include <stdexcept>
@@ -109,6 +110,29 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
   return CreateCpuFeatureMatcher(options.sift, options.cashash, mean);
 }
 
+// Brute-force matchers on the run's GPU for the exact rematch deferred to the
+// verification threads (exact_rematch_feature_matcher.h); null where it
+// stays on the matching thread: with several GPUs (each chunk is split
+// between them), or when CASHASH_DEFERRED_REMATCH=0 (a diagnostic switch).
+std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const MatcherCommandOptions& options,
+                                                      const MeanDescriptor& mean) {
+#ifdef CASHASH_WITH_CUDA
+  const char* setting = std::getenv("CASHASH_DEFERRED_REMATCH");
+  if (setting != nullptr && std::string(setting) == "0") return nullptr;
+  if (GpuIndices(options.gpu_index).size() != 1) return nullptr;
+  MatcherCommandOptions brute_force = options;
+  brute_force.cashash.matcher = MatcherType::kBruteForce;
+  return std::make_shared<ExactMatcherPool>([brute_force, mean]() {
+    bool on_gpu = false;
+    return CreateBackendForOptions(brute_force, mean, nullptr, &on_gpu);
+  });
+#else
+  (void)options;
+  (void)mean;
+  return nullptr;
+#endif
+}
+
 // The cascade backend of a run; with --CasHash.exact_rematch_min_matches > 0
 // it also matches the pairs that may verify again exactly, from the
 // descriptors it holds (exact_rematch_feature_matcher.h). Guided matching
@@ -123,7 +147,8 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOpti
   std::unique_ptr<FeatureMatcher> matcher = CreateBackendForOptions(cascade, mean, warning, on_gpu);
   if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
   return std::make_unique<ExactRematchFeatureMatcher>(
-      std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts);
+      std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts,
+      *on_gpu ? DeferredRematchPool(options, mean) : nullptr);
 }
 
 }  // namespace

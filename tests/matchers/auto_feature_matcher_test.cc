@@ -26,7 +26,14 @@ struct Record {
   std::set<image_t> images;
   std::vector<ImagePair> matched;
   size_t calls = 0;
+  size_t deferred_calls = 0;  // MatchPairsDeferred
   bool destroyed = false;
+};
+
+// Deferred work that leaves the matches as they are.
+class NothingLeft : public DeferredMatching {
+ public:
+  void Complete(const DescriptorLookup&, std::vector<FeatureMatches>*) override {}
 };
 
 // Answers pair (a, b) with the single match (a, b) and advances the clock
@@ -63,6 +70,11 @@ class FakeMatcher : public FeatureMatcher {
       results.push_back({FeatureMatch{static_cast<uint32_t>(pair.first), static_cast<uint32_t>(pair.second)}});
     }
     return results;
+  }
+  // MatchPairs, and a deferred part (as the GPU's exact rematch leaves).
+  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override {
+    ++record_->deferred_calls;
+    return ChunkMatches{MatchPairs(pairs), std::make_unique<NothingLeft>()};
   }
   std::string Name() const override { return name_; }
   bool SupportsEpipolarGuidance() const override { return guided_; }
@@ -162,6 +174,33 @@ TEST(AutoFeatureMatcher, KeepsTheCascadeWhenItIsFaster) {
   EXPECT_NE(h.log[0].find("fake-cascade 1.000 ms per pair"), std::string::npos) << h.log[0];
   EXPECT_NE(h.log[0].find("fake-bruteforce 20.000 ms per pair"), std::string::npos) << h.log[0];
   EXPECT_NE(h.log[0].find("using fake-cascade"), std::string::npos) << h.log[0];
+}
+
+// While timing, each backend's time must include all its work: nothing is
+// deferred. Once decided, the winner's deferred work is passed on.
+TEST(AutoFeatureMatcher, DefersNothingWhileTimingAndThenWhatTheWinnerDefers) {
+  Harness h(0.001, 0.02);
+  FeatureDescriptors none;
+  for (int i = 0; i < 40; ++i) h.matcher->AddImage(image_t(i), none);
+  const std::vector<ImagePair> pairs = AllPairs(0, 40);
+  size_t deferred_chunks = 0, chunks = 0, undecided_chunks = 0;
+  for (size_t begin = 0; begin < pairs.size(); begin += 100) {
+    const bool decided_before = h.matcher->decision().decided;
+    const std::vector<ImagePair> part(pairs.begin() + begin, pairs.begin() + std::min(pairs.size(), begin + 100));
+    ChunkMatches matched = h.matcher->MatchPairsDeferred(part);
+    ASSERT_EQ(matched.matches.size(), part.size());
+    ++chunks;
+    if (!decided_before) {
+      ++undecided_chunks;
+      EXPECT_EQ(matched.deferred, nullptr) << "chunk " << chunks;
+    }
+    deferred_chunks += matched.deferred != nullptr;
+  }
+  ASSERT_TRUE(h.matcher->decision().cascade_won);
+  EXPECT_GE(undecided_chunks, 1u);
+  EXPECT_EQ(deferred_chunks, chunks - undecided_chunks);
+  EXPECT_EQ(h.cascade.deferred_calls, deferred_chunks);
+  EXPECT_EQ(h.brute_force.deferred_calls, 0u);
 }
 
 TEST(AutoFeatureMatcher, KeepsBruteForceWhenItIsFaster) {

@@ -7,6 +7,7 @@
 #include <random>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -146,6 +147,121 @@ TEST(ExactRematchFeatureMatcher, RematchedPairsEqualBruteForceOnTheCpu) {
   EXPECT_GE(rematched, 2u);
   EXPECT_LT(cascade_results[1].size(), 15u);
   EXPECT_EQ(matcher.pairs_rematched(), rematched);
+}
+
+// Deferred (with a pool): the cascade's matches come back at once, the
+// pairs that reach the threshold are left to Complete, which matches them
+// on a pooled matcher from the caller's descriptors: the same results as
+// the rematch at once, and no exact call on the cascade.
+TEST(ExactRematchFeatureMatcher, DeferredRematchCompletesWithAPooledMatcherFromTheCallersDescriptors) {
+  auto cascade = std::make_unique<CannedMatcher>();
+  CannedMatcher* c = cascade.get();
+  std::vector<CannedMatcher*> made;
+  auto pool = std::make_shared<ExactMatcherPool>([&made]() {
+    auto exact = std::make_unique<CannedMatcher>();
+    made.push_back(exact.get());
+    return exact;
+  });
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 5, nullptr, pool);
+  for (image_t id = 0; id < 5; ++id) matcher.AddImage(id, FeatureDescriptors{});
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 4}, {0, 2}, {2, 3}, {0, 4}, {1, 2}};
+
+  ChunkMatches chunk = matcher.MatchPairsDeferred(pairs);
+  ASSERT_EQ(chunk.matches.size(), pairs.size());
+  ASSERT_NE(chunk.deferred, nullptr);
+  for (const FeatureMatches& m : chunk.matches) {
+    for (const FeatureMatch& match : m) EXPECT_EQ(match.point2D_idx2, 1u) << "the cascade's matches at first";
+  }
+  EXPECT_EQ(matcher.pairs_rematched(), 0u);
+
+  std::set<image_t> looked_up;
+  auto descriptors = std::make_shared<const FeatureDescriptors>();
+  chunk.deferred->Complete(
+      [&](image_t id) {
+        looked_up.insert(id);
+        return descriptors;
+      },
+      &chunk.matches);
+  // (1,4) and (2,3) reach 5 cascade matches; only their images were needed.
+  EXPECT_EQ(looked_up, (std::set<image_t>{1, 2, 3, 4}));
+  ASSERT_EQ(made.size(), 1u);
+  // The pooled matcher answers with MatchPairs (tag 1, a + b matches).
+  EXPECT_EQ(made[0]->asked, (std::vector<ImagePair>{{1, 4}, {2, 3}}));
+  EXPECT_TRUE(made[0]->images.empty()) << "images removed before the matcher goes back to the pool";
+  EXPECT_TRUE(c->asked_exact.empty());
+  EXPECT_EQ(chunk.matches[1].size(), 5u);
+  EXPECT_EQ(chunk.matches[3].size(), 5u);
+  EXPECT_EQ(matcher.pairs_rematched(), 2u);
+
+  // The matcher went back to the pool: a second chunk reuses it.
+  ChunkMatches again = matcher.MatchPairsDeferred({{2, 3}});
+  again.deferred->Complete([&](image_t) { return descriptors; }, &again.matches);
+  EXPECT_EQ(made.size(), 1u);
+  EXPECT_EQ(pool->made(), 1u);
+  // Nothing reaches the threshold: nothing deferred. MatchPairs never defers.
+  EXPECT_EQ(matcher.MatchPairsDeferred({{0, 1}}).deferred, nullptr);
+  matcher.MatchPairs({{2, 3}});
+  EXPECT_EQ(c->asked_exact, (std::vector<ImagePair>{{2, 3}}));
+}
+
+// On the CPU backends, deferred rematches completed on two other threads
+// while the cascade goes on give what the rematch at once gives.
+TEST(ExactRematchFeatureMatcher, DeferredOnOtherThreadsEqualsTheRematchAtOnce) {
+  std::mt19937 rng(5);
+  std::vector<std::vector<uint8_t>> base;
+  for (int k = 0; k < 200; ++k) base.push_back(testing_support::RandomSift(&rng));
+  std::uniform_int_distribution<int> noise(-6, 6);
+  std::vector<std::shared_ptr<FeatureDescriptors>> images;
+  for (int i = 0; i < 6; ++i) {
+    auto d = std::make_shared<FeatureDescriptors>();
+    for (int k = 0; k < 200; ++k) {
+      const std::vector<uint8_t> b = i % 3 != 2 ? base[k] : testing_support::RandomSift(&rng);
+      for (uint8_t x : b) d->data.push_back(static_cast<uint8_t>(std::clamp(int(x) + noise(rng), 0, 255)));
+    }
+    images.push_back(d);
+  }
+  std::vector<const FeatureDescriptors*> pointers;
+  for (const auto& d : images) pointers.push_back(d.get());
+  const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
+  SiftMatchingOptions sift;
+  sift.num_threads = 1;
+  CasHashOptions cascade_options, brute_options;
+  brute_options.matcher = MatcherType::kBruteForce;
+  auto pool = std::make_shared<ExactMatcherPool>(
+      [&]() { return CreateCpuFeatureMatcher(sift, brute_options, mean); });
+  ExactRematchFeatureMatcher deferred(CreateCpuFeatureMatcher(sift, cascade_options, mean), 15, nullptr, pool);
+  ExactRematchFeatureMatcher at_once(CreateCpuFeatureMatcher(sift, cascade_options, mean), 15);
+  for (image_t id = 0; id < 6; ++id) {
+    deferred.AddImage(id, *images[id]);
+    at_once.AddImage(id, *images[id]);
+  }
+  const std::vector<std::vector<ImagePair>> chunks = {{{0, 1}, {0, 2}, {0, 3}}, {{1, 3}, {1, 4}, {2, 5}},
+                                                      {{3, 4}, {0, 4}, {1, 5}}, {{4, 5}, {2, 3}, {0, 5}}};
+  std::vector<ChunkMatches> matched(chunks.size());
+  std::vector<std::thread> completing;
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    matched[c] = deferred.MatchPairsDeferred(chunks[c]);
+    if (!matched[c].deferred) continue;
+    completing.emplace_back([&, c]() {
+      matched[c].deferred->Complete([&](image_t id) { return images.at(id); }, &matched[c].matches);
+    });
+  }
+  for (std::thread& t : completing) t.join();
+  size_t rematched = 0;
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    const std::vector<FeatureMatches> expected = at_once.MatchPairs(chunks[c]);
+    for (size_t i = 0; i < expected.size(); ++i) {
+      ASSERT_EQ(matched[c].matches[i].size(), expected[i].size()) << c << " " << i;
+      for (size_t k = 0; k < expected[i].size(); ++k) {
+        EXPECT_EQ(matched[c].matches[i][k].point2D_idx1, expected[i][k].point2D_idx1);
+        EXPECT_EQ(matched[c].matches[i][k].point2D_idx2, expected[i][k].point2D_idx2);
+      }
+    }
+  }
+  rematched = deferred.pairs_rematched();
+  EXPECT_EQ(rematched, at_once.pairs_rematched());
+  EXPECT_GE(rematched, 4u) << "pairs of overlapping images are matched again";
+  EXPECT_GE(pool->made(), 1u);
 }
 
 }  // namespace

@@ -37,7 +37,14 @@ class CountingMatcher : public FeatureMatcher {
     }
     return out;
   }
+  // The pipeline's call: the wrapper must pass it on, so that what the inner
+  // matcher defers (the GPU's exact rematch) is deferred.
+  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override {
+    ++deferred_calls;
+    return ChunkMatches{MatchPairs(pairs), nullptr};
+  }
   std::string Name() const override { return "counting"; }
+  size_t deferred_calls = 0;
   std::map<image_t, size_t> held;
   std::map<image_t, int> adds;
   size_t max_held = 0;
@@ -73,6 +80,8 @@ struct RunOutcome {
   size_t max_held = 0;
   RetainingStats stats;
   std::map<pair_t, size_t> results;
+  size_t chunks = 0;
+  size_t deferred_calls = 0;
 };
 
 constexpr size_t kImages = 60;
@@ -91,11 +100,12 @@ RunOutcome MatchAll(size_t budget_images) {
   options.skip_geometric_verification = true;
   MatchingPipeline pipeline(options, &source, &matcher, &sink);
   pipeline.Run(chunks);
-  return {inner->adds, inner->max_held, matcher.stats(), sink.sizes};
+  return {inner->adds, inner->max_held, matcher.stats(), sink.sizes, chunks.size(), inner->deferred_calls};
 }
 
 TEST(RetainingFeatureMatcher, AmpleBudgetHashesEveryImageOnce) {
   const RunOutcome run = MatchAll(kImages);
+  EXPECT_EQ(run.deferred_calls, run.chunks);
   ASSERT_EQ(run.adds.size(), kImages);
   for (const auto& [id, count] : run.adds) EXPECT_EQ(count, 1) << "image " << id;
   EXPECT_EQ(run.stats.images_added, kImages);

@@ -1,5 +1,6 @@
 #include "cashash/pipeline/matching_pipeline.h"
 
+#include <atomic>
 #include <map>
 #include <mutex>
 #include <set>
@@ -103,6 +104,56 @@ TEST(MatchingPipeline, EveryPairMatchedAndWrittenOnce) {
   EXPECT_EQ(source.loads.at(1), 1);
   // Images not needed by the last chunks were released from the matcher.
   EXPECT_LE(matcher.num_added(), 8u);
+}
+
+// Leaves every pair's matches to DeferredMatching::Complete: MatchPairsDeferred
+// returns none, Complete gives each pair as many matches as the first
+// image's descriptors have rows (read through the pipeline's lookup).
+class DeferringMatcher : public FakeMatcher {
+ public:
+  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override {
+    MatchPairs(pairs);  // checks the images were added
+    ChunkMatches out;
+    out.matches.resize(pairs.size());
+    out.deferred = std::make_unique<Deferred>(pairs, &completed);
+    return out;
+  }
+  std::atomic<int> completed{0};
+
+ private:
+  class Deferred : public DeferredMatching {
+   public:
+    Deferred(std::vector<ImagePair> pairs, std::atomic<int>* completed) : pairs_(std::move(pairs)), completed_(completed) {}
+    void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
+      for (size_t k = 0; k < pairs_.size(); ++k) {
+        const size_t rows = descriptors(pairs_[k].first)->rows();
+        for (point2D_t m = 0; m < rows; ++m) (*matches)[k].push_back({m, m});
+      }
+      ++*completed_;
+    }
+
+   private:
+    std::vector<ImagePair> pairs_;
+    std::atomic<int>* completed_;
+  };
+};
+
+TEST(MatchingPipeline, DeferredMatchingIsCompletedBeforeVerifyingAndWriting) {
+  for (const bool skip_verification : {true, false}) {
+    FakeSource source;
+    DeferringMatcher matcher;
+    CollectingSink sink;
+    PipelineOptions options = NoVerification();
+    options.skip_geometric_verification = skip_verification;
+    MatchingPipeline pipeline(options, &source, &matcher, &sink);
+    const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
+    const PipelineStats stats = pipeline.Run(chunks);
+    EXPECT_EQ(stats.pairs_done, 36u);
+    EXPECT_EQ(matcher.completed.load(), static_cast<int>(chunks.size()));
+    ASSERT_EQ(sink.written.size(), 36u);
+    // Pair (a, b) got a matches, from image a's descriptors, in either mode.
+    for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first) << skip_verification;
+  }
 }
 
 TEST(MatchingPipeline, StopFlagEndsAfterCommittedChunks) {

@@ -226,6 +226,11 @@ bool AutoFeatureMatcher::SupportsEpipolarGuidance() const {
   return winner_ != nullptr ? winner_->SupportsEpipolarGuidance() : cascade_->SupportsEpipolarGuidance();
 }
 
+ChunkMatches AutoFeatureMatcher::MatchPairsDeferred(const std::vector<ImagePair>& pairs) {
+  if (winner_ != nullptr) return winner_->MatchPairsDeferred(pairs);
+  return ChunkMatches{MatchPairs(pairs), nullptr};
+}
+
 std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairsGuided(const std::vector<GuidedPair>& pairs,
                                                                  double max_distance) {
   if (winner_ == nullptr) Decide(true, "guided matching");

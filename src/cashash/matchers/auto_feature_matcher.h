@@ -99,6 +99,9 @@ class AutoFeatureMatcher : public FeatureMatcher {
   void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
+  // The winner's, once chosen; while timing, MatchPairs (nothing deferred:
+  // each backend's time includes all its work).
+  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override;
   // The winner's name once decided; "auto(cascade name|brute-force name)" before.
   std::string Name() const override;
   bool ChoosingBackend() const override { return winner_ == nullptr; }

@@ -1,5 +1,6 @@
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 #include <utility>
@@ -10,11 +11,86 @@ std::vector<FeatureMatches> FeatureMatcher::MatchPairsExact(const std::vector<Im
   throw std::logic_error("the " + Name() + " matcher does not match from its own descriptors exactly");
 }
 
+namespace {
+
+int64_t MicrosecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The exact matching of a chunk's pairs that reached the threshold, on a
+// pooled brute-force matcher fed with the chunk's descriptors.
+class DeferredExactRematch : public DeferredMatching {
+ public:
+  DeferredExactRematch(std::vector<size_t> indices, std::vector<ImagePair> pairs,
+                       std::shared_ptr<ExactMatcherPool> pool, std::shared_ptr<ExactRematchCounts> counts)
+      : indices_(std::move(indices)), pairs_(std::move(pairs)), pool_(std::move(pool)), counts_(std::move(counts)) {}
+
+  void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<image_t> images;
+    for (const ImagePair& pair : pairs_) {
+      images.push_back(pair.first);
+      images.push_back(pair.second);
+    }
+    std::sort(images.begin(), images.end());
+    images.erase(std::unique(images.begin(), images.end()), images.end());
+    // On an error the matcher, which may still hold images, is dropped
+    // instead of going back to the pool.
+    std::unique_ptr<FeatureMatcher> exact = pool_->Acquire();
+    for (const image_t image_id : images) exact->AddSharedImage(image_id, descriptors(image_id));
+    std::vector<FeatureMatches> exact_matches = exact->MatchPairs(pairs_);
+    for (const image_t image_id : images) exact->RemoveImage(image_id);
+    pool_->Release(std::move(exact));
+    if (exact_matches.size() != pairs_.size()) throw std::logic_error("deferred rematch: wrong number of results");
+    for (size_t k = 0; k < indices_.size(); ++k) (*matches).at(indices_[k]) = std::move(exact_matches[k]);
+    counts_->rematched += pairs_.size();
+    counts_->exact_us += MicrosecondsSince(start);
+  }
+
+ private:
+  std::vector<size_t> indices_;
+  std::vector<ImagePair> pairs_;
+  std::shared_ptr<ExactMatcherPool> pool_;
+  std::shared_ptr<ExactRematchCounts> counts_;
+};
+
+}  // namespace
+
+ExactMatcherPool::ExactMatcherPool(std::function<std::unique_ptr<FeatureMatcher>()> make) : make_(std::move(make)) {
+  if (!make_) throw std::invalid_argument("ExactMatcherPool needs a way to make matchers");
+}
+
+std::unique_ptr<FeatureMatcher> ExactMatcherPool::Acquire() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!idle_.empty()) {
+      std::unique_ptr<FeatureMatcher> matcher = std::move(idle_.back());
+      idle_.pop_back();
+      return matcher;
+    }
+    ++made_;
+  }
+  // Made outside the lock: a GPU matcher takes a while to set up.
+  return make_();
+}
+
+void ExactMatcherPool::Release(std::unique_ptr<FeatureMatcher> matcher) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  idle_.push_back(std::move(matcher));
+}
+
+size_t ExactMatcherPool::made() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return made_;
+}
+
 ExactRematchFeatureMatcher::ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
-                                                       std::shared_ptr<ExactRematchCounts> counts)
+                                                       std::shared_ptr<ExactRematchCounts> counts,
+                                                       std::shared_ptr<ExactMatcherPool> pool)
     : cascade_(std::move(cascade)),
       min_matches_(min_matches),
-      counts_(counts ? std::move(counts) : std::make_shared<ExactRematchCounts>()) {
+      counts_(counts ? std::move(counts) : std::make_shared<ExactRematchCounts>()),
+      pool_(std::move(pool)) {
   if (!cascade_) throw std::invalid_argument("ExactRematchFeatureMatcher needs a matcher");
   if (!cascade_->SupportsExactMatching()) {
     throw std::invalid_argument("ExactRematchFeatureMatcher: the " + cascade_->Name() +
@@ -34,12 +110,31 @@ void ExactRematchFeatureMatcher::AddSharedImage(image_t image_id,
 
 void ExactRematchFeatureMatcher::RemoveImage(image_t image_id) { cascade_->RemoveImage(image_id); }
 
-std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
-  std::vector<FeatureMatches> results = cascade_->MatchPairs(pairs);
+std::vector<size_t> ExactRematchFeatureMatcher::PairsToRematch(const std::vector<FeatureMatches>& results) const {
   std::vector<size_t> again;
   for (size_t i = 0; i < results.size(); ++i) {
     if (results[i].size() >= min_matches_) again.push_back(i);
   }
+  return again;
+}
+
+ChunkMatches ExactRematchFeatureMatcher::MatchPairsDeferred(const std::vector<ImagePair>& pairs) {
+  if (!pool_) return ChunkMatches{MatchPairs(pairs), nullptr};
+  ChunkMatches out;
+  out.matches = cascade_->MatchPairs(pairs);
+  counts_->pairs += pairs.size();
+  std::vector<size_t> again = PairsToRematch(out.matches);
+  if (again.empty()) return out;
+  std::vector<ImagePair> subset;
+  subset.reserve(again.size());
+  for (const size_t i : again) subset.push_back(pairs[i]);
+  out.deferred = std::make_unique<DeferredExactRematch>(std::move(again), std::move(subset), pool_, counts_);
+  return out;
+}
+
+std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
+  std::vector<FeatureMatches> results = cascade_->MatchPairs(pairs);
+  const std::vector<size_t> again = PairsToRematch(results);
   counts_->pairs += pairs.size();
   if (again.empty()) return results;
   const auto start = std::chrono::steady_clock::now();
@@ -49,8 +144,7 @@ std::vector<FeatureMatches> ExactRematchFeatureMatcher::MatchPairs(const std::ve
   std::vector<FeatureMatches> exact = cascade_->MatchPairsExact(subset);
   for (size_t k = 0; k < again.size(); ++k) results[again[k]] = std::move(exact[k]);
   counts_->rematched += again.size();
-  counts_->exact_us += std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - start)
-                           .count();
+  counts_->exact_us += MicrosecondsSince(start);
   return results;
 }
 

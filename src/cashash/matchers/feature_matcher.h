@@ -5,6 +5,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -24,6 +25,26 @@ struct GuidedPair {
   // x, y of feature i at [2 i], [2 i + 1]; at least the rows added.
   const std::vector<float>* points1 = nullptr;
   const std::vector<float>* points2 = nullptr;
+};
+
+// Work on a chunk's matches that a matcher leaves for later, so that its
+// caller can match the next chunk meanwhile (the exact rematch on the GPU,
+// exact_rematch_feature_matcher.h). Complete may run on another thread than
+// the matcher's, concurrently with its next calls.
+class DeferredMatching {
+ public:
+  virtual ~DeferredMatching() = default;
+  // The descriptors of an image of the chunk, still held by the caller.
+  using DescriptorLookup = std::function<std::shared_ptr<const FeatureDescriptors>(image_t)>;
+  // Replaces the matches of the pairs it was left for; `matches` are the
+  // chunk's, in its pair order.
+  virtual void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) = 0;
+};
+
+// A chunk's matches, and what is left to complete them (null: nothing).
+struct ChunkMatches {
+  std::vector<FeatureMatches> matches;
+  std::unique_ptr<DeferredMatching> deferred;
 };
 
 class FeatureMatcher {
@@ -47,6 +68,12 @@ class FeatureMatcher {
   // Matches each pair (both images added before); result i belongs to pair i
   // and indexes (first image, second image) of that pair.
   virtual std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) = 0;
+  // MatchPairs for a caller that can complete part of the work later, on
+  // another thread (the pipeline: before verifying the chunk). The default
+  // leaves nothing; wrappers forward it.
+  virtual ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) {
+    return ChunkMatches{MatchPairs(pairs), nullptr};
+  }
   // A short name for logs: "cpu-cascade", "gpu-bruteforce", ...
   virtual std::string Name() const = 0;
   // True while the matcher still times its backends to choose one (auto):

@@ -62,6 +62,10 @@ std::vector<FeatureMatches> RetainingFeatureMatcher::MatchPairs(const std::vecto
   return inner_->MatchPairs(pairs);
 }
 
+ChunkMatches RetainingFeatureMatcher::MatchPairsDeferred(const std::vector<ImagePair>& pairs) {
+  return inner_->MatchPairsDeferred(pairs);
+}
+
 std::string RetainingFeatureMatcher::Name() const { return inner_->Name(); }
 
 }  // namespace cashash

@@ -38,6 +38,7 @@ class RetainingFeatureMatcher : public FeatureMatcher {
   void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
   void RemoveImage(image_t image_id) override;
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
+  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override;
   std::string Name() const override;
   bool ChoosingBackend() const override { return inner_->ChoosingBackend(); }
 

@@ -31,6 +31,9 @@ struct MatchedChunk {
   const PairChunk* chunk = nullptr;
   std::unordered_map<image_t, FeaturesPtr> features;
   std::vector<FeatureMatches> matches;
+  // What the matcher left to complete the matches (the exact rematch on the
+  // GPU): done on the verification thread, before verifying.
+  std::unique_ptr<DeferredMatching> deferred;
   Clock::time_point started;
 };
 
@@ -59,14 +62,23 @@ class FirstError {
   std::atomic<bool> failed_{false};
 };
 
-// The verification of one matched chunk: results in the chunk's pair order,
-// geometries left undefined when verification is skipped. Releases the
-// chunk's features.
+// The verification of one matched chunk: what the matcher deferred first,
+// then results in the chunk's pair order, geometries left undefined when
+// verification is skipped. Releases the chunk's features.
 VerifiedChunk VerifyChunk(const PipelineOptions& options, FeatureSource* source, MatchedChunk* item,
                           BatchVerifier* verifier) {
   VerifiedChunk out;
   out.chunk = item->chunk;
   out.started = item->started;
+  if (item->deferred) {
+    item->deferred->Complete(
+        [&](image_t image_id) {
+          const FeaturesPtr& features = item->features.at(image_id);
+          return std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors);
+        },
+        &item->matches);
+    item->deferred.reset();
+  }
   const std::vector<ImagePair>& pairs = item->chunk->pairs;
   out.results.resize(pairs.size());
   for (size_t k = 0; k < pairs.size(); ++k) {
@@ -292,7 +304,9 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       item.index = c;
       item.chunk = &chunk;
       item.started = chunk_start;
-      item.matches = matcher_->MatchPairs(chunk.pairs);
+      ChunkMatches matched = matcher_->MatchPairsDeferred(chunk.pairs);
+      item.matches = std::move(matched.matches);
+      item.deferred = std::move(matched.deferred);
       {
         std::lock_guard<std::mutex> lock(stats_mutex);
         stats.seconds_loading += load_seconds;
