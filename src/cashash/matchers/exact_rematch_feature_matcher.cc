@@ -68,10 +68,12 @@ std::unique_ptr<FeatureMatcher> ExactMatcherPool::Acquire() {
       idle_.pop_back();
       return matcher;
     }
-    ++made_;
   }
   // Made outside the lock: a GPU matcher takes a while to set up.
-  return make_();
+  std::unique_ptr<FeatureMatcher> matcher = make_();
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++made_;
+  return matcher;
 }
 
 void ExactMatcherPool::Release(std::unique_ptr<FeatureMatcher> matcher) {
