@@ -17,6 +17,9 @@ WalCheckpointer::WalCheckpointer(const std::string& database_path) {
   // This connection writes no rows; it must never fold the log on its own
   // schedule either.
   sqlite3_wal_autocheckpoint(db_, 0);
+  // For the first read below, which a recovering or locking connection may
+  // hold off for a moment; passive checkpoints never wait on it.
+  sqlite3_busy_timeout(db_, 60000);
   // SQLite opens the file on the first statement; until then the connection
   // does not know the log exists and a checkpoint does nothing.
   if (sqlite3_exec(db_, "SELECT count(*) FROM sqlite_master", nullptr, nullptr, nullptr) != SQLITE_OK) {
