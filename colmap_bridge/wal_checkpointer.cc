@@ -8,12 +8,13 @@ namespace cashash {
 namespace colmap {
 
 WalCheckpointer::WalCheckpointer(const std::string& database_path) {
-  if (sqlite3_open_v2(database_path.c_str(), &db_, SQLITE_OPEN_READWRITE, nullptr) != SQLITE_OK) {
+  const auto fail = [&](const std::string& what) {
     const std::string message = db_ != nullptr ? sqlite3_errmsg(db_) : "out of memory";
     sqlite3_close_v2(db_);
     db_ = nullptr;
-    throw DatabaseError("cannot open database " + database_path + " to fold its log: " + message);
-  }
+    throw DatabaseError("cannot " + what + " database " + database_path + " to fold its log: " + message);
+  };
+  if (sqlite3_open_v2(database_path.c_str(), &db_, SQLITE_OPEN_READWRITE, nullptr) != SQLITE_OK) fail("open");
   // This connection writes no rows; it must never fold the log on its own
   // schedule either.
   sqlite3_wal_autocheckpoint(db_, 0);
@@ -22,12 +23,7 @@ WalCheckpointer::WalCheckpointer(const std::string& database_path) {
   sqlite3_busy_timeout(db_, 60000);
   // SQLite opens the file on the first statement; until then the connection
   // does not know the log exists and a checkpoint does nothing.
-  if (sqlite3_exec(db_, "SELECT count(*) FROM sqlite_master", nullptr, nullptr, nullptr) != SQLITE_OK) {
-    const std::string message = sqlite3_errmsg(db_);
-    sqlite3_close_v2(db_);
-    db_ = nullptr;
-    throw DatabaseError("cannot read database " + database_path + " to fold its log: " + message);
-  }
+  if (sqlite3_exec(db_, "SELECT count(*) FROM sqlite_master", nullptr, nullptr, nullptr) != SQLITE_OK) fail("read");
   thread_ = std::thread([this] { Loop(); });
 }
 
@@ -62,25 +58,6 @@ size_t WalCheckpointer::checkpoints() const {
   return checkpoints_;
 }
 
-size_t WalCheckpointer::busy_checkpoints() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return busy_checkpoints_;
-}
-
-void WalCheckpointer::CheckpointOnce() {
-  int logged = 0;
-  int folded = 0;
-  // PASSIVE: copies what no reader still needs, takes no write lock and
-  // never calls the busy handler, so the writer never waits on it.
-  const int rc = sqlite3_wal_checkpoint_v2(db_, nullptr, SQLITE_CHECKPOINT_PASSIVE, &logged, &folded);
-  std::lock_guard<std::mutex> lock(mutex_);
-  ++checkpoints_;
-  if (rc == SQLITE_BUSY) ++busy_checkpoints_;
-  // Any other failure (disk full, I/O error) leaves the log as it is: the
-  // writer's commits stay valid in it, and the last connection to close
-  // folds it.
-}
-
 void WalCheckpointer::Loop() {
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
@@ -89,8 +66,14 @@ void WalCheckpointer::Loop() {
     pending_ = false;
     ++started_;
     lock.unlock();
-    CheckpointOnce();
+    // PASSIVE: copies what no reader still needs, takes no write lock and
+    // never calls the busy handler, so the writer never waits on it. A busy
+    // log is retried by the next checkpoint; any other failure (disk full,
+    // I/O error) leaves the log as it is: the writer's commits stay valid in
+    // it, and the last connection to close folds it.
+    sqlite3_wal_checkpoint_v2(db_, nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
     lock.lock();
+    ++checkpoints_;
     ended_.notify_all();
     if (last) return;
   }

@@ -41,14 +41,12 @@ class WalCheckpointer {
   // the next transaction starts the log over.
   void CatchUp();
 
-  // Checkpoints run so far, and how many of them found the log busy (a reader
-  // or the writer's restart held a lock it needs; the next one retries).
+  // Checkpoints run so far (one that finds the log busy, a reader or the
+  // writer's restart holding a lock it needs, counts too; the next retries).
   size_t checkpoints() const;
-  size_t busy_checkpoints() const;
 
  private:
   void Loop();
-  void CheckpointOnce();
 
   sqlite3* db_ = nullptr;
   mutable std::mutex mutex_;
@@ -58,7 +56,6 @@ class WalCheckpointer {
   bool stop_ = false;
   size_t started_ = 0;
   size_t checkpoints_ = 0;
-  size_t busy_checkpoints_ = 0;
   std::thread thread_;
 };
 

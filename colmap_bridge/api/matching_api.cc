@@ -76,17 +76,6 @@ std::vector<image_t> ImageIds(const DatabaseFeatureSource& source) {
   return ids;
 }
 
-std::vector<image_t> ImagesOfPairs(const std::vector<ImagePair>& pairs) {
-  std::vector<image_t> image_ids;
-  for (const ImagePair& pair : pairs) {
-    image_ids.push_back(pair.first);
-    image_ids.push_back(pair.second);
-  }
-  std::sort(image_ids.begin(), image_ids.end());
-  image_ids.erase(std::unique(image_ids.begin(), image_ids.end()), image_ids.end());
-  return image_ids;
-}
-
 // Feature rows of each image (row counts only, no descriptors are read).
 std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vector<image_t>& image_ids) {
   std::vector<size_t> rows;

@@ -14,7 +14,6 @@
 #       --TwoViewGeometry.early_exit 0, no_rematch = default with
 #       --CasHash.exact_rematch_min_matches 0 (the cascade's matches kept),
 #       cascade_no_rematch = the same with --CasHash.matcher cascade,
-#       rematch_N = default with --CasHash.exact_rematch_min_matches N,
 #       default+NAME=VALUE[+NAME=VALUE...] = default with --NAME VALUE ...
 #       (for example default+CasHash.top_k=5),
 #       guided_paper = guided_matcher with the paper's stage 2 (search within
@@ -66,7 +65,6 @@ for config in $CONFIGS; do
     full_budget) options=(--TwoViewGeometry.early_exit 0) ;;
     no_rematch) options=(--CasHash.exact_rematch_min_matches 0) ;;
     cascade_no_rematch) options=(--CasHash.matcher cascade --CasHash.exact_rematch_min_matches 0) ;;
-    rematch_[0-9]*) options=(--CasHash.exact_rematch_min_matches "${config#rematch_}") ;;
     default+*)
       IFS='+' read -r -a assignments <<< "${config#default+}"
       for assignment in "${assignments[@]}"; do options+=("--${assignment%%=*}" "${assignment#*=}"); done ;;

@@ -1,9 +1,10 @@
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 
-#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 #include <utility>
+
+#include "cashash/base/pair_id.h"
 
 namespace cashash {
 
@@ -27,13 +28,7 @@ class DeferredExactRematch : public DeferredMatching {
 
   void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
     const auto start = std::chrono::steady_clock::now();
-    std::vector<image_t> images;
-    for (const ImagePair& pair : pairs_) {
-      images.push_back(pair.first);
-      images.push_back(pair.second);
-    }
-    std::sort(images.begin(), images.end());
-    images.erase(std::unique(images.begin(), images.end()), images.end());
+    const std::vector<image_t> images = ImagesOfPairs(pairs_);
     // On an error the matcher, which may still hold images, is dropped
     // instead of going back to the pool.
     std::unique_ptr<FeatureMatcher> exact = pool_->Acquire();
@@ -42,7 +37,7 @@ class DeferredExactRematch : public DeferredMatching {
     for (const image_t image_id : images) exact->RemoveImage(image_id);
     pool_->Release(std::move(exact));
     if (exact_matches.size() != pairs_.size()) throw std::logic_error("deferred rematch: wrong number of results");
-    for (size_t k = 0; k < indices_.size(); ++k) (*matches).at(indices_[k]) = std::move(exact_matches[k]);
+    for (size_t k = 0; k < indices_.size(); ++k) matches->at(indices_[k]) = std::move(exact_matches[k]);
     counts_->rematched += pairs_.size();
     counts_->exact_us += MicrosecondsSince(start);
   }

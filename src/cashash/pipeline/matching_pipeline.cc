@@ -25,6 +25,11 @@ double SecondsSince(Clock::time_point start) {
 
 using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
 
+// An image's descriptors, sharing ownership of its features.
+std::shared_ptr<const FeatureDescriptors> DescriptorsOf(const FeaturesPtr& features) {
+  return std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors);
+}
+
 // What travels from the matching stage to the verification stage.
 struct MatchedChunk {
   size_t index = 0;  // position in the run's chunks: the writer's order
@@ -72,10 +77,7 @@ VerifiedChunk VerifyChunk(const PipelineOptions& options, FeatureSource* source,
   out.started = item->started;
   if (item->deferred) {
     item->deferred->Complete(
-        [&](image_t image_id) {
-          const FeaturesPtr& features = item->features.at(image_id);
-          return std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors);
-        },
+        [&](image_t image_id) { return DescriptorsOf(item->features.at(image_id)); },
         &item->matches);
     item->deferred.reset();
   }
@@ -294,7 +296,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         const Clock::time_point t_hash = Clock::now();
         load_seconds += std::chrono::duration<double>(t_hash - t_load).count();
         // The matcher may keep the descriptors (aliasing the features).
-        matcher_->AddSharedImage(image_id, std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors));
+        matcher_->AddSharedImage(image_id, DescriptorsOf(features));
         hash_seconds += SecondsSince(t_hash);
         loaded.emplace(image_id, std::move(features));
       }

@@ -8,6 +8,7 @@
 
 #include <vector>
 
+#include "cashash/base/pair_id.h"
 #include "cashash/base/types.h"
 
 namespace cashash {
@@ -74,18 +75,12 @@ std::vector<PairChunk> RemovePairs(std::vector<PairChunk> chunks, SkipPredicate 
   std::vector<PairChunk> kept;
   for (PairChunk& chunk : chunks) {
     std::vector<ImagePair> pairs;
-    std::vector<image_t> images;
     for (const ImagePair& pair : chunk.pairs) {
-      if (skip(pair)) continue;
-      pairs.push_back(pair);
-      images.push_back(pair.first);
-      images.push_back(pair.second);
+      if (!skip(pair)) pairs.push_back(pair);
     }
     if (pairs.empty()) continue;
-    std::sort(images.begin(), images.end());
-    images.erase(std::unique(images.begin(), images.end()), images.end());
+    chunk.images = ImagesOfPairs(pairs);
     chunk.pairs = std::move(pairs);
-    chunk.images = std::move(images);
     kept.push_back(std::move(chunk));
   }
   return kept;
