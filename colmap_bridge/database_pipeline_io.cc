@@ -10,7 +10,7 @@ namespace cashash {
 namespace colmap {
 
 DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
-    : database_(database_path, /*read_only=*/true) {
+    : database_path_(database_path), database_(database_path, /*read_only=*/true) {
   images_ = database_.ReadAllImages();
   for (Camera& camera : database_.ReadAllCameras()) {
     CheckCamera(camera);
@@ -77,10 +77,9 @@ void DatabaseFeatureSource::WarnAboutKeypointsOutside(image_t image_id, const Ke
     }
   }
   if (outside == 0) return;
-  {
-    std::lock_guard<std::mutex> lock(warned_mutex_);
-    if (!warned_images_.insert(image_id).second) return;
-  }
+  // Loading threads warn one at a time (the callback need not be thread-safe).
+  std::lock_guard<std::mutex> lock(warned_mutex_);
+  if (!warned_images_.insert(image_id).second) return;
   const Keypoint& kp = keypoints[first];
   const std::string text = "image " + std::to_string(image_id) + " (" + image(image_id).name + "): " +
                            std::to_string(outside) + " of " + std::to_string(keypoints.size()) +
@@ -94,11 +93,33 @@ void DatabaseFeatureSource::WarnAboutKeypointsOutside(image_t image_id, const Ke
   }
 }
 
+std::unique_ptr<Database> DatabaseFeatureSource::TakeReader() {
+  {
+    std::lock_guard<std::mutex> lock(readers_mutex_);
+    if (!idle_readers_.empty()) {
+      std::unique_ptr<Database> reader = std::move(idle_readers_.back());
+      idle_readers_.pop_back();
+      return reader;
+    }
+  }
+  return std::make_unique<Database>(database_path_, /*read_only=*/true);
+}
+
+void DatabaseFeatureSource::ReturnReader(std::unique_ptr<Database> reader) {
+  std::lock_guard<std::mutex> lock(readers_mutex_);
+  idle_readers_.push_back(std::move(reader));
+}
+
 ImageFeatures DatabaseFeatureSource::LoadFeatures(image_t image_id) {
   ImageFeatures features;
   features.image_id = image_id;
-  features.keypoints = database_.ReadKeypoints(image_id);
-  features.descriptors = database_.ReadDescriptors(image_id);
+  {
+    std::unique_ptr<Database> reader = TakeReader();
+    // A reader that threw is dropped: its statements may be mid-step.
+    features.keypoints = reader->ReadKeypoints(image_id);
+    features.descriptors = reader->ReadDescriptors(image_id);
+    ReturnReader(std::move(reader));
+  }
   if (features.keypoints.size() != features.descriptors.rows()) {
     const Image& im = image(image_id);
     throw DatabaseError("image " + std::to_string(image_id) + " (" + im.name + "): table keypoints has " +

@@ -27,7 +27,7 @@ class DatabaseFeatureSource : public FeatureSource {
 
   // Where warnings about usable but suspicious data go (keypoints outside
   // their image); by default "WARNING: ..." lines on stderr. Called from the
-  // loading thread.
+  // loading threads, one call at a time.
   void SetWarningCallback(std::function<void(const std::string&)> warning);
 
   const std::vector<Image>& images() const { return images_; }
@@ -36,9 +36,16 @@ class DatabaseFeatureSource : public FeatureSource {
   // Throws DatabaseError naming the image when keypoints and descriptors
   // disagree in their number of rows or a keypoint is NaN / infinite; warns
   // once per image about keypoints outside the image (COLMAP uses them).
+  // Any number of threads may call it at once: each call reads through a
+  // connection of its own, from a pool opened as needed.
   ImageFeatures LoadFeatures(image_t image_id) override;
   const Camera& CameraOfImage(image_t image_id) const override;
+  // Four: on the H200 machine one thread read 1,000 images of 8,192
+  // features (1.2 GiB) in 0.9 s, mostly copying blobs out of SQLite's pages.
+  int MaxConcurrentLoads() const override { return kConcurrentLoads; }
+  static constexpr int kConcurrentLoads = 4;
 
+  // The connection that read the images and cameras; LoadFeatures does not use it.
   Database& database() { return database_; }
 
  private:
@@ -46,7 +53,14 @@ class DatabaseFeatureSource : public FeatureSource {
   static void CheckCamera(const Camera& camera);
   void WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints);
 
+  // A pooled reading connection, returned to the pool when done.
+  std::unique_ptr<Database> TakeReader();
+  void ReturnReader(std::unique_ptr<Database> reader);
+
+  std::string database_path_;
   Database database_;
+  std::mutex readers_mutex_;
+  std::vector<std::unique_ptr<Database>> idle_readers_;
   std::vector<Image> images_;
   std::unordered_map<image_t, size_t> image_index_;
   std::unordered_map<camera_t, Camera> cameras_;

@@ -4,7 +4,9 @@
 #include "cashash/pipeline/feature_cache.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <tuple>
 #include <map>
 #include <mutex>
 #include <set>
@@ -23,20 +25,32 @@ constexpr size_t kFeaturesPerImage = 10;
 constexpr size_t kImageBytes = kFeaturesPerImage * (kDescriptorDim + sizeof(Keypoint));
 
 // Image i has kFeaturesPerImage features whose bytes are (i mod 256); counts
-// loads, and checks no two threads read it at once.
+// loads. With concurrent_loads 1 it checks that no two threads read at once;
+// with more it allows that and records the most reads seen at once.
 class CountingSource : public FeatureSource {
  public:
-  explicit CountingSource(int broken_image = -1, int delay_us = 0) : broken_image_(broken_image), delay_us_(delay_us) {
+  explicit CountingSource(int broken_image = -1, int delay_us = 0, int concurrent_loads = 1)
+      : broken_image_(broken_image), delay_us_(delay_us), concurrent_loads_(concurrent_loads) {
     camera_.params = {100, 50, 50};
   }
   ImageFeatures LoadFeatures(image_t image_id) override {
-    std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
+    std::unique_lock<std::mutex> busy(busy_, std::defer_lock);
+    if (concurrent_loads_ == 1) busy.try_lock();
+    const int now = ++reading_;
+    for (int seen = most_at_once.load(); now > seen && !most_at_once.compare_exchange_weak(seen, now);) {
+    }
     // A slow disk: the pipeline then waits for the loader instead of the
     // loader waiting for the pipeline; reads must not change.
     if (delay_us_ > 0) std::this_thread::sleep_for(std::chrono::microseconds(delay_us_));
-    EXPECT_TRUE(busy.owns_lock()) << "source read from two threads at once";
+    --reading_;
+    if (concurrent_loads_ == 1) {
+      EXPECT_TRUE(busy.owns_lock()) << "source read from two threads at once";
+    }
     if (static_cast<int>(image_id) == broken_image_) throw std::runtime_error("image is broken");
-    ++loads[image_id];
+    {
+      std::lock_guard<std::mutex> lock(loads_mutex_);
+      ++loads[image_id];
+    }
     ImageFeatures f;
     f.image_id = image_id;
     f.keypoints.resize(kFeaturesPerImage);
@@ -44,13 +58,18 @@ class CountingSource : public FeatureSource {
     return f;
   }
   const Camera& CameraOfImage(image_t) const override { return camera_; }
+  int MaxConcurrentLoads() const override { return concurrent_loads_; }
   std::map<image_t, int> loads;
+  std::atomic<int> most_at_once{0};
 
  private:
   std::mutex busy_;
+  std::mutex loads_mutex_;
+  std::atomic<int> reading_{0};
   Camera camera_;
   int broken_image_;
   int delay_us_;
+  int concurrent_loads_;
 };
 
 // Matches (k, k) for every feature, after checking each image's bytes are
@@ -114,7 +133,8 @@ struct Layout {
   int blocks_per_group;
 };
 
-class GroupFeatureCacheLoads : public ::testing::TestWithParam<int> {};
+// (source delay in microseconds, the source's MaxConcurrentLoads)
+class GroupFeatureCacheLoads : public ::testing::TestWithParam<std::tuple<int, int>> {};
 
 TEST_P(GroupFeatureCacheLoads, AsPredictedAndAtMostThreeGroupsHeld) {
   for (const Layout& l : {Layout{24, 3, 2}, Layout{25, 3, 2}, Layout{30, 4, 3}, Layout{7, 2, 1}, Layout{12, 5, 10},
@@ -122,10 +142,16 @@ TEST_P(GroupFeatureCacheLoads, AsPredictedAndAtMostThreeGroupsHeld) {
     SCOPED_TRACE("n=" + std::to_string(l.n) + " block_size=" + std::to_string(l.block_size) +
                  " blocks_per_group=" + std::to_string(l.blocks_per_group));
     const std::vector<PairChunk> chunks = ScheduledPairChunks(Ids(l.n), l.block_size, l.blocks_per_group);
-    CountingSource source(-1, GetParam());
+    const auto [delay_us, concurrent_loads] = GetParam();
+    CountingSource source(-1, delay_us, concurrent_loads);
     CollectingSink sink;
     const FeatureCacheStats stats = RunPipeline(&source, chunks, &sink);
     EXPECT_EQ(sink.pairs.size(), l.n * (l.n - 1) / 2);
+    EXPECT_LE(source.most_at_once.load(), concurrent_loads);
+    // Slow reads of a step of 4 or more images overlap when allowed to.
+    if (concurrent_loads > 1 && delay_us > 0 && l.n >= 8) {
+      EXPECT_GT(source.most_at_once.load(), 1);
+    }
 
     // Predicted from the group pairs alone: a group pair (a step) needs its
     // groups; what the previous step and this one need stays in memory,
@@ -172,8 +198,9 @@ TEST_P(GroupFeatureCacheLoads, AsPredictedAndAtMostThreeGroupsHeld) {
 }
 
 // Source reads taking no time (the loader runs ahead) and 300 us (the
-// pipeline waits for it).
-INSTANTIATE_TEST_SUITE_P(SourceDelayMicroseconds, GroupFeatureCacheLoads, ::testing::Values(0, 300));
+// pipeline waits for it), by one loading thread and by four: the same loads.
+INSTANTIATE_TEST_SUITE_P(SourceDelayAndConcurrentLoads, GroupFeatureCacheLoads,
+                         ::testing::Combine(::testing::Values(0, 300), ::testing::Values(1, 4)));
 
 TEST(GroupFeatureCache, ResumedScheduleStillMatchesEveryPairOnce) {
   std::vector<PairChunk> chunks = ScheduledPairChunks(Ids(30), 3, 2);

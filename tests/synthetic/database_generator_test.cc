@@ -7,8 +7,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include "cashash/base/pair_id.h"
 #include "colmap_bridge/blob_codec.h"
@@ -114,6 +116,40 @@ TEST_F(DatabaseGeneratorTest, SameSeedSameDatabaseOtherSeedOtherFeaturesAnyThrea
       EXPECT_EQ(ka[i].y, kb[i].y);
     }
     EXPECT_NE(da.ReadDescriptors(id).data, dc.ReadDescriptors(id).data);
+  }
+}
+
+// The feature cache loads with several threads at once (MaxConcurrentLoads):
+// each call reads through its own pooled connection and returns what one
+// thread alone reads.
+TEST_F(DatabaseGeneratorTest, FeatureSourceLoadsFromSeveralThreadsAtOnce) {
+  const DatabaseGeneratorOptions o = Options("concurrent.db", 6, 500);
+  colmap::GenerateDatabase(o);
+  colmap::DatabaseFeatureSource source(o.database_path);
+  EXPECT_GT(source.MaxConcurrentLoads(), 1);
+  std::map<image_t, ImageFeatures> alone;
+  for (const Image& image : source.images()) alone[image.image_id] = source.LoadFeatures(image.image_id);
+  constexpr int kThreads = 4;
+  std::vector<std::map<image_t, ImageFeatures>> seen(kThreads);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t) {
+    threads.emplace_back([&, t]() {
+      for (int round = 0; round < 5; ++round) {
+        for (const Image& image : source.images()) seen[t][image.image_id] = source.LoadFeatures(image.image_id);
+      }
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  for (int t = 0; t < kThreads; ++t) {
+    ASSERT_EQ(seen[t].size(), alone.size());
+    for (const auto& [id, features] : alone) {
+      EXPECT_EQ(seen[t][id].descriptors.data, features.descriptors.data) << "image " << id;
+      ASSERT_EQ(seen[t][id].keypoints.size(), features.keypoints.size());
+      for (size_t i = 0; i < features.keypoints.size(); ++i) {
+        EXPECT_EQ(seen[t][id].keypoints[i].x, features.keypoints[i].x);
+        EXPECT_EQ(seen[t][id].keypoints[i].y, features.keypoints[i].y);
+      }
+    }
   }
 }
 

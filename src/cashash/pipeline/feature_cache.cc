@@ -1,6 +1,7 @@
 #include "cashash/pipeline/feature_cache.h"
 
 #include <algorithm>
+#include <atomic>
 #include <utility>
 
 namespace cashash {
@@ -30,7 +31,7 @@ std::vector<std::vector<image_t>> GroupFeatureCache::Steps(const std::vector<Pai
 }
 
 GroupFeatureCache::GroupFeatureCache(FeatureSource* source, const std::vector<PairChunk>& chunks)
-    : source_(source), steps_(Steps(chunks)) {
+    : source_(source), loader_threads_(std::max(1, source->MaxConcurrentLoads())), steps_(Steps(chunks)) {
   for (size_t s = 0; s < steps_.size(); ++s) {
     step_sets_.emplace_back(steps_[s].begin(), steps_[s].end());
     for (image_t id : steps_[s]) steps_of_image_[id].push_back(static_cast<int>(s));
@@ -79,29 +80,7 @@ void GroupFeatureCache::LoaderLoop() {
     }
     loading_step_ = s;
     loading_done_ = false;
-    for (image_t id : steps_[s]) {
-      if (stopping_ || current_step_ > s) break;
-      if (held_.count(id)) continue;
-      lock.unlock();
-      FeaturesPtr features;
-      std::exception_ptr error;
-      try {
-        std::lock_guard<std::mutex> source_lock(source_mutex_);
-        features = std::make_shared<const ImageFeatures>(source_->LoadFeatures(id));
-      } catch (...) {
-        error = std::current_exception();
-      }
-      lock.lock();
-      ++stats_.source_loads;
-      if (error) {
-        failed_[id] = error;
-      } else {
-        held_bytes_ += FeatureBytes(*features);
-        stats_.peak_bytes = std::max(stats_.peak_bytes, held_bytes_);
-        held_.emplace(id, std::move(features));
-      }
-      changed_.notify_all();
-    }
+    LoadStep(s, lock);
     loading_done_ = true;
     changed_.notify_all();
   }
@@ -111,9 +90,56 @@ void GroupFeatureCache::LoaderLoop() {
   changed_.notify_all();
 }
 
-ImageFeatures GroupFeatureCache::LoadDirectly(image_t image_id) {
+void GroupFeatureCache::LoadStep(int s, std::unique_lock<std::mutex>& lock) {
+  // Images in first-use order: each loader takes the next one, so the
+  // pipeline's next image is the next to arrive, whichever thread reads it.
+  std::vector<image_t> todo;
+  for (image_t id : steps_[s]) {
+    if (!held_.count(id)) todo.push_back(id);
+  }
+  lock.unlock();
+  std::atomic<size_t> next{0};
+  auto load = [&]() {
+    for (size_t i = next++; i < todo.size(); i = next++) {
+      {
+        std::lock_guard<std::mutex> guard(mutex_);
+        if (stopping_ || current_step_ > s) return;
+      }
+      FeaturesPtr features;
+      std::exception_ptr error;
+      try {
+        features = std::make_shared<const ImageFeatures>(LoadFromSource(todo[i]));
+      } catch (...) {
+        error = std::current_exception();
+      }
+      std::lock_guard<std::mutex> guard(mutex_);
+      ++stats_.source_loads;
+      if (error) {
+        failed_[todo[i]] = error;
+      } else {
+        held_bytes_ += FeatureBytes(*features);
+        stats_.peak_bytes = std::max(stats_.peak_bytes, held_bytes_);
+        held_.emplace(todo[i], std::move(features));
+      }
+      changed_.notify_all();
+    }
+  };
+  const int helpers_wanted = std::min<int>(loader_threads_, static_cast<int>(todo.size())) - 1;
+  std::vector<std::thread> helpers;
+  for (int t = 0; t < helpers_wanted; ++t) helpers.emplace_back(load);
+  load();
+  for (std::thread& helper : helpers) helper.join();
+  lock.lock();
+}
+
+ImageFeatures GroupFeatureCache::LoadFromSource(image_t image_id) {
+  if (loader_threads_ > 1) return source_->LoadFeatures(image_id);
   std::lock_guard<std::mutex> source_lock(source_mutex_);
-  ImageFeatures features = source_->LoadFeatures(image_id);
+  return source_->LoadFeatures(image_id);
+}
+
+ImageFeatures GroupFeatureCache::LoadDirectly(image_t image_id) {
+  ImageFeatures features = LoadFromSource(image_id);
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.source_loads;
   ++stats_.unplanned;

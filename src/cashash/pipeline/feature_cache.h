@@ -43,8 +43,8 @@ struct FeatureCacheStats {
 class GroupFeatureCache : public FeatureSource {
  public:
   // `source` must outlive the cache; it is called from the cache's loading
-  // thread and, for unplanned requests, from the caller's thread, never from
-  // both at once.
+  // threads (MaxConcurrentLoads() of them) and, for unplanned requests, from
+  // the caller's thread; one at a time where MaxConcurrentLoads() is 1.
   GroupFeatureCache(FeatureSource* source, const std::vector<PairChunk>& chunks);
   ~GroupFeatureCache() override;
   GroupFeatureCache(const GroupFeatureCache&) = delete;
@@ -66,12 +66,18 @@ class GroupFeatureCache : public FeatureSource {
   using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
 
   void LoaderLoop();
+  // Loads the images of step s not held yet, with the source's concurrent
+  // loads; called and returns with `lock` held.
+  void LoadStep(int s, std::unique_lock<std::mutex>& lock);
+  // One LoadFeatures call, serialised unless the source allows concurrent ones.
+  ImageFeatures LoadFromSource(image_t image_id);
   ImageFeatures LoadDirectly(image_t image_id);
   // Smallest step >= from that holds the image, or -1.
   int StepHolding(image_t image_id, int from) const;
 
   FeatureSource* source_;
-  std::mutex source_mutex_;  // the wrapped source is used by one thread at a time
+  std::mutex source_mutex_;  // serialises a source that allows one load at a time
+  int loader_threads_ = 1;   // the source's MaxConcurrentLoads
   std::vector<std::vector<image_t>> steps_;
   std::vector<std::unordered_set<image_t>> step_sets_;
   std::unordered_map<image_t, std::vector<int>> steps_of_image_;  // ascending
