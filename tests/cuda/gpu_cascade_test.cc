@@ -14,6 +14,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cashash/matchers/feature_matcher.h"
@@ -365,6 +366,42 @@ TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
   EXPECT_GT(total, 500u);
   EXPECT_TRUE(exact[4].empty());
   EXPECT_GE(a.value(), 0.999);
+}
+
+// A ticket (DeferExactMatching) taken after a chunk is matched and run on
+// another thread, after the cascade has dropped those images and uploaded
+// others into the blocks it reuses, gives what MatchPairsExact gave: it
+// holds the images' device blocks until it is let go.
+TEST(GpuCascadeTest, ExactMatchingTicketRunsLaterFromTheBlocksItHolds) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(11);
+  std::vector<FeatureDescriptors> images{source.Image(3000)};
+  images.push_back(source.Related(images[0], 2500, 0.5));
+  images.push_back(source.Related(images[1], 4100, 0.3));
+  images.push_back(FeatureDescriptors());
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 2}, {0, 2}, {0, 3}};
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), MeanOf(images), 0);
+  AddAndMatch(cascade.get(), images, {});
+  const std::vector<FeatureMatches> exact = cascade->MatchPairsExact(pairs);
+  std::unique_ptr<ExactMatchingTicket> ticket = cascade->DeferExactMatching(pairs);
+  ASSERT_NE(ticket, nullptr);
+  // The cascade goes on: its images are replaced by others of the same sizes.
+  std::vector<FeatureDescriptors> others;
+  for (const FeatureDescriptors& d : images) others.push_back(source.Image(d.rows()));
+  for (image_t id = 0; id < images.size(); ++id) cascade->RemoveImage(id);
+  for (image_t id = 0; id < others.size(); ++id) cascade->AddImage(id + 10, others[id]);
+  cascade->MatchPairs({{10, 11}, {11, 12}});
+  std::vector<FeatureMatches> later;
+  std::thread([&]() { later = ticket->Run(); }).join();
+  ticket.reset();
+  ASSERT_EQ(later.size(), exact.size());
+  size_t total = 0;
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    EXPECT_EQ(later[p], exact[p]) << "pair " << p;
+    total += exact[p].size();
+  }
+  EXPECT_GT(total, 500u);
+  EXPECT_TRUE(later[3].empty());
 }
 
 TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {

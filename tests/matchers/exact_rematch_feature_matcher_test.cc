@@ -204,6 +204,76 @@ TEST(ExactRematchFeatureMatcher, DeferredRematchCompletesWithAPooledMatcherFromT
   EXPECT_EQ(c->asked_exact, (std::vector<ImagePair>{{2, 3}}));
 }
 
+// A cascade that lends tickets: the deferred rematch runs the ticket (the
+// exact matches from what the cascade held when the chunk was matched, even
+// once the images are gone from it), never the pool nor the caller's
+// descriptors; a ticket is run once and let go.
+class TicketMatcher : public CannedMatcher {
+ public:
+  class Ticket : public ExactMatchingTicket {
+   public:
+    Ticket(std::vector<ImagePair> pairs, std::vector<FeatureMatches> answer, int* alive)
+        : pairs_(std::move(pairs)), answer_(std::move(answer)), alive_(alive) {
+      ++*alive_;
+    }
+    ~Ticket() override { --*alive_; }
+    std::vector<FeatureMatches> Run() override {
+      EXPECT_FALSE(ran_) << "a ticket is run once";
+      ran_ = true;
+      return answer_;
+    }
+
+   private:
+    std::vector<ImagePair> pairs_;
+    std::vector<FeatureMatches> answer_;
+    int* alive_;
+    bool ran_ = false;
+  };
+  std::unique_ptr<ExactMatchingTicket> DeferExactMatching(const std::vector<ImagePair>& pairs) override {
+    for (const ImagePair& p : pairs) {
+      EXPECT_TRUE(images.count(p.first) && images.count(p.second)) << "a ticket is taken while the images are held";
+    }
+    return std::make_unique<Ticket>(pairs, MatchPairsExact(pairs), &alive);
+  }
+  int alive = 0;
+};
+
+TEST(ExactRematchFeatureMatcher, DeferredRematchRunsTheCascadesTicketWhereItGivesOne) {
+  auto cascade = std::make_unique<TicketMatcher>();
+  TicketMatcher* c = cascade.get();
+  auto pool = std::make_shared<ExactMatcherPool>([]() { return std::make_unique<CannedMatcher>(); });
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 5, nullptr, pool);
+  for (image_t id = 0; id < 5; ++id) matcher.AddImage(id, FeatureDescriptors{});
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 4}, {0, 2}, {2, 3}, {0, 4}, {1, 2}};
+  ChunkMatches chunk = matcher.MatchPairsDeferred(pairs);
+  ASSERT_NE(chunk.deferred, nullptr);
+  EXPECT_EQ(c->alive, 1);
+  for (image_t id = 0; id < 5; ++id) matcher.RemoveImage(id);  // the matcher goes on
+  bool looked_up = false;
+  chunk.deferred->Complete(
+      [&](image_t) {
+        looked_up = true;
+        return std::make_shared<const FeatureDescriptors>();
+      },
+      &chunk.matches);
+  EXPECT_FALSE(looked_up) << "the ticket needs no descriptors from the caller";
+  EXPECT_EQ(pool->made(), 0u);
+  EXPECT_EQ(c->alive, 0) << "the ticket is let go once run";
+  // (1,4) and (2,3): the exact answer (a + b + 1 matches tagged 2).
+  ASSERT_EQ(chunk.matches[1].size(), 6u);
+  ASSERT_EQ(chunk.matches[3].size(), 6u);
+  EXPECT_EQ(chunk.matches[1][0].point2D_idx2, 2u);
+  EXPECT_EQ(chunk.matches[0][0].point2D_idx2, 1u) << "below the threshold: the cascade's";
+  EXPECT_EQ(matcher.pairs_rematched(), 2u);
+  // A chunk dropped before it is completed (a failed run) lets go too.
+  for (image_t id = 0; id < 5; ++id) matcher.AddImage(id, FeatureDescriptors{});
+  {
+    ChunkMatches dropped = matcher.MatchPairsDeferred({{2, 3}});
+    EXPECT_EQ(c->alive, 1);
+  }
+  EXPECT_EQ(c->alive, 0);
+}
+
 // On the CPU backends, deferred rematches completed on two other threads
 // while the cascade goes on give what the rematch at once gives.
 TEST(ExactRematchFeatureMatcher, DeferredOnOtherThreadsEqualsTheRematchAtOnce) {

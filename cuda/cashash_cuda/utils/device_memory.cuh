@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -84,7 +85,8 @@ class DeviceBuffer {
 // costs no cudaMalloc (about a third of a millisecond each on the H200,
 // a third of what adding an image cost), and removing one no cudaFree,
 // which would wait for every stream of the device. Memory goes back to the
-// device only with the pool.
+// device only with the pool. Thread-safe: a block lent to another thread
+// (the GPU cascade's exact-matching tickets) comes back from there.
 class DeviceBlockPool {
  public:
   static constexpr size_t kChunkBytes = size_t{64} << 20;
@@ -93,6 +95,7 @@ class DeviceBlockPool {
   // Throws like DeviceBuffer::Allocate when the device has no room.
   void* Acquire(size_t bytes, const char* what) {
     bytes = RoundUp(bytes);
+    std::lock_guard<std::mutex> lock(mutex_);
     auto& reusable = free_[bytes];
     if (!reusable.empty()) {
       void* ptr = reusable.back();
@@ -113,10 +116,14 @@ class DeviceBlockPool {
     return ptr;
   }
   // `ptr` from Acquire(bytes); no kernel may use it any more.
-  void Release(void* ptr, size_t bytes) { free_[RoundUp(bytes)].push_back(ptr); }
+  void Release(void* ptr, size_t bytes) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_[RoundUp(bytes)].push_back(ptr);
+  }
 
  private:
   static size_t RoundUp(size_t bytes) { return (bytes + kAlignment - 1) / kAlignment * kAlignment; }
+  std::mutex mutex_;
   std::vector<DeviceBuffer> chunks_;
   size_t chunk_left_ = 0;
   std::unordered_map<size_t, std::vector<void*>> free_;

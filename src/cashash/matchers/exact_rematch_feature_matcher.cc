@@ -18,24 +18,36 @@ int64_t MicrosecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - start).count();
 }
 
-// The exact matching of a chunk's pairs that reached the threshold, on a
-// pooled brute-force matcher fed with the chunk's descriptors.
+// The exact matching of a chunk's pairs that reached the threshold: by the
+// cascade's ticket (from the descriptors it holds) where it gives one, else
+// on a pooled brute-force matcher fed with the chunk's descriptors.
 class DeferredExactRematch : public DeferredMatching {
  public:
   DeferredExactRematch(std::vector<size_t> indices, std::vector<ImagePair> pairs,
-                       std::shared_ptr<ExactMatcherPool> pool, std::shared_ptr<ExactRematchCounts> counts)
-      : indices_(std::move(indices)), pairs_(std::move(pairs)), pool_(std::move(pool)), counts_(std::move(counts)) {}
+                       std::unique_ptr<ExactMatchingTicket> ticket, std::shared_ptr<ExactMatcherPool> pool,
+                       std::shared_ptr<ExactRematchCounts> counts)
+      : indices_(std::move(indices)),
+        pairs_(std::move(pairs)),
+        ticket_(std::move(ticket)),
+        pool_(std::move(pool)),
+        counts_(std::move(counts)) {}
 
   void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
     const auto start = std::chrono::steady_clock::now();
-    const std::vector<image_t> images = ImagesOfPairs(pairs_);
-    // On an error the matcher, which may still hold images, is dropped
-    // instead of going back to the pool.
-    std::unique_ptr<FeatureMatcher> exact = pool_->Acquire();
-    for (const image_t image_id : images) exact->AddSharedImage(image_id, descriptors(image_id));
-    std::vector<FeatureMatches> exact_matches = exact->MatchPairs(pairs_);
-    for (const image_t image_id : images) exact->RemoveImage(image_id);
-    pool_->Release(std::move(exact));
+    std::vector<FeatureMatches> exact_matches;
+    if (ticket_) {
+      exact_matches = ticket_->Run();
+      ticket_.reset();  // lets go of the images now
+    } else {
+      const std::vector<image_t> images = ImagesOfPairs(pairs_);
+      // On an error the matcher, which may still hold images, is dropped
+      // instead of going back to the pool.
+      std::unique_ptr<FeatureMatcher> exact = pool_->Acquire();
+      for (const image_t image_id : images) exact->AddSharedImage(image_id, descriptors(image_id));
+      exact_matches = exact->MatchPairs(pairs_);
+      for (const image_t image_id : images) exact->RemoveImage(image_id);
+      pool_->Release(std::move(exact));
+    }
     if (exact_matches.size() != pairs_.size()) throw std::logic_error("deferred rematch: wrong number of results");
     for (size_t k = 0; k < indices_.size(); ++k) matches->at(indices_[k]) = std::move(exact_matches[k]);
     counts_->rematched += pairs_.size();
@@ -45,6 +57,7 @@ class DeferredExactRematch : public DeferredMatching {
  private:
   std::vector<size_t> indices_;
   std::vector<ImagePair> pairs_;
+  std::unique_ptr<ExactMatchingTicket> ticket_;
   std::shared_ptr<ExactMatcherPool> pool_;
   std::shared_ptr<ExactRematchCounts> counts_;
 };
@@ -125,7 +138,11 @@ ChunkMatches ExactRematchFeatureMatcher::MatchPairsDeferred(const std::vector<Im
   std::vector<ImagePair> subset;
   subset.reserve(again.size());
   for (const size_t i : again) subset.push_back(pairs[i]);
-  out.deferred = std::make_unique<DeferredExactRematch>(std::move(again), std::move(subset), pool_, counts_);
+  // A ticket saves uploading the images again (device run 43: that upload
+  // beside the next chunk's made adding images 0.07 s slower at 300 images).
+  std::unique_ptr<ExactMatchingTicket> ticket = cascade_->DeferExactMatching(subset);
+  out.deferred = std::make_unique<DeferredExactRematch>(std::move(again), std::move(subset), std::move(ticket), pool_,
+                                                        counts_);
   return out;
 }
 

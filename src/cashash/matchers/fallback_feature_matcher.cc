@@ -52,6 +52,10 @@ class FallbackFeatureMatcher : public FeatureMatcher {
   }
 
   bool SupportsExactMatching() const override { return active_->SupportsExactMatching(); }
+  // The active backend's ticket (the CPU backends give none).
+  std::unique_ptr<ExactMatchingTicket> DeferExactMatching(const std::vector<ImagePair>& pairs) override {
+    return active_->DeferExactMatching(pairs);
+  }
 
   std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
     std::vector<FeatureMatches> result;

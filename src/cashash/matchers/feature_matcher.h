@@ -41,6 +41,16 @@ class DeferredMatching {
   virtual void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) = 0;
 };
 
+// Exact matches of some pairs, taken now from what a matcher holds and
+// computed later by Run, on any thread, while the matcher goes on adding,
+// removing and matching images (FeatureMatcher::DeferExactMatching).
+class ExactMatchingTicket {
+ public:
+  virtual ~ExactMatchingTicket() = default;
+  // The pairs' exact matches, in the order they were given; once.
+  virtual std::vector<FeatureMatches> Run() = 0;
+};
+
 // A chunk's matches, and what is left to complete them (null: nothing).
 struct ChunkMatches {
   std::vector<FeatureMatches> matches;
@@ -96,6 +106,15 @@ class FeatureMatcher {
   // images to one (exact_rematch_feature_matcher.h). Throws
   // std::logic_error where not supported.
   virtual std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs);
+  // MatchPairsExact for later and on another thread: the ticket keeps what
+  // it needs of the pairs' images (the GPU cascade: their descriptors on
+  // the device, which it then neither uploads again nor frees early).
+  // nullptr where not supported (the default); the caller then matches
+  // some other way.
+  virtual std::unique_ptr<ExactMatchingTicket> DeferExactMatching(const std::vector<ImagePair>& pairs) {
+    (void)pairs;
+    return nullptr;
+  }
 };
 
 // CPU backends (multi-threaded over pairs). MatcherType::kAuto gives an
