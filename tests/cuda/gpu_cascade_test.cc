@@ -334,16 +334,23 @@ TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {
   EXPECT_GE(a.value(), 0.999);
 }
 
+// Images of different sizes, each sharing features with the one before,
+// and an empty one: the pairs an exact rematch meets.
+std::vector<FeatureDescriptors> ChainOfThreeAndAnEmptyImage(DescriptorSource* source) {
+  std::vector<FeatureDescriptors> images{source->Image(3000)};
+  images.push_back(source->Related(images[0], 2500, 0.5));
+  images.push_back(source->Related(images[1], 4100, 0.3));
+  images.push_back(FeatureDescriptors());
+  return images;
+}
+
 // The cascade's exact rematch (MatchPairsExact, from the descriptors it
 // uploaded) returns the GPU brute-force backend's matches, and those of the
 // CPU brute force, on pairs whose images differ in size and on an empty one.
 TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
   SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(7);
-  std::vector<FeatureDescriptors> images{source.Image(3000)};
-  images.push_back(source.Related(images[0], 2500, 0.5));
-  images.push_back(source.Related(images[1], 4100, 0.3));
-  images.push_back(FeatureDescriptors());
+  const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 0}, {1, 2}, {0, 2}, {0, 3}};
   const MeanDescriptor mean = MeanOf(images);
   CasHashOptions brute_force;
@@ -375,10 +382,7 @@ TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
 TEST(GpuCascadeTest, ExactMatchingTicketRunsLaterFromTheBlocksItHolds) {
   SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(11);
-  std::vector<FeatureDescriptors> images{source.Image(3000)};
-  images.push_back(source.Related(images[0], 2500, 0.5));
-  images.push_back(source.Related(images[1], 4100, 0.3));
-  images.push_back(FeatureDescriptors());
+  const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 2}, {0, 2}, {0, 3}};
   auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), MeanOf(images), 0);
   AddAndMatch(cascade.get(), images, {});
