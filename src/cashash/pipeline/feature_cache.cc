@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <system_error>
 #include <utility>
 
 namespace cashash {
@@ -126,7 +127,11 @@ void GroupFeatureCache::LoadStep(int s, std::unique_lock<std::mutex>& lock) {
   };
   const int helpers_wanted = std::min<int>(loader_threads_, static_cast<int>(todo.size())) - 1;
   std::vector<std::thread> helpers;
-  for (int t = 0; t < helpers_wanted; ++t) helpers.emplace_back(load);
+  try {
+    for (int t = 0; t < helpers_wanted; ++t) helpers.emplace_back(load);
+  } catch (const std::system_error&) {
+    // No thread to be had: the helpers that started and this one load all.
+  }
   load();
   for (std::thread& helper : helpers) helper.join();
   lock.lock();
