@@ -88,7 +88,10 @@ bool GpuEssentialFromEnvironment();
 // the pace (guided matching: 23.5k, 25.6k and 26.9k pairs/s at 300 images
 // with 1, 2 and 3) and cost a little where matching does (exhaustive: 20.6k,
 // 20.4k, 19.7k), since their E blocks hold SMs the matching kernels want;
-// 2 takes most of the first and little of the second.
+// 2 takes most of the first and little of the second. One at a time keeps
+// the matching stage closer to its matching-only time (device run 51: 1.19-
+// 1.22x against 1.39-1.58x at 300 images) but the whole command is 2-5 %
+// slower, so the default stays at 2.
 constexpr int kDefaultGpuVerificationsInFlight = 2;
 int GpuVerificationsInFlightFromEnvironment();
 
