@@ -30,6 +30,7 @@ struct EssentialModel {
     return five_point::EssentialFromFivePoints(pairs, models);
   }
   __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
+  static constexpr bool kSampsonResidual = true;  // Residual = SampsonParts' num2 / den
   __device__ static void AddRows(float4 p, double* upper) {
     double row[9];
     EpipolarRow(p, row);

@@ -10,14 +10,24 @@ namespace cashash {
 namespace cuda {
 namespace ransac {
 
-__device__ inline float SampsonSquared(const float* f, float4 p) {
+// The squared Sampson error as its numerator and denominator, so that a
+// scan can reject a point without dividing (ransac.cu, ScanModel); the
+// residual is exactly num2 / den either way.
+__device__ inline void SampsonParts(const float* f, float4 p, float* num2, float* den) {
   const float a = f[0] * p.x + f[1] * p.y + f[2];
   const float b = f[3] * p.x + f[4] * p.y + f[5];
   const float c = f[6] * p.x + f[7] * p.y + f[8];
   const float d = f[0] * p.z + f[3] * p.w + f[6];
   const float e = f[1] * p.z + f[4] * p.w + f[7];
   const float num = p.z * a + p.w * b + c;
-  return num * num / (a * a + b * b + d * d + e * e);
+  *num2 = num * num;
+  *den = a * a + b * b + d * d + e * e;
+}
+
+__device__ inline float SampsonSquared(const float* f, float4 p) {
+  float num2, den;
+  SampsonParts(f, p, &num2, &den);
+  return num2 / den;
 }
 
 // Coefficients of x2^T F x1 in the row-major entries of F, for a packed
@@ -124,6 +134,7 @@ struct FundamentalModel {
     return FundamentalSevenPoint(sample, models);
   }
   __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
+  static constexpr bool kSampsonResidual = true;  // Residual = SampsonParts' num2 / den
   __device__ static void AddRows(float4 p, double* upper) {
     double row[9];
     EpipolarRow(p, row);

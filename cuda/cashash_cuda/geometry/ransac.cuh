@@ -57,8 +57,17 @@ struct RansacLaunch {
 constexpr int kRansacThreads = 128;
 constexpr int kEssentialLargeBlockThreads = 256;
 
-// Largest shared-memory point cache a launch may ask for (48 KiB of float4).
+// Largest shared-memory point cache an F/H launch may ask for (48 KiB of
+// float4; three F/H blocks share an SM).
 constexpr int kRansacMaxSharedPoints = 3072;
+// The same for E launches: 160 KiB, since an E block of 256 holds an SM
+// alone anyway (255 registers). The scan of each model over the pair's
+// points is most of an E block's time (ncu, device run 53), and the large
+// pairs' points now come from shared memory too: verification's device time
+// on the 300-image street 0.98 s against 1.04 s (device runs 50-55). E
+// blocks of 128 (CASHASH_ESSENTIAL_BLOCK_THREADS) then fit one per SM
+// instead of two when a launch holds such a pair.
+constexpr int kEssentialMaxSharedPoints = 10240;
 
 // F of F.num_pairs pairs and H of H.num_pairs pairs in one grid (F blocks
 // first; callers put the largest pairs first so the tail is short). With

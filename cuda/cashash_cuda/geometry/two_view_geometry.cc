@@ -220,7 +220,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   E_launch.masks = d.masks.as<uint8_t>() + total;
   E_launch.max_trials = RansacMaxTrials(ransac, 5);
   E_launch.block_threads = EssentialBlockThreadsFromEnvironment();
-  E_launch.shared_points = std::min(max_count_E, kRansacMaxSharedPoints);
+  E_launch.shared_points = std::min(max_count_E, kEssentialMaxSharedPoints);
   if (num_E > 0) {
     // E (the longest) starts first on its own stream; F and H run beside it.
     CUDA_CHECK(cudaEventRecord(d.uploaded, d.stream));
