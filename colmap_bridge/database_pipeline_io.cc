@@ -10,7 +10,8 @@ namespace cashash {
 namespace colmap {
 
 DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
-    : database_path_(database_path), database_(database_path, /*read_only=*/true) {
+    : database_(database_path, /*read_only=*/true),
+      readers_([database_path]() { return std::make_unique<Database>(database_path, /*read_only=*/true); }) {
   images_ = database_.ReadAllImages();
   for (Camera& camera : database_.ReadAllCameras()) {
     CheckCamera(camera);
@@ -93,32 +94,15 @@ void DatabaseFeatureSource::WarnAboutKeypointsOutside(image_t image_id, const Ke
   }
 }
 
-std::unique_ptr<Database> DatabaseFeatureSource::TakeReader() {
-  {
-    std::lock_guard<std::mutex> lock(readers_mutex_);
-    if (!idle_readers_.empty()) {
-      std::unique_ptr<Database> reader = std::move(idle_readers_.back());
-      idle_readers_.pop_back();
-      return reader;
-    }
-  }
-  return std::make_unique<Database>(database_path_, /*read_only=*/true);
-}
-
-void DatabaseFeatureSource::ReturnReader(std::unique_ptr<Database> reader) {
-  std::lock_guard<std::mutex> lock(readers_mutex_);
-  idle_readers_.push_back(std::move(reader));
-}
-
 ImageFeatures DatabaseFeatureSource::LoadFeatures(image_t image_id) {
   ImageFeatures features;
   features.image_id = image_id;
   {
-    std::unique_ptr<Database> reader = TakeReader();
+    std::unique_ptr<Database> reader = readers_.Acquire();
     // A reader that threw is dropped: its statements may be mid-step.
     features.keypoints = reader->ReadKeypoints(image_id);
     features.descriptors = reader->ReadDescriptors(image_id);
-    ReturnReader(std::move(reader));
+    readers_.Release(std::move(reader));
   }
   if (features.keypoints.size() != features.descriptors.rows()) {
     const Image& im = image(image_id);

@@ -11,6 +11,7 @@
 #include <unordered_set>
 #include <vector>
 
+#include "cashash/base/object_pool.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_writer_lock.h"
@@ -53,14 +54,8 @@ class DatabaseFeatureSource : public FeatureSource {
   static void CheckCamera(const Camera& camera);
   void WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints);
 
-  // A pooled reading connection, returned to the pool when done.
-  std::unique_ptr<Database> TakeReader();
-  void ReturnReader(std::unique_ptr<Database> reader);
-
-  std::string database_path_;
   Database database_;
-  std::mutex readers_mutex_;
-  std::vector<std::unique_ptr<Database>> idle_readers_;
+  ObjectPool<Database> readers_;  // LoadFeatures' connections, one per caller at a time
   std::vector<Image> images_;
   std::unordered_map<image_t, size_t> image_index_;
   std::unordered_map<camera_t, Camera> cameras_;

@@ -64,36 +64,6 @@ class DeferredExactRematch : public DeferredMatching {
 
 }  // namespace
 
-ExactMatcherPool::ExactMatcherPool(std::function<std::unique_ptr<FeatureMatcher>()> make) : make_(std::move(make)) {
-  if (!make_) throw std::invalid_argument("ExactMatcherPool needs a way to make matchers");
-}
-
-std::unique_ptr<FeatureMatcher> ExactMatcherPool::Acquire() {
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!idle_.empty()) {
-      std::unique_ptr<FeatureMatcher> matcher = std::move(idle_.back());
-      idle_.pop_back();
-      return matcher;
-    }
-  }
-  // Made outside the lock: a GPU matcher takes a while to set up.
-  std::unique_ptr<FeatureMatcher> matcher = make_();
-  std::lock_guard<std::mutex> lock(mutex_);
-  ++made_;
-  return matcher;
-}
-
-void ExactMatcherPool::Release(std::unique_ptr<FeatureMatcher> matcher) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  idle_.push_back(std::move(matcher));
-}
-
-size_t ExactMatcherPool::made() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return made_;
-}
-
 ExactRematchFeatureMatcher::ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
                                                        std::shared_ptr<ExactRematchCounts> counts,
                                                        std::shared_ptr<ExactMatcherPool> pool)

@@ -32,12 +32,11 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
-#include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
+#include "cashash/base/object_pool.h"
 #include "cashash/matchers/feature_matcher.h"
 
 namespace cashash {
@@ -52,21 +51,7 @@ struct ExactRematchCounts {
 
 // Brute-force matchers for deferred rematches, one per thread that
 // completes one at a time, made on first need and reused.
-class ExactMatcherPool {
- public:
-  explicit ExactMatcherPool(std::function<std::unique_ptr<FeatureMatcher>()> make);
-  // A matcher no other caller holds; give it back with Release.
-  std::unique_ptr<FeatureMatcher> Acquire();
-  void Release(std::unique_ptr<FeatureMatcher> matcher);
-  // Matchers made so far.
-  size_t made() const;
-
- private:
-  std::function<std::unique_ptr<FeatureMatcher>()> make_;
-  mutable std::mutex mutex_;
-  std::vector<std::unique_ptr<FeatureMatcher>> idle_;
-  size_t made_ = 0;
-};
+using ExactMatcherPool = ObjectPool<FeatureMatcher>;
 
 class ExactRematchFeatureMatcher : public FeatureMatcher {
  public:

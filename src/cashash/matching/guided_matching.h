@@ -176,8 +176,6 @@ class KeypointRecordingSource : public FeatureSource {
   ImageFeatures LoadFeatures(image_t image_id) override;
   std::shared_ptr<const ImageFeatures> LoadSharedFeatures(image_t image_id) override;
   const Camera& CameraOfImage(image_t image_id) const override { return inner_->CameraOfImage(image_id); }
-  // Loads may run at once as the inner source allows (the store is locked).
-  int MaxConcurrentLoads() const override { return inner_ ? inner_->MaxConcurrentLoads() : 1; }
 
   // The keypoints of the last load of image_id, removed from the store;
   // false when there are none.
