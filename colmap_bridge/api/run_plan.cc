@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <iomanip>
 #include <iostream>
 #include <memory>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
@@ -317,6 +319,13 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
                       " group steps, at most " + FormatMemorySize(stats.peak_bytes) + " cached");
 }
 
+// CASHASH_EXTRA_VERIFIERS=eager lets every verification thread take chunks
+// at once (PipelineOptions::extra_verifiers_on_backlog), to compare.
+bool ExtraVerifiersOnBacklogFromEnvironment() {
+  const char* text = std::getenv("CASHASH_EXTRA_VERIFIERS");
+  return text == nullptr || std::string(text) != "eager";
+}
+
 // Runs the pipeline over the plan and reports. Progress counts the pairs of
 // every rank written so far; rank 0 merges the other ranks' statistics.
 MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCallbacks& callbacks) {
@@ -325,6 +334,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCall
   pipeline_options.num_threads = plan.options.sift.num_threads;
   pipeline_options.skip_geometric_verification = plan.options.skip_geometric_verification;
   pipeline_options.two_view = plan.options.two_view;
+  pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   MatchingPipeline pipeline(pipeline_options, plan.features, plan.matcher.get(), plan.sink);
 
   std::mutex progress_mutex;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -326,6 +327,105 @@ TEST(BatchVerifierPipeline, MatchingRunsAheadOfASlowChunkByTheQueueDepth) {
     EXPECT_EQ(verifier.calls_while_held, static_cast<int>(depth) + 2) << "depth " << depth;
     EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
   }
+}
+
+// A verifier of two chunks at once (as the GPU one) that records how many
+// of its calls ran at the same time.
+class TwoAtOnceVerifier : public RecordingVerifier {
+ public:
+  int MaxConcurrentCalls() const override { return 2; }
+  std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+    const int now = ++in_flight;
+    int seen = max_in_flight.load();
+    while (now > seen && !max_in_flight.compare_exchange_weak(seen, now)) {
+    }
+    std::vector<TwoViewGeometry> out;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);  // RecordingVerifier's vectors
+      out = RecordingVerifier::Verify(pairs);
+    }
+    Hold();
+    --in_flight;
+    ++verified;
+    return out;
+  }
+  virtual void Hold() { std::this_thread::sleep_for(std::chrono::milliseconds(2)); }
+  std::atomic<int> in_flight{0}, max_in_flight{0}, verified{0};
+
+ private:
+  std::mutex mutex_;
+};
+
+// While matching keeps ahead of one verification thread, the second takes
+// nothing: matching shares the device with one chunk's RANSAC, not two.
+// The matcher here matches a chunk only once the previous one is verified,
+// so the queue never fills.
+TEST(BatchVerifierPipeline, ASecondVerifierWaitsWhileMatchingKeepsUp) {
+  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
+  TwoAtOnceVerifier verifier;
+  class PacedMatcher : public IdentityMatcher {
+   public:
+    explicit PacedMatcher(TwoAtOnceVerifier* v) : v_(v) {}
+    std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+      const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+      while (v_->verified.load() < calls_ && std::chrono::steady_clock::now() < give_up) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      ++calls_;
+      return IdentityMatcher::MatchPairs(pairs);
+    }
+
+   private:
+    TwoAtOnceVerifier* v_;
+    int calls_ = 0;
+  } matcher(&verifier);
+  Sink sink;
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
+  EXPECT_EQ(stats.verification_threads, 2);
+  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+  EXPECT_EQ(verifier.max_in_flight.load(), 1);
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+}
+
+// Once the queue to verification is full (matching is about to wait), the
+// second thread verifies too: the first thread's chunk is held here until
+// another call starts, which only the second thread can make.
+TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
+  const std::vector<PairChunk> chunks = Chunks(24, 3);  // 36 chunks
+  ChoosingMatcher matcher(0);
+  class HeldFirstVerifier : public TwoAtOnceVerifier {
+   public:
+    explicit HeldFirstVerifier(ChoosingMatcher* m) : m_(m) {}
+    void Hold() override {
+      if (!held_.exchange(true)) {
+        holding_ = true;
+        const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+        while (!second_while_held.load() && std::chrono::steady_clock::now() < give_up) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+        holding_ = false;
+      } else if (holding_.load() && !second_while_held.load()) {
+        matched_when_second = m_->calls.load();
+        second_while_held = true;
+      }
+    }
+    std::atomic<bool> second_while_held{false};
+    std::atomic<int> matched_when_second{0};
+
+   private:
+    ChoosingMatcher* m_;
+    std::atomic<bool> held_{false}, holding_{false};
+  } verifier(&matcher);
+  Sink sink;
+  PipelineOptions options;
+  options.chunks_in_queue = 3;
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+  EXPECT_TRUE(verifier.second_while_held.load());
+  // Long before matching ended (36 chunks): the held chunk, the second
+  // thread's, the queue of 3 full again, one matched chunk waiting.
+  EXPECT_LE(verifier.matched_when_second.load(), 6);
+  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
 }
 
 }  // namespace

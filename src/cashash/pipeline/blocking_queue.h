@@ -22,7 +22,8 @@ class BlockingQueue {
     not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
     if (closed_) return false;
     items_.push_back(std::move(item));
-    not_empty_.notify_one();
+    // All: consumers may wait for different things (PopWhenBacklogged).
+    not_empty_.notify_all();
     return true;
   }
 
@@ -36,6 +37,21 @@ class BlockingQueue {
     not_full_.notify_one();
     return item;
   }
+
+  // As Pop, but waits until at least `backlog` items wait or the queue is
+  // closed: for a helper consumer that should work only when the others
+  // cannot keep up (the producer is about to block) or at the end.
+  std::optional<T> PopWhenBacklogged(size_t backlog) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    not_empty_.wait(lock, [&] { return closed_ || (!items_.empty() && items_.size() >= backlog); });
+    if (items_.empty()) return std::nullopt;
+    T item = std::move(items_.front());
+    items_.pop_front();
+    not_full_.notify_one();
+    return item;
+  }
+
+  size_t capacity() const { return capacity_; }
 
   // No more pushes; consumers drain what is left.
   void Close() {

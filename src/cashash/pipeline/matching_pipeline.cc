@@ -235,12 +235,14 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   InOrderTurnstile to_writer_in_order;
   VerificationGate gate;
   std::atomic<int> verifier_threads_left{num_verifier_threads};
-  auto verification_stage = [&]() {
+  auto verification_stage = [&](int thread) {
+    const bool helper = thread > 0 && options_.extra_verifiers_on_backlog;
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
         gate.Wait();
-        std::optional<MatchedChunk> item = to_verify.Pop();
+        std::optional<MatchedChunk> item =
+            helper ? to_verify.PopWhenBacklogged(to_verify.capacity()) : to_verify.Pop();
         add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
@@ -261,7 +263,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     if (--verifier_threads_left == 0) to_write.Close();
   };
   std::vector<std::thread> verifier_threads;
-  for (int t = 0; t < num_verifier_threads; ++t) verifier_threads.emplace_back(verification_stage);
+  for (int t = 0; t < num_verifier_threads; ++t) verifier_threads.emplace_back(verification_stage, t);
 
   // Stage 1 (this thread): load what the chunk needs, match. The gate opens
   // once the matcher has chosen, or before a push that could wait for

@@ -70,6 +70,13 @@ struct PipelineOptions {
   // and 1,000 images unchanged within noise.
   size_t chunks_in_queue = 6;
   size_t chunks_to_write = 6;
+  // With several verification threads (a GPU verifier keeps two chunks in
+  // flight), the second and later take a chunk only once the queue to
+  // verification is full, that is when matching is about to wait for them,
+  // or once matching has ended. While matching runs it then shares the GPU
+  // with one chunk's RANSAC instead of two; the backlog and the tail are
+  // still verified two at a time. false: every thread takes chunks at once.
+  bool extra_verifiers_on_backlog = true;
 };
 
 struct PipelineProgress {
