@@ -21,6 +21,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "cashash/base/object_pool.h"
 #include "cashash/matching/cascade_hashing.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/matching/brute_force_matcher.cuh"
@@ -90,57 +91,39 @@ struct BatchSlot {
   bool busy = false;
 };
 
-// Brute-force kernels for exact-matching tickets run on other threads: one
-// per thread running a ticket at a time, each on a stream of its own. (A
-// twin of ObjectPool, base/object_pool.h, with the stream's teardown; kept
-// as run on the H200 in device runs 50-55 until a device run checks the
-// ObjectPool version.)
-class ExactKernelsPool {
+// Brute-force kernels for an exact-matching ticket run on another thread,
+// on a stream of their own; a pool (ObjectPool) keeps one per thread that
+// runs tickets at once.
+class ExactKernels {
  public:
-  struct Lease {
-    cudaStream_t stream = nullptr;
-    std::unique_ptr<BruteForceKernels> kernels;
-  };
-  explicit ExactKernelsPool(int device) : device_(device) {}
-  ~ExactKernelsPool() {
+  explicit ExactKernels(int device) : device_(device) {
+    CUDA_CHECK(cudaSetDevice(device));
+    stream_ = CreateStageStream(StreamRole::kMatching);
+    try {
+      kernels_ = std::make_unique<BruteForceKernels>(stream_);
+    } catch (...) {
+      cudaStreamDestroy(stream_);
+      throw;
+    }
+  }
+  // Also runs for kernels that failed half-way, which the ticket does not
+  // give back: their stream may hold half a batch and goes with them.
+  ~ExactKernels() {
     cudaSetDevice(device_);
-    for (Lease& lease : idle_) {
-      lease.kernels.reset();
-      cudaStreamDestroy(lease.stream);
-    }
+    kernels_.reset();
+    cudaStreamDestroy(stream_);
   }
-  ExactKernelsPool(const ExactKernelsPool&) = delete;
-  ExactKernelsPool& operator=(const ExactKernelsPool&) = delete;
+  ExactKernels(const ExactKernels&) = delete;
+  ExactKernels& operator=(const ExactKernels&) = delete;
 
-  Lease Acquire() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!idle_.empty()) {
-        Lease lease = std::move(idle_.back());
-        idle_.pop_back();
-        return lease;
-      }
-    }
-    Lease lease;
-    lease.stream = CreateStageStream(StreamRole::kMatching);
-    lease.kernels = std::make_unique<BruteForceKernels>(lease.stream);
-    return lease;
-  }
-  void Release(Lease lease) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    idle_.push_back(std::move(lease));
-  }
-  // A lease whose work failed: its stream may hold half a batch.
-  void Discard(Lease lease) {
-    lease.kernels.reset();
-    cudaStreamDestroy(lease.stream);
-  }
+  BruteForceKernels* kernels() { return kernels_.get(); }
 
  private:
   const int device_;
-  std::mutex mutex_;
-  std::vector<Lease> idle_;
+  cudaStream_t stream_ = nullptr;
+  std::unique_ptr<BruteForceKernels> kernels_;
 };
+using ExactKernelsPool = ObjectPool<ExactKernels>;
 
 // Exact matches of pairs from device descriptors the cascade matcher holds:
 // the ticket keeps their blocks (and the pool they return to) until it goes.
@@ -163,14 +146,8 @@ class GpuExactMatchingTicket : public ExactMatchingTicket {
 
   std::vector<FeatureMatches> Run() override {
     CUDA_CHECK(cudaSetDevice(device_));
-    ExactKernelsPool::Lease lease = kernels_->Acquire();
-    std::vector<FeatureMatches> matches;
-    try {
-      matches = MatchPairsInBatches(lease.kernels.get(), pairs_, thresholds_);
-    } catch (...) {
-      kernels_->Discard(std::move(lease));
-      throw;
-    }
+    std::unique_ptr<ExactKernels> lease = kernels_->Acquire();
+    std::vector<FeatureMatches> matches = MatchPairsInBatches(lease->kernels(), pairs_, thresholds_);
     kernels_->Release(std::move(lease));
     return matches;
   }
@@ -286,7 +263,10 @@ class GpuCascadeMatcher : public FeatureMatcher {
   // uploading it again (0.9 GB per 300-image street) beside the next
   // chunk's images.
   std::unique_ptr<ExactMatchingTicket> DeferExactMatching(const std::vector<ImagePair>& pairs) override {
-    if (!ticket_kernels_) ticket_kernels_ = std::make_shared<ExactKernelsPool>(device_);
+    if (!ticket_kernels_) {
+      const int device = device_;
+      ticket_kernels_ = std::make_shared<ExactKernelsPool>([device] { return std::make_unique<ExactKernels>(device); });
+    }
     auto ticket = std::make_unique<GpuExactMatchingTicket>(device_, image_pool_, ticket_kernels_,
                                                            ToMatchThresholds(sift_options_));
     for (const ImagePair& pair : pairs) {
