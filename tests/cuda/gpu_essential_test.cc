@@ -130,6 +130,46 @@ std::vector<EssentialCase> EssentialCases() {
   return cases;
 }
 
+// E's local refit takes the normal matrix's four smallest eigenvectors; the
+// kernel decomposes it with a warp (WarpSymmetricJacobi9). On the normal
+// matrices of noisy epipolar rows, the basis spans what the host's serial
+// decomposition gives: each vector the host's up to sign, to 1e-9.
+TEST(GpuEssential, WarpEigenDecompositionGivesTheHostsLocalBasis) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0, 1);
+  const int num = 64;
+  std::vector<double> uppers(45 * num, 0.0);
+  for (int m = 0; m < num; ++m) {
+    // Rows near a rank-5 system (a near-null space of dimension 4).
+    double dirs[5][9];
+    for (auto& d : dirs)
+      for (double& x : d) x = noise(rng);
+    for (int r = 0; r < 20 + 10 * m; ++r) {
+      double row[9] = {0};
+      for (const auto& d : dirs) {
+        const double w = noise(rng);
+        for (int i = 0; i < 9; ++i) row[i] += w * d[i];
+      }
+      for (double& x : row) x += 1e-3 * noise(rng);
+      int k = 0;
+      for (int i = 0; i < 9; ++i)
+        for (int j = i; j < 9; ++j) uppers[45 * m + k++] += row[i] * row[j];
+    }
+  }
+  std::vector<double> device(36 * num);
+  cuda::EssentialLocalBasisOnDevice(uppers.data(), num, device.data());
+  for (int m = 0; m < num; ++m) {
+    double host[4][9];
+    ASSERT_TRUE(five_point::LeastSquaresNullSpace(&uppers[45 * m], host));
+    for (int e = 0; e < 4; ++e) {
+      double dot = 0;
+      for (int i = 0; i < 9; ++i) dot += host[e][i] * device[36 * m + 9 * e + i];
+      EXPECT_NEAR(std::abs(dot), 1.0, 1e-9) << "matrix " << m << " vector " << e;
+    }
+  }
+}
+
 TEST(GpuEssential, RansacAgreesWithCpuOnSyntheticPairs) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const std::vector<EssentialCase> cases = EssentialCases();

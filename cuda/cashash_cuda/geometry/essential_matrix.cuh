@@ -31,6 +31,7 @@ struct EssentialModel {
   }
   __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
   static constexpr bool kSampsonResidual = true;  // Residual = SampsonParts' num2 / den
+  static constexpr bool kLocalNullSpace = true;  // LocalSolve = LeastSquaresNullSpace + SolveFromBasis (ransac.cu splits it)
   __device__ static void AddRows(float4 p, double* upper) {
     double row[9];
     EpipolarRow(p, row);

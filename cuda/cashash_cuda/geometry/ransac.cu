@@ -18,6 +18,7 @@
 #include "cashash_cuda/geometry/essential_matrix.cuh"
 #include "cashash_cuda/geometry/fundamental_matrix.cuh"
 #include "cashash_cuda/geometry/homography_matrix.cuh"
+#include "cashash_cuda/geometry/warp_symmetric_jacobi.cuh"
 #include "cashash_cuda/utils/cuda_check.cuh"
 
 namespace cashash {
@@ -47,6 +48,9 @@ struct BlockScratch {
   double upper[45];
   double best_model[9];
   double local_models[kMaxLocalModels][9];
+  // E's local refit: the normal matrix's eigen decomposition by warp 0.
+  double jacobi_a[81];
+  double jacobi_v[81];
   unsigned long long best_key;
   int best_count;
   int num_local;
@@ -118,7 +122,29 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
     s.upper[threadIdx.x] = v;
   }
   __syncthreads();
-  if (threadIdx.x == 0) {
+  if constexpr (Model::kLocalNullSpace) {
+    // E: the null space's eigen decomposition by warp 0, the 5-point
+    // solve on it by thread 0 (EssentialModel::LocalSolve's two steps).
+    if (threadIdx.x < 32) {
+      bool finite = true;
+      for (int i = threadIdx.x; i < 81; i += 32) {
+        s.jacobi_a[i] = s.upper[five_point::NormalMatrixUpperIndex(i / 9, i % 9)];
+        finite = finite && isfinite(s.jacobi_a[i]);
+      }
+      finite = __all_sync(0xffffffffu, finite);
+      __syncwarp();
+      if (finite) WarpSymmetricJacobi9(s.jacobi_a, s.jacobi_v);
+      if (threadIdx.x == 0) {
+        s.num_local = 0;
+        if (finite) {
+          double basis[4][9];
+          five_point::NullSpaceFromEigen(s.jacobi_a, s.jacobi_v, basis);
+          s.num_local = five_point::SolveFromBasis(basis, s.local_models);
+        }
+        ++s.num_local_refits;
+      }
+    }
+  } else if (threadIdx.x == 0) {
     s.num_local = Model::LocalSolve(s.upper, s.best_model, s.local_models);
     ++s.num_local_refits;
   }
@@ -392,7 +418,37 @@ __global__ void EssentialFivePointKernel(const float4* samples, int num_samples,
     for (int k = 0; k < 9; ++k) models[(i * five_point::kMaxSolutions + m) * 9 + k] = out[m][k];
 }
 
+// One warp per normal matrix: E's local-refit basis as the kernel finds it
+// (tests).
+__global__ void EssentialLocalBasisKernel(const double* uppers, int num_matrices, double* bases) {
+  __shared__ double a[81], v[81];
+  const int m = static_cast<int>(blockIdx.x);
+  if (m >= num_matrices) return;
+  for (int i = threadIdx.x; i < 81; i += 32) a[i] = uppers[45 * m + five_point::NormalMatrixUpperIndex(i / 9, i % 9)];
+  __syncwarp();
+  WarpSymmetricJacobi9(a, v);
+  if (threadIdx.x == 0) {
+    double basis[4][9];
+    five_point::NullSpaceFromEigen(a, v, basis);
+    for (int e = 0; e < 4; ++e)
+      for (int i = 0; i < 9; ++i) bases[36 * m + 9 * e + i] = basis[e][i];
+  }
+}
+
 }  // namespace
+
+void EssentialLocalBasisOnDevice(const double* uppers, int num_matrices, double* bases) {
+  if (num_matrices <= 0) return;
+  double *d_uppers = nullptr, *d_bases = nullptr;
+  CUDA_CHECK(cudaMalloc(&d_uppers, sizeof(double) * 45 * num_matrices));
+  CUDA_CHECK(cudaMalloc(&d_bases, sizeof(double) * 36 * num_matrices));
+  CUDA_CHECK(cudaMemcpy(d_uppers, uppers, sizeof(double) * 45 * num_matrices, cudaMemcpyHostToDevice));
+  EssentialLocalBasisKernel<<<num_matrices, 32>>>(d_uppers, num_matrices, d_bases);
+  CUDA_CHECK_LAUNCH();
+  CUDA_CHECK(cudaMemcpy(bases, d_bases, sizeof(double) * 36 * num_matrices, cudaMemcpyDeviceToHost));
+  cudaFree(d_uppers);
+  cudaFree(d_bases);
+}
 
 void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
   if (E.num_pairs == 0) return;

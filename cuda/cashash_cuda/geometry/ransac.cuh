@@ -87,5 +87,11 @@ void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream);
 // block as in the RANSAC kernel.
 float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts);
 
+// Tests: E's local-refit basis (the four null-space vectors of
+// five_point::LeastSquaresNullSpace, 36 doubles per matrix) of num_matrices
+// normal matrices (45 upper-triangle doubles each), computed as the RANSAC
+// kernel computes it, the eigen decomposition by a warp. Synchronous.
+void EssentialLocalBasisOnDevice(const double* uppers, int num_matrices, double* bases);
+
 }  // namespace cuda
 }  // namespace cashash

@@ -119,18 +119,9 @@ CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v) {
   }
 }
 
-// Least-squares basis from the 9 x 9 normal matrix of >= 5 epipolar rows,
-// given by its 45 upper-triangle entries (row-major over i <= j): the
-// eigenvectors of the four smallest eigenvalues, the smallest as E4 (the
-// constant term, so the solution sits near (x, y, z) = 0, as on the CPU).
-CASHASH_HOST_DEVICE inline bool LeastSquaresNullSpace(const double* upper, double (*basis)[9]) {
-  double a[81], v[81];
-  int k = 0;
-  for (int i = 0; i < 9; ++i)
-    for (int j = i; j < 9; ++j) a[i * 9 + j] = a[j * 9 + i] = upper[k++];
-  for (int i = 0; i < 81; ++i)
-    if (!isfinite(a[i])) return false;
-  SymmetricJacobi<9>(a, v);
+// The basis from the normal matrix's eigen decomposition (SymmetricJacobi's
+// `a` and `v`); the GPU's local refit runs the decomposition by a warp.
+CASHASH_HOST_DEVICE inline void NullSpaceFromEigen(const double* a, const double* v, double (*basis)[9]) {
   // Order the eigenvalues (selection of the four smallest).
   int order[9];
   for (int i = 0; i < 9; ++i) order[i] = i;
@@ -145,6 +136,31 @@ CASHASH_HOST_DEVICE inline bool LeastSquaresNullSpace(const double* upper, doubl
   const int slot[4] = {3, 0, 1, 2};
   for (int e = 0; e < 4; ++e)
     for (int i = 0; i < 9; ++i) basis[slot[e]][i] = v[i * 9 + order[e]];
+}
+
+// Entry (i, j) of the 9 x 9 normal matrix given by its 45 upper-triangle
+// entries (row-major over i <= j).
+CASHASH_HOST_DEVICE inline int NormalMatrixUpperIndex(int i, int j) {
+  if (i > j) {
+    const int t = i;
+    i = j;
+    j = t;
+  }
+  return i * 9 - i * (i - 1) / 2 + (j - i);
+}
+
+// Least-squares basis from the 9 x 9 normal matrix of >= 5 epipolar rows,
+// given by its 45 upper-triangle entries (row-major over i <= j): the
+// eigenvectors of the four smallest eigenvalues, the smallest as E4 (the
+// constant term, so the solution sits near (x, y, z) = 0, as on the CPU).
+CASHASH_HOST_DEVICE inline bool LeastSquaresNullSpace(const double* upper, double (*basis)[9]) {
+  double a[81], v[81];
+  for (int i = 0; i < 81; ++i) {
+    a[i] = upper[NormalMatrixUpperIndex(i / 9, i % 9)];
+    if (!isfinite(a[i])) return false;
+  }
+  SymmetricJacobi<9>(a, v);
+  NullSpaceFromEigen(a, v, basis);
   return true;
 }
 
