@@ -9,6 +9,7 @@
 #include <cstdint>
 
 #include "cashash/base/host_device.h"
+#include "cashash/geometry/five_point_solver.h"
 
 namespace cashash {
 namespace cuda {
@@ -110,35 +111,18 @@ __device__ void SmallestEigenvector(double* a, double* out) {
   double v[N * N];
   for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
   for (int sweep = 0; sweep < 40; ++sweep) {
-    double off = 0, diag = 0;
-    for (int p = 0; p < N; ++p) {
-      diag += a[p * N + p] * a[p * N + p];
-      for (int q = p + 1; q < N; ++q) off += a[p * N + q] * a[p * N + q];
-    }
+    double off, diag;
+    five_point::JacobiNorms<N>(a, &off, &diag);
     if (off <= 1e-30 * diag || off == 0) break;
     for (int p = 0; p < N - 1; ++p) {
       for (int q = p + 1; q < N; ++q) {
         const double apq = a[p * N + q];
         if (apq == 0) continue;
-        const double theta = (a[q * N + q] - a[p * N + p]) / (2 * apq);
-        const double t = fabs(theta) > 1e150 ? 0.5 / theta
-                                              : copysign(1.0, theta) / (fabs(theta) + sqrt(theta * theta + 1));
-        const double c = 1 / sqrt(t * t + 1), s = t * c;
-        for (int k = 0; k < N; ++k) {  // columns p, q
-          const double akp = a[k * N + p], akq = a[k * N + q];
-          a[k * N + p] = c * akp - s * akq;
-          a[k * N + q] = s * akp + c * akq;
-        }
-        for (int k = 0; k < N; ++k) {  // rows p, q
-          const double apk = a[p * N + k], aqk = a[q * N + k];
-          a[p * N + k] = c * apk - s * aqk;
-          a[q * N + k] = s * apk + c * aqk;
-        }
-        for (int k = 0; k < N; ++k) {
-          const double vkp = v[k * N + p], vkq = v[k * N + q];
-          v[k * N + p] = c * vkp - s * vkq;
-          v[k * N + q] = s * vkp + c * vkq;
-        }
+        double c, s;
+        five_point::JacobiRotation(a[p * N + p], a[q * N + q], apq, &c, &s);
+        for (int k = 0; k < N; ++k) five_point::RotatePair(&a[k * N + p], &a[k * N + q], c, s);  // columns p, q
+        for (int k = 0; k < N; ++k) five_point::RotatePair(&a[p * N + k], &a[q * N + k], c, s);  // rows p, q
+        for (int k = 0; k < N; ++k) five_point::RotatePair(&v[k * N + p], &v[k * N + q], c, s);
       }
     }
   }

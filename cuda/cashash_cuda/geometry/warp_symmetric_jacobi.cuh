@@ -9,6 +9,8 @@
 
 #include <cuda_runtime.h>
 
+#include "cashash/geometry/five_point_solver.h"
+
 namespace cashash {
 namespace cuda {
 
@@ -22,37 +24,22 @@ __device__ inline void WarpSymmetricJacobi9(double* a, double* v) {
   for (int i = lane; i < N * N; i += 32) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
   __syncwarp();
   for (int sweep = 0; sweep < 50; ++sweep) {
-    double off = 0, diag = 0;
-    for (int p = 0; p < N; ++p) {
-      diag += a[p * N + p] * a[p * N + p];
-      for (int q = p + 1; q < N; ++q) off += a[p * N + q] * a[p * N + q];
-    }
+    double off, diag;
+    five_point::JacobiNorms<N>(a, &off, &diag);
     if (off <= 1e-32 * diag || off == 0) break;
     for (int p = 0; p < N - 1; ++p) {
       for (int q = p + 1; q < N; ++q) {
         const double apq = a[p * N + q];
         if (apq == 0) continue;
-        const double theta = (a[q * N + q] - a[p * N + p]) / (2 * apq);
-        const double t = fabs(theta) > 1e150 ? 0.5 / theta
-                                              : copysign(1.0, theta) / (fabs(theta) + sqrt(theta * theta + 1));
-        const double c = 1 / sqrt(t * t + 1), s = t * c;
+        double c, s;
+        five_point::JacobiRotation(a[p * N + p], a[q * N + q], apq, &c, &s);
         __syncwarp();  // every lane has read a[p][q], a[p][p] and a[q][q]
         if (lane < N) {
-          const int k = lane;
-          const double akp = a[k * N + p], akq = a[k * N + q];
-          a[k * N + p] = c * akp - s * akq;
-          a[k * N + q] = s * akp + c * akq;
-          const double vkp = v[k * N + p], vkq = v[k * N + q];
-          v[k * N + p] = c * vkp - s * vkq;
-          v[k * N + q] = s * vkp + c * vkq;
+          five_point::RotatePair(&a[lane * N + p], &a[lane * N + q], c, s);  // columns p, q
+          five_point::RotatePair(&v[lane * N + p], &v[lane * N + q], c, s);
         }
         __syncwarp();
-        if (lane < N) {
-          const int k = lane;
-          const double apk = a[p * N + k], aqk = a[q * N + k];
-          a[p * N + k] = c * apk - s * aqk;
-          a[q * N + k] = s * apk + c * aqk;
-        }
+        if (lane < N) five_point::RotatePair(&a[p * N + lane], &a[q * N + lane], c, s);  // rows p, q
         __syncwarp();
       }
     }

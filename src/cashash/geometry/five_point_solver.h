@@ -79,41 +79,54 @@ CASHASH_HOST_DEVICE inline bool MinimalNullSpace(const double (*rows)[9], double
   return true;
 }
 
+// Pieces of a cyclic Jacobi eigen decomposition, shared by SymmetricJacobi
+// below and the GPU's (SmallestEigenvector in ransac_numerics.cuh, a warp's
+// in warp_symmetric_jacobi.cuh).
+// Squared off-diagonal and diagonal norms of the symmetric N x N matrix `a`,
+// whose ratio stops the sweeps.
+template <int N>
+CASHASH_HOST_DEVICE inline void JacobiNorms(const double* a, double* off, double* diag) {
+  *off = 0;
+  *diag = 0;
+  for (int p = 0; p < N; ++p) {
+    *diag += a[p * N + p] * a[p * N + p];
+    for (int q = p + 1; q < N; ++q) *off += a[p * N + q] * a[p * N + q];
+  }
+}
+
+// The rotation (c, s) that zeroes the off-diagonal entry apq (non-zero).
+CASHASH_HOST_DEVICE inline void JacobiRotation(double app, double aqq, double apq, double* c, double* s) {
+  const double theta = (aqq - app) / (2 * apq);
+  const double t = fabs(theta) > 1e150 ? 0.5 / theta : copysign(1.0, theta) / (fabs(theta) + sqrt(theta * theta + 1));
+  *c = 1 / sqrt(t * t + 1);
+  *s = t * *c;
+}
+
+// (x, y) <- (c x - s y, s x + c y).
+CASHASH_HOST_DEVICE inline void RotatePair(double* x, double* y, double c, double s) {
+  const double x0 = *x, y0 = *y;
+  *x = c * x0 - s * y0;
+  *y = s * x0 + c * y0;
+}
+
 // Cyclic Jacobi on the symmetric n x n matrix `a` (row-major, destroyed):
 // eigenvalues on its diagonal, eigenvectors in the columns of `v`.
 template <int N>
 CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v) {
   for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
   for (int sweep = 0; sweep < 50; ++sweep) {
-    double off = 0, diag = 0;
-    for (int p = 0; p < N; ++p) {
-      diag += a[p * N + p] * a[p * N + p];
-      for (int q = p + 1; q < N; ++q) off += a[p * N + q] * a[p * N + q];
-    }
+    double off, diag;
+    JacobiNorms<N>(a, &off, &diag);
     if (off <= 1e-32 * diag || off == 0) break;
     for (int p = 0; p < N - 1; ++p) {
       for (int q = p + 1; q < N; ++q) {
         const double apq = a[p * N + q];
         if (apq == 0) continue;
-        const double theta = (a[q * N + q] - a[p * N + p]) / (2 * apq);
-        const double t = fabs(theta) > 1e150 ? 0.5 / theta
-                                              : copysign(1.0, theta) / (fabs(theta) + sqrt(theta * theta + 1));
-        const double c = 1 / sqrt(t * t + 1), s = t * c;
-        for (int k = 0; k < N; ++k) {
-          const double akp = a[k * N + p], akq = a[k * N + q];
-          a[k * N + p] = c * akp - s * akq;
-          a[k * N + q] = s * akp + c * akq;
-        }
-        for (int k = 0; k < N; ++k) {
-          const double apk = a[p * N + k], aqk = a[q * N + k];
-          a[p * N + k] = c * apk - s * aqk;
-          a[q * N + k] = s * apk + c * aqk;
-        }
-        for (int k = 0; k < N; ++k) {
-          const double vkp = v[k * N + p], vkq = v[k * N + q];
-          v[k * N + p] = c * vkp - s * vkq;
-          v[k * N + q] = s * vkp + c * vkq;
-        }
+        double c, s;
+        JacobiRotation(a[p * N + p], a[q * N + q], apq, &c, &s);
+        for (int k = 0; k < N; ++k) RotatePair(&a[k * N + p], &a[k * N + q], c, s);  // columns p, q
+        for (int k = 0; k < N; ++k) RotatePair(&a[p * N + k], &a[q * N + k], c, s);  // rows p, q
+        for (int k = 0; k < N; ++k) RotatePair(&v[k * N + p], &v[k * N + q], c, s);
       }
     }
   }
