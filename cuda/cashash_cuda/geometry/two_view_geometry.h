@@ -91,7 +91,10 @@ bool GpuEssentialFromEnvironment();
 // 2 takes most of the first and little of the second. One at a time keeps
 // the matching stage closer to its matching-only time (device run 51: 1.19-
 // 1.22x against 1.39-1.58x at 300 images) but the whole command is 2-5 %
-// slower, so the default stays at 2.
+// slower, so the default stays at 2; the pipeline's second verification
+// thread takes a chunk only on a backlog or after matching
+// (PipelineOptions::extra_verifiers_on_backlog), which gives the first
+// without the second (device run 58).
 constexpr int kDefaultGpuVerificationsInFlight = 2;
 int GpuVerificationsInFlightFromEnvironment();
 
