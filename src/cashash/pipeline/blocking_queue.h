@@ -28,15 +28,7 @@ class BlockingQueue {
   }
 
   // Blocks while empty; returns nullopt once closed and drained.
-  std::optional<T> Pop() {
-    std::unique_lock<std::mutex> lock(mutex_);
-    not_empty_.wait(lock, [&] { return closed_ || !items_.empty(); });
-    if (items_.empty()) return std::nullopt;
-    T item = std::move(items_.front());
-    items_.pop_front();
-    not_full_.notify_one();
-    return item;
-  }
+  std::optional<T> Pop() { return PopWhenBacklogged(1); }
 
   // As Pop, but waits until at least `backlog` items wait or the queue is
   // closed: for a helper consumer that should work only when the others

@@ -236,13 +236,13 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   VerificationGate gate;
   std::atomic<int> verifier_threads_left{num_verifier_threads};
   auto verification_stage = [&](int thread) {
-    const bool helper = thread > 0 && options_.extra_verifiers_on_backlog;
+    // A helper (the second thread on) waits for a full queue or the end.
+    const size_t backlog = thread > 0 && options_.extra_verifiers_on_backlog ? to_verify.capacity() : 1;
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
         gate.Wait();
-        std::optional<MatchedChunk> item =
-            helper ? to_verify.PopWhenBacklogged(to_verify.capacity()) : to_verify.Pop();
+        std::optional<MatchedChunk> item = to_verify.PopWhenBacklogged(backlog);
         add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
