@@ -7,6 +7,7 @@
 #include "cashash_cuda/geometry/ransac_numerics.cuh"
 #include "cashash/geometry/five_point_solver.h"
 #include "cashash_cuda/geometry/fundamental_matrix.cuh"
+#include "cashash_cuda/geometry/warp_symmetric_jacobi.cuh"
 
 namespace cashash {
 namespace cuda {
@@ -14,7 +15,8 @@ namespace ransac {
 
 // E on normalised camera coordinates (x2^T E x1 = 0): 5-point hypotheses,
 // Sampson residuals as F, and the CPU path's local refit, the 5-point solver
-// on the least-squares null space of all inliers (up to 10 models).
+// on the least-squares null space of all inliers (up to 10 models), which a
+// warp runs (kWarpLocalSolve).
 struct EssentialModel {
   static constexpr int kSampleSize = 5;
   static constexpr int kMaxModels = five_point::kMaxSolutions;
@@ -31,15 +33,37 @@ struct EssentialModel {
   }
   __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
   static constexpr bool kSampsonResidual = true;  // Residual = SampsonParts' num2 / den
-  static constexpr bool kLocalNullSpace = true;  // LocalSolve = LeastSquaresNullSpace + SolveFromBasis (ransac.cu splits it)
+  static constexpr bool kWarpLocalSolve = true;  // WarpLocalSolve, not LocalSolve
   __device__ static void AddRows(float4 p, double* upper) {
     double row[9];
     EpipolarRow(p, row);
     AddOuter(row, upper);
   }
-  __device__ static int LocalSolve(const double* upper, const double* start, double (*models)[9]) {
+  // The least-squares null space of the normal matrix given by its 45
+  // upper-triangle entries, as five_point::LeastSquaresNullSpace gives it,
+  // with the eigen decomposition by the calling warp (WarpSymmetricJacobi9;
+  // `a` and `v`: 81 doubles of shared memory each). Every lane calls it and
+  // gets the same return value, false for non-finite input; lane 0 gets the
+  // basis.
+  __device__ static bool WarpLocalBasis(const double* upper, double* a, double* v, double (*basis)[9]) {
+    const int lane = threadIdx.x % 32;
+    bool finite = true;
+    for (int i = lane; i < 81; i += 32) {
+      a[i] = upper[five_point::NormalMatrixUpperIndex(i / 9, i % 9)];
+      finite = finite && isfinite(a[i]);
+    }
+    finite = __all_sync(0xffffffffu, finite);
+    __syncwarp();
+    if (!finite) return false;
+    WarpSymmetricJacobi9(a, v);
+    if (lane == 0) five_point::NullSpaceFromEigen(a, v, basis);
+    return true;
+  }
+  // The CPU path's local refit, the 5-point solver on that basis (up to 10
+  // models): called by a whole warp, the models and their count on lane 0.
+  __device__ static int WarpLocalSolve(const double* upper, double* a, double* v, double (*models)[9]) {
     double basis[4][9];
-    if (!five_point::LeastSquaresNullSpace(upper, basis)) return 0;
+    if (!WarpLocalBasis(upper, a, v, basis) || threadIdx.x % 32 != 0) return 0;
     return five_point::SolveFromBasis(basis, models);
   }
 };

@@ -135,7 +135,7 @@ struct FundamentalModel {
   }
   __device__ static float Residual(const float* m, float4 p) { return SampsonSquared(m, p); }
   static constexpr bool kSampsonResidual = true;  // Residual = SampsonParts' num2 / den
-  static constexpr bool kLocalNullSpace = false;
+  static constexpr bool kWarpLocalSolve = false;  // LocalSolve on one thread
   __device__ static void AddRows(float4 p, double* upper) {
     double row[9];
     EpipolarRow(p, row);

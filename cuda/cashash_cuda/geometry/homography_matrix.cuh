@@ -69,7 +69,7 @@ struct HomographyModel {
   }
   __device__ static float Residual(const float* m, float4 p) { return TransferSquared(m, p); }
   static constexpr bool kSampsonResidual = false;
-  static constexpr bool kLocalNullSpace = false;
+  static constexpr bool kWarpLocalSolve = false;  // LocalSolve on one thread
   __device__ static void AddRows(float4 p, double* upper) {
     double r1[9], r2[9];
     HomographyRows(p, r1, r2);

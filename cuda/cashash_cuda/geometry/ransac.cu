@@ -18,7 +18,6 @@
 #include "cashash_cuda/geometry/essential_matrix.cuh"
 #include "cashash_cuda/geometry/fundamental_matrix.cuh"
 #include "cashash_cuda/geometry/homography_matrix.cuh"
-#include "cashash_cuda/geometry/warp_symmetric_jacobi.cuh"
 #include "cashash_cuda/utils/cuda_check.cuh"
 
 namespace cashash {
@@ -48,7 +47,8 @@ struct BlockScratch {
   double upper[45];
   double best_model[9];
   double local_models[kMaxLocalModels][9];
-  // E's local refit: the normal matrix's eigen decomposition by warp 0.
+  // E's local refit: the normal matrix's eigen decomposition by warp 0
+  // (EssentialModel::WarpLocalSolve).
   double jacobi_a[81];
   double jacobi_v[81];
   unsigned long long best_key;
@@ -122,25 +122,13 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
     s.upper[threadIdx.x] = v;
   }
   __syncthreads();
-  if constexpr (Model::kLocalNullSpace) {
-    // E: the null space's eigen decomposition by warp 0, the 5-point
-    // solve on it by thread 0 (EssentialModel::LocalSolve's two steps).
+  if constexpr (Model::kWarpLocalSolve) {
+    // E: warp 0 refits. On thread 0 alone its eigen decomposition kept
+    // the block's other warps waiting here (device run 59).
     if (threadIdx.x < 32) {
-      bool finite = true;
-      for (int i = threadIdx.x; i < 81; i += 32) {
-        s.jacobi_a[i] = s.upper[five_point::NormalMatrixUpperIndex(i / 9, i % 9)];
-        finite = finite && isfinite(s.jacobi_a[i]);
-      }
-      finite = __all_sync(0xffffffffu, finite);
-      __syncwarp();
-      if (finite) WarpSymmetricJacobi9(s.jacobi_a, s.jacobi_v);
+      const int num = Model::WarpLocalSolve(s.upper, s.jacobi_a, s.jacobi_v, s.local_models);
       if (threadIdx.x == 0) {
-        s.num_local = 0;
-        if (finite) {
-          double basis[4][9];
-          five_point::NullSpaceFromEigen(s.jacobi_a, s.jacobi_v, basis);
-          s.num_local = five_point::SolveFromBasis(basis, s.local_models);
-        }
+        s.num_local = num;
         ++s.num_local_refits;
       }
     }
@@ -424,14 +412,11 @@ __global__ void EssentialLocalBasisKernel(const double* uppers, int num_matrices
   __shared__ double a[81], v[81];
   const int m = static_cast<int>(blockIdx.x);
   if (m >= num_matrices) return;
-  for (int i = threadIdx.x; i < 81; i += 32) a[i] = uppers[45 * m + five_point::NormalMatrixUpperIndex(i / 9, i % 9)];
-  __syncwarp();
-  WarpSymmetricJacobi9(a, v);
+  double basis[4][9];
+  const bool finite = EssentialModel::WarpLocalBasis(uppers + 45 * m, a, v, basis);
   if (threadIdx.x == 0) {
-    double basis[4][9];
-    five_point::NullSpaceFromEigen(a, v, basis);
     for (int e = 0; e < 4; ++e)
-      for (int i = 0; i < 9; ++i) bases[36 * m + 9 * e + i] = basis[e][i];
+      for (int i = 0; i < 9; ++i) bases[36 * m + 9 * e + i] = finite ? basis[e][i] : 0.0;
   }
 }
 

@@ -109,23 +109,7 @@ __device__ inline bool NormalizeModel(double* m) {
 template <int N>
 __device__ void SmallestEigenvector(double* a, double* out) {
   double v[N * N];
-  for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
-  for (int sweep = 0; sweep < 40; ++sweep) {
-    double off, diag;
-    five_point::JacobiNorms<N>(a, &off, &diag);
-    if (off <= 1e-30 * diag || off == 0) break;
-    for (int p = 0; p < N - 1; ++p) {
-      for (int q = p + 1; q < N; ++q) {
-        const double apq = a[p * N + q];
-        if (apq == 0) continue;
-        double c, s;
-        five_point::JacobiRotation(a[p * N + p], a[q * N + q], apq, &c, &s);
-        for (int k = 0; k < N; ++k) five_point::RotatePair(&a[k * N + p], &a[k * N + q], c, s);  // columns p, q
-        for (int k = 0; k < N; ++k) five_point::RotatePair(&a[p * N + k], &a[q * N + k], c, s);  // rows p, q
-        for (int k = 0; k < N; ++k) five_point::RotatePair(&v[k * N + p], &v[k * N + q], c, s);
-      }
-    }
-  }
+  five_point::SymmetricJacobi<N>(a, v, 40, 1e-30);
   int best = 0;
   for (int i = 1; i < N; ++i) {
     if (a[i * N + i] < a[best * N + best]) best = i;

@@ -80,8 +80,8 @@ CASHASH_HOST_DEVICE inline bool MinimalNullSpace(const double (*rows)[9], double
 }
 
 // Pieces of a cyclic Jacobi eigen decomposition, shared by SymmetricJacobi
-// below and the GPU's (SmallestEigenvector in ransac_numerics.cuh, a warp's
-// in warp_symmetric_jacobi.cuh).
+// below (which the GPU's SmallestEigenvector runs too) and the warp's in
+// warp_symmetric_jacobi.cuh.
 // Squared off-diagonal and diagonal norms of the symmetric N x N matrix `a`,
 // whose ratio stops the sweeps.
 template <int N>
@@ -110,14 +110,16 @@ CASHASH_HOST_DEVICE inline void RotatePair(double* x, double* y, double c, doubl
 }
 
 // Cyclic Jacobi on the symmetric n x n matrix `a` (row-major, destroyed):
-// eigenvalues on its diagonal, eigenvectors in the columns of `v`.
+// eigenvalues on its diagonal, eigenvectors in the columns of `v`. Sweeps
+// stop once the squared off-diagonal norm is at most `tolerance` times the
+// diagonal's, or after `max_sweeps`.
 template <int N>
-CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v) {
+CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v, int max_sweeps = 50, double tolerance = 1e-32) {
   for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
-  for (int sweep = 0; sweep < 50; ++sweep) {
+  for (int sweep = 0; sweep < max_sweeps; ++sweep) {
     double off, diag;
     JacobiNorms<N>(a, &off, &diag);
-    if (off <= 1e-32 * diag || off == 0) break;
+    if (off <= tolerance * diag || off == 0) break;
     for (int p = 0; p < N - 1; ++p) {
       for (int q = p + 1; q < N; ++q) {
         const double apq = a[p * N + q];
