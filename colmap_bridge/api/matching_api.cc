@@ -158,7 +158,8 @@ std::vector<ImagePair> PairsOfNames(const std::vector<std::pair<std::string, std
 }
 
 MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
-                             const std::vector<ImagePair>& pairs, const MatchingCallbacks& callbacks) {
+                             const std::vector<ImagePair>& pairs, const PhaseClock& clock,
+                             const MatchingCallbacks& callbacks) {
   const size_t block = static_cast<size_t>(options.block_size);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
   const std::vector<image_t> image_ids = ImagesOfPairs(pairs);
@@ -172,6 +173,8 @@ MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatu
   request.chunks = std::move(chunks);
   request.num_pairs_requested = pairs.size();
   request.mean = std::move(mean);
+  request.clock = clock;
+  request.clock.Mark("reading the pairs and feature counts");
   return MatchChunks(std::move(request), callbacks);
 }
 
@@ -208,10 +211,13 @@ MatchingSummary EndAllRanksOnError(Body body) {
 MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
                                 const MatchingCallbacks& all_callbacks) {
   return EndAllRanksOnError([&]() {
+    PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
+    const std::future<void> gpu_started = StartGpuInBackground(checked);
     DatabaseFeatureSource source(database_path);
     if (callbacks.database_opened) callbacks.database_opened();
+    clock.Mark("opening the database");
     const std::vector<image_t> image_ids = ImageIds(source);
     if (image_ids.size() < 2) {
       Warn(callbacks, "table images of " + database_path + " holds " + std::to_string(image_ids.size()) + " image" +
@@ -221,7 +227,9 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     std::shared_future<MeanDescriptor> mean = StartDatabaseMean(source, image_ids);
     const MatcherCommandOptions resolved = ResolveOptionsForRun(
         checked, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
+    clock.Mark("reading the feature counts");
     const ScheduleSizes sizes = ChooseSizesForRun(resolved, source, image_ids, callbacks);
+    clock.Mark("starting the GPU and sizing the run");
     std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
     const size_t n = image_ids.size();
     RunRequest request;
@@ -233,6 +241,7 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     request.cache_groups = true;
     request.matcher_keep_bytes = sizes.matcher_keep_bytes;
     request.mean = std::move(mean);
+    request.clock = clock;
     return MatchChunks(std::move(request), callbacks);
   });
 }
@@ -241,26 +250,30 @@ MatchingSummary MatchPairs(const std::string& database_path,
                            const std::vector<std::pair<std::string, std::string>>& image_name_pairs,
                            const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
   return EndAllRanksOnError([&]() {
+    PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
     DatabaseFeatureSource source(database_path);
     if (callbacks.database_opened) callbacks.database_opened();
-    return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), callbacks);
+    clock.Mark("opening the database");
+    return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), clock, callbacks);
   });
 }
 
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
                               const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
   return EndAllRanksOnError([&]() {
+    PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
     DatabaseFeatureSource source(database_path);
     if (callbacks.database_opened) callbacks.database_opened();
+    clock.Mark("opening the database");
     std::unordered_map<std::string, image_t> ids_by_name;
     for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
     std::ifstream file(match_list_path);
     if (!file) throw std::runtime_error("cannot open --match_list_path " + match_list_path);
-    return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), callbacks);
+    return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), clock, callbacks);
   });
 }
 

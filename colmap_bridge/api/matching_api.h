@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "cashash/base/phase_clock.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/pipeline/matching_pipeline.h"
@@ -51,6 +52,10 @@ struct MatchingSummary {
   size_t gpu_total_bytes = 0;
   size_t gpu_used_before_bytes = 0;  // in use before the matcher was made
   size_t gpu_peak_used_bytes = 0;    // most in use at a sample
+  // Where the call's time outside the pipeline went, phase by phase: before
+  // it (opening the database, starting the GPU, making the matcher) and
+  // after it (closing the database, freeing GPU memory).
+  std::vector<PhaseClock::Phase> phases_outside_pipeline;
 };
 
 // Matches every pair of images of the database (options.database_path is

@@ -261,13 +261,15 @@ void OpenSink(RunPlan* plan) {
 // the matching thread's first wait for features was 0.05-0.14 s at 300
 // images, and the setup 0.3 s), then the device, the matcher, the writer
 // and the verifier.
-void PlanRun(const RunRequest& request, RunShare share, const MatchingCallbacks& callbacks, RunPlan* plan) {
+void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callbacks, RunPlan* plan) {
+  PhaseClock& clock = request.clock;
   plan->share = std::move(share);
   if (plan->share.rank == 0) WarnAboutSmallImages(*request.source, request.image_ids, callbacks);
   if (request.cache_groups) {
     plan->cache = std::make_unique<GroupFeatureCache>(request.source, plan->share.my_chunks);
   }
   plan->features = plan->cache ? static_cast<FeatureSource*>(plan->cache.get()) : request.source;
+  clock.Mark("starting the feature reader");
 
   plan->options = request.options;
 #ifdef CASHASH_WITH_CUDA
@@ -278,17 +280,43 @@ void PlanRun(const RunRequest& request, RunShare share, const MatchingCallbacks&
   }
 #endif
   plan->gpu_memory = std::make_unique<GpuMemorySampler>(GpuIndexForRun(plan->options));
-  ComposeMatcher(request, request.mean.get(), callbacks, plan);
+  clock.Mark("starting the GPU and sizing the run");
+  const MeanDescriptor& mean = request.mean.get();
+  clock.Mark("waiting for the hashing mean");
+  ComposeMatcher(request, mean, callbacks, plan);
   if (plan->keypoint_source) {
     plan->keypoint_source->SetInner(plan->features);
     plan->features = plan->keypoint_source.get();
   }
+  clock.Mark("making the matcher");
   OpenSink(plan);
+  clock.Mark("opening the database for writing");
   // Verification on the GPU too when use_gpu is set (the matcher has
   // already warned when no GPU can be used).
   if (!plan->options.skip_geometric_verification) {
     plan->verifier = CreateBatchVerifierForOptions(plan->options, nullptr);
+    clock.Mark("making the verifier");
   }
+}
+
+// Takes the plan apart in the order its destructor would, timing each part:
+// closing the database (its last checkpoint) and freeing GPU memory are
+// waits too, before the command can print its summary.
+void DismantlePlan(RunPlan& plan, PhaseClock& clock) {
+  plan.verifier.reset();
+  clock.Mark("freeing the verifier");
+  plan.sink = nullptr;
+  plan.sender.reset();
+  plan.locked_sink.reset();
+  plan.database_sink.reset();
+  clock.Mark("closing the database");
+  plan.matcher.reset();
+  plan.rematch_counts.reset();
+  clock.Mark("freeing the matcher");
+  plan.features = nullptr;
+  plan.keypoint_source.reset();
+  plan.cache.reset();
+  clock.Mark("stopping the feature reader");
 }
 
 // What the matcher's wrappers and the feature cache did, for the log.
@@ -328,7 +356,7 @@ bool ExtraVerifiersOnBacklogFromEnvironment() {
 
 // Runs the pipeline over the plan and reports. Progress counts the pairs of
 // every rank written so far; rank 0 merges the other ranks' statistics.
-MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCallbacks& callbacks) {
+MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock, const MatchingCallbacks& callbacks) {
   const RunShare& share = plan.share;
   PipelineOptions pipeline_options;
   pipeline_options.num_threads = plan.options.sift.num_threads;
@@ -355,15 +383,18 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCall
   MatchingSummary summary;
   summary.matcher_name = plan.matcher->Name();
   Info(callbacks, "Matcher: " + summary.matcher_name);
+  clock.Mark("starting the pipeline");
   if (share.rank > 0) {
     RankReport report;
     report.stats = pipeline.Run(share.my_chunks);
+    clock.Restart();
     report.matcher_name = plan.matcher->Name();
     MpiResultSender::SendReport(report);
     return MatchingSummary();  // rank 0 reports the run
   }
   if (share.num_ranks == 1) {
     summary.pipeline = pipeline.Run(share.my_chunks);
+    clock.Restart();
   } else {
     MpiResultReceiver receiver(plan.sink, [&](const PairChunk& chunk) {
       PipelineProgress progress;
@@ -376,6 +407,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, const MatchingCall
       MpiAbortJob(e.what());  // the other ranks cannot be told otherwise
     }
     for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
+    clock.Restart();
   }
   // The GPU matcher may have handed over to the CPU on running out of memory.
   summary.matcher_name = plan.matcher->Name();
@@ -401,12 +433,15 @@ MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbac
     Info(callbacks, "Nothing to match.");
     return summary;
   }
+  request.clock.Mark("finding the pairs left to match");
   RunPlan plan;
   PlanRun(request, std::move(share), callbacks, &plan);
-  MatchingSummary result = ExecutePlan(plan, request.image_ids.size(), callbacks);
+  MatchingSummary result = ExecutePlan(plan, request.image_ids.size(), request.clock, callbacks);
+  DismantlePlan(plan, request.clock);
   if (plan.share.rank > 0) return result;
   result.pairs_requested = summary.pairs_requested;
   result.pairs_skipped = summary.pairs_skipped;
+  result.phases_outside_pipeline = request.clock.phases();
   return result;
 }
 

@@ -36,6 +36,9 @@ struct RunRequest {
   // (RetainingFeatureMatcher), so that most images are hashed once.
   size_t matcher_keep_bytes = 0;
   std::shared_future<MeanDescriptor> mean;
+  // Started by the caller on entry; the run marks its own phases on it and
+  // hands them back in MatchingSummary::phases_outside_pipeline.
+  PhaseClock clock;
 };
 
 // Runs the pipeline over the request's chunks, leaving out pairs already in

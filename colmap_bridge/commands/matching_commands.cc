@@ -72,6 +72,20 @@ size_t PeakResidentBytes() {
   return static_cast<size_t>(usage.ru_maxrss) * 1024;
 }
 
+// The phases of the run outside its pipeline that took a millisecond or
+// more, in the order they came (PhaseClock).
+void PrintPhasesOutsidePipeline(const std::vector<PhaseClock::Phase>& phases) {
+  std::ostringstream line;
+  line << std::fixed << std::setprecision(3);
+  const char* separator = "";
+  for (const PhaseClock::Phase& phase : phases) {
+    if (phase.seconds < 0.0005) continue;
+    line << separator << phase.name << " " << phase.seconds << " s";
+    separator = ", ";
+  }
+  if (*separator != '\0') std::cout << "Outside the pipeline: " << line.str() << std::endl;
+}
+
 // Prints the closing summary; returns the exit code (130 when stopped).
 int ReportSummary(const MatchingSummary& summary) {
   if (summary.matcher_name.empty()) return EXIT_SUCCESS;  // nothing was matched
@@ -96,8 +110,8 @@ int ReportSummary(const MatchingSummary& summary) {
   // it out.
   const double process_seconds = SecondsSinceProcessStart();
   std::cout << "Process: " << process_seconds << " s so far, " << std::max(0.0, process_seconds - stats.seconds_total)
-            << " s of it outside the pipeline (opening the database, starting the GPU, sizing the hash tables)"
-            << std::endl;
+            << " s of it outside the pipeline" << std::endl;
+  PrintPhasesOutsidePipeline(summary.phases_outside_pipeline);
   // Waiting, apart from the busy times: which stage held the others up.
   std::cout << "Waiting: matching for verification " << stats.seconds_matching_wait_queue
             << " s, verification for matching " << stats.seconds_verification_wait_input << " s and for writing "

@@ -112,7 +112,7 @@ print(f"| {name} | {wall:.2f} | {f(pairs)} | {f(rate)} | {f(stage['loading'], 2)
       f"{f(stage['matching'], 2)} | {f(stage['verification'], 2)} | {f(stage['writing'], 2)} | {f(wait_m, 2)} / {f(wait_v, 2)} | "
       f"{f(raw)} | {f(verified)} | {f(inliers)} |")
 EOF
-  { echo "$config:"; grep -E "GPU verification|Matcher|auto|Hash tables|Exact rematch|Process:" "$log" | head -7 | sed 's/^/    /'; } >> "$OUT/notes.txt"
+  { echo "$config:"; grep -E "GPU verification|Matcher|auto|Hash tables|Exact rematch|Process:|Outside the pipeline" "$log" | head -8 | sed 's/^/    /'; } >> "$OUT/notes.txt"
   [ "$COPY" = 1 ] && rm -f "$copy" "$copy-wal" "$copy-shm"
 done
 
