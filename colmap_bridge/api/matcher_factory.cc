@@ -68,18 +68,6 @@ int GpuIndexForRun(const MatcherCommandOptions& options) {
 #endif
 }
 
-std::future<void> StartGpuInBackground(const MatcherCommandOptions& options) {
-  const char* mode = std::getenv("CASHASH_GPU_START");
-  if (!options.use_gpu || (mode != nullptr && std::string(mode) == "serial")) return {};
-  return std::async(std::launch::async, [options]() {
-    try {
-      (void)GpuIndexForRun(options);
-    } catch (const std::exception&) {
-      // Reported by the run's own call.
-    }
-  });
-}
-
 namespace {
 
 // The backend of one matcher type (cascade or brute force): on the GPUs of

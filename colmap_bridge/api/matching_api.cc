@@ -214,7 +214,6 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    const std::future<void> gpu_started = StartGpuInBackground(checked);
     DatabaseFeatureSource source(database_path);
     if (callbacks.database_opened) callbacks.database_opened();
     clock.Mark("opening the database");

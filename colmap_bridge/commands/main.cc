@@ -1,12 +1,10 @@
 // cashash: Cascade Hashing feature matching for COLMAP databases.
-#include <cstdio>
 #include <cstdlib>
 #include <iostream>
 #include <string>
 
 #include "colmap_bridge/commands/matching_commands.h"
 #include "colmap_bridge/commands/verify_command.h"
-#include "distributed/mpi_world.h"
 #include "synthetic/generate_database_command.h"
 #ifdef CASHASH_WITH_MPI
 #include "distributed/mpi_process_group.h"
@@ -27,19 +25,6 @@ void PrintUsage() {
             << std::endl;
 }
 
-// Ends the process with `code` once a command has returned. Every file the
-// command wrote is closed by then: each database connection belongs to the
-// command's own scope. CASHASH_EXIT=fast ends at once, leaving the CUDA
-// context to the driver, to measure what the runtime's own teardown costs.
-int Finish(int code) {
-  const char* exit_mode = std::getenv("CASHASH_EXIT");
-  if (exit_mode == nullptr || std::string(exit_mode) != "fast" || cashash::distributed::MpiSize() > 1) return code;
-  std::cout.flush();
-  std::cerr.flush();
-  std::fflush(nullptr);
-  std::_Exit(code);
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -53,10 +38,10 @@ int main(int argc, char** argv) {
     return argc < 2 ? EXIT_FAILURE : EXIT_SUCCESS;
   }
   const std::string command = argv[1];
-  if (command == "exhaustive_matcher") return Finish(cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1));
-  if (command == "guided_matcher") return Finish(cashash::colmap::RunGuidedMatcher(argc - 1, argv + 1));
-  if (command == "matches_importer") return Finish(cashash::colmap::RunMatchesImporter(argc - 1, argv + 1));
-  if (command == "geometric_verifier") return Finish(cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1));
+  if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
+  if (command == "guided_matcher") return cashash::colmap::RunGuidedMatcher(argc - 1, argv + 1);
+  if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
+  if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
   if (command == "generate_database") return cashash::colmap::RunGenerateDatabase(argc - 1, argv + 1);
   std::cerr << "ERROR: unknown command '" << command << "'" << std::endl;
   PrintUsage();
