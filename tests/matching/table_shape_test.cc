@@ -113,6 +113,38 @@ TEST(TableShape, ExplicitValuesWin) {
   EXPECT_EQ(chosen.tau, CasHashOptions().tau);
 }
 
+TEST(TableShape, AScreeningCascadeTakesOneBitMoreWhileTheCollisionFloorHolds) {
+  const auto screening = [](size_t features, int tables = 0, int bits = 0) {
+    return ChooseTableShape(features, tables, bits, TableShapeGoal::kScreening);
+  };
+  // Half the candidates per query of the recall shape at every size: 8 x 8
+  // where recall takes 8 x 7, 7 x 9 where it takes 8 x 8.
+  for (size_t features : {size_t{0}, size_t{2048}, size_t{8192}, size_t{12500}}) {
+    EXPECT_EQ(screening(features).num_tables, 8) << features;
+    EXPECT_EQ(screening(features).bits_per_table, 8) << features;
+  }
+  for (size_t features : {size_t{16384}, size_t{32768}, size_t{1} << 20}) {
+    EXPECT_EQ(screening(features).num_tables, 7) << features;
+    EXPECT_EQ(screening(features).bits_per_table, 9) << features;
+  }
+  EXPECT_GE(TableCollisionProbability(7, 9), kScreeningCollisionFloor);
+  // 6 x 10 is below the floor: the bits stop at 9.
+  EXPECT_LT(TableCollisionProbability(6, 10), kScreeningCollisionFloor);
+  // Explicit bits are kept; explicit tables get the extra bit only within
+  // 64 signature bits and the floor.
+  EXPECT_EQ(screening(8192, 0, 7).bits_per_table, 7);
+  EXPECT_EQ(screening(8192, 0, 7).num_tables, 8);
+  EXPECT_EQ(screening(8192, 8, 0).bits_per_table, 8);
+  EXPECT_EQ(screening(8192, 16, 0).bits_per_table, 4);  // 16 x 5 > 64 bits
+  EXPECT_EQ(screening(8192, 4, 0).bits_per_table, 7);   // 4 x 8: 0.69
+  const CasHashOptions resolved = ResolveTableShape(CasHashOptions(), 8192, TableShapeGoal::kScreening);
+  EXPECT_EQ(resolved.num_tables, 8);
+  EXPECT_EQ(resolved.bits_per_table, 8);
+  EXPECT_EQ(DescribeTableShape(CasHashOptions(), resolved, 8192, 300, TableShapeGoal::kScreening),
+            "Hash tables: 8 x 8 bits (chosen for 8192 features per image, the median of 300 images, a bit more "
+            "than for recall: the exact rematch decides)");
+}
+
 TEST(TableShape, RunSizeIsTheMedianAfterMaxNumMatches) {
   EXPECT_EQ(TypicalFeatureCount({}, 32768), 0u);
   EXPECT_EQ(TypicalFeatureCount({100, 9000, 20000}, 32768), 9000u);

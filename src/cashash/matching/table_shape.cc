@@ -43,18 +43,11 @@ int TablesForBits(int bits_per_table) {
   return tables;
 }
 
-TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table) {
+namespace {
+
+// The recall shape for the size, with the bits chosen (bits_per_table 0).
+TableShape ChooseRecallShape(size_t features_per_image, int num_tables) {
   TableShape shape;
-  if (num_tables > 0 && bits_per_table > 0) {
-    shape.num_tables = num_tables;
-    shape.bits_per_table = bits_per_table;
-    return shape;
-  }
-  if (bits_per_table > 0) {
-    shape.bits_per_table = bits_per_table;
-    shape.num_tables = TablesForBits(bits_per_table);
-    return shape;
-  }
   const double floor = TargetCollisionProbability() - kMaxCollisionLoss;
   int bits = BitsForSize(features_per_image);
   if (num_tables > 0) {
@@ -70,6 +63,31 @@ TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_
   return shape;
 }
 
+}  // namespace
+
+TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal) {
+  TableShape shape;
+  if (num_tables > 0 && bits_per_table > 0) {
+    shape.num_tables = num_tables;
+    shape.bits_per_table = bits_per_table;
+    return shape;
+  }
+  if (bits_per_table > 0) {
+    shape.bits_per_table = bits_per_table;
+    shape.num_tables = TablesForBits(bits_per_table);
+    return shape;
+  }
+  shape = ChooseRecallShape(features_per_image, num_tables);
+  if (goal != TableShapeGoal::kScreening) return shape;
+  const int bits = shape.bits_per_table + 1;
+  const int tables = num_tables > 0 ? num_tables : TablesForBits(bits);
+  if (tables * bits <= kMaxSignatureBits && TableCollisionProbability(tables, bits) >= kScreeningCollisionFloor) {
+    shape.num_tables = tables;
+    shape.bits_per_table = bits;
+  }
+  return shape;
+}
+
 size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches) {
   if (rows_per_image.empty()) return 0;
   const size_t cap = static_cast<size_t>(std::max(1, max_num_matches));
@@ -79,16 +97,16 @@ size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_match
   return rows_per_image[middle];
 }
 
-CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image) {
+CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image, TableShapeGoal goal) {
   CasHashOptions resolved = options;
-  const TableShape shape = ChooseTableShape(features_per_image, options.num_tables, options.bits_per_table);
+  const TableShape shape = ChooseTableShape(features_per_image, options.num_tables, options.bits_per_table, goal);
   resolved.num_tables = shape.num_tables;
   resolved.bits_per_table = shape.bits_per_table;
   return resolved;
 }
 
 std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOptions& resolved,
-                               size_t features_per_image, size_t num_images) {
+                               size_t features_per_image, size_t num_images, TableShapeGoal goal) {
   std::ostringstream text;
   text << "Hash tables: " << resolved.num_tables << " x " << resolved.bits_per_table << " bits";
   if (requested.num_tables > 0 && requested.bits_per_table > 0) {
@@ -99,7 +117,11 @@ std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOpt
   if (requested.num_tables > 0) text << "tables as set, bits ";
   if (requested.bits_per_table > 0) text << "bits as set, tables ";
   text << "chosen for " << features_per_image << " features per image, the median of " << num_images << " image"
-       << (num_images == 1 ? "" : "s") << ")";
+       << (num_images == 1 ? "" : "s");
+  if (goal == TableShapeGoal::kScreening && requested.bits_per_table == 0) {
+    text << ", a bit more than for recall: the exact rematch decides";
+  }
+  text << ")";
   return text.str();
 }
 

@@ -56,6 +56,21 @@ constexpr int kMaxSignatureBits = 64;
 constexpr int kMaxShapeTables = 32;
 // Fewest bits the rule chooses: the reference's (8 x 7 for every smaller image).
 constexpr int kMinShapeBits = kTableShapeReferenceBits;
+// Lowest collision probability of a screening shape (TableShapeGoal):
+// admits 8 x 8 (0.954) and 7 x 9 (0.897), not 6 x 10 (0.807).
+constexpr double kScreeningCollisionFloor = 0.89;
+
+// What the cascade's matches are for. kRecall: they are the run's matches
+// (guided matching, no exact rematch), so the shape holds the reference's
+// collision probability. kScreening: the exact rematch decides which pairs
+// may verify and gives their matches, so the cascade only has to find its
+// threshold of matches on the pairs that verify; the shape takes one bit
+// more than kRecall's (half the candidates per query) while its collision
+// probability stays at kScreeningCollisionFloor or above. Device run 65,
+// 300-image streets: 8 x 8 at 8,192 features and 7 x 9 at 16,384 verified
+// the same pairs with the same inlier matches as 8 x 7 and 8 x 8 (and as
+// brute force), 5-10 % faster end to end.
+enum class TableShapeGoal { kRecall, kScreening };
 
 // 1 - (1 - p^bits)^tables.
 double TableCollisionProbability(int num_tables, int bits_per_table, double p = kTableShapeBitAgreement);
@@ -68,7 +83,9 @@ int TablesForBits(int bits_per_table);
 // size). num_tables / bits_per_table > 0 are kept as given (explicit
 // options win) and the other is chosen for them: bits from the size and
 // within 64 / num_tables; tables from the bits.
-TableShape ChooseTableShape(size_t features_per_image, int num_tables = 0, int bits_per_table = 0);
+// An explicit bits_per_table is never changed by the goal.
+TableShape ChooseTableShape(size_t features_per_image, int num_tables = 0, int bits_per_table = 0,
+                            TableShapeGoal goal = TableShapeGoal::kRecall);
 
 // The feature count a run's rule is decided from: the median over its
 // images of min(rows, max_num_matches) (the upper one of the two middle
@@ -77,11 +94,13 @@ size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_match
 
 // `options` with num_tables and bits_per_table chosen for the size where
 // they are 0 (the defaults), unchanged where set.
-CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image);
+CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image,
+                                 TableShapeGoal goal = TableShapeGoal::kRecall);
 
 // One line for the run's log, e.g. "Hash tables: 8 x 8 bits (chosen for
 // 16384 features per image, the median of 300 images)".
 std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOptions& resolved,
-                               size_t features_per_image, size_t num_images);
+                               size_t features_per_image, size_t num_images,
+                               TableShapeGoal goal = TableShapeGoal::kRecall);
 
 }  // namespace cashash
