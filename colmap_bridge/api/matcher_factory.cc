@@ -194,11 +194,10 @@ MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
     if (info) info("Matcher: cascade (guided matching needs it)");
   }
   const size_t features = TypicalFeatureCount(rows_per_image, options.sift.max_num_matches);
-  // The cascade screens where the exact rematch decides the pairs that may
-  // verify (the same condition as tau's), and is the matcher otherwise.
-  const TableShapeGoal goal = resolved.cashash.exact_rematch_min_matches > 0 && !resolved.guided.enabled
-                                  ? TableShapeGoal::kScreening
-                                  : TableShapeGoal::kRecall;
+  const TableShapeGoal goal =
+      CascadeOnlyScreens(resolved.cashash.exact_rematch_min_matches, resolved.guided.enabled)
+          ? TableShapeGoal::kScreening
+          : TableShapeGoal::kRecall;
   resolved.cashash = ResolveTableShape(resolved.cashash, features, goal);
   resolved.cashash.tau = RunTau(resolved);
   if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {

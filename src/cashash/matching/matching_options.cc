@@ -41,8 +41,12 @@ std::string CasHashOptions::Check() const {
   return error.str();
 }
 
+bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided) {
+  return exact_rematch_min_matches > 0 && !guided;
+}
+
 int ChooseCascadeTau(int exact_rematch_min_matches, bool guided) {
-  return exact_rematch_min_matches > 0 && !guided ? kCascadeTauForScreening : kCascadeTauForPrecision;
+  return CascadeOnlyScreens(exact_rematch_min_matches, guided) ? kCascadeTauForScreening : kCascadeTauForPrecision;
 }
 
 std::string MatcherTypeToString(MatcherType type) {

@@ -106,10 +106,16 @@ constexpr int kCascadeTauForPrecision = 43;
 // decides").
 constexpr int kCascadeTauForScreening = 32;
 
+// Whether the cascade only screens a run's pairs: the exact rematch is on
+// and the cascade's matches are not used otherwise (not kept without a
+// rematch, not fed to guided matching's stage-1 model). Its tau and its
+// tables (TableShapeGoal) are chosen for screening then, for precision and
+// recall otherwise.
+bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided);
+
 // The tau a run uses when its options leave it at 0 (the commands'
-// default): for screening when the exact rematch is on and the cascade's
-// matches are not used otherwise, for precision when they are kept
-// (no rematch) or feed a model (guided matching's stage 1).
+// default): kCascadeTauForScreening where CascadeOnlyScreens, else
+// kCascadeTauForPrecision.
 int ChooseCascadeTau(int exact_rematch_min_matches, bool guided);
 
 std::string MatcherTypeToString(MatcherType type);

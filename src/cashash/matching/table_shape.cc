@@ -28,23 +28,6 @@ int BitsForSize(size_t features_per_image) {
   return std::max(kMinShapeBits, kTableShapeReferenceBits + log2_n - log2_reference);
 }
 
-}  // namespace
-
-double TableCollisionProbability(int num_tables, int bits_per_table, double p) {
-  return 1.0 - std::pow(1.0 - std::pow(p, bits_per_table), num_tables);
-}
-
-int TablesForBits(int bits_per_table) {
-  const double target = TargetCollisionProbability();
-  const int max_tables = MaxTablesForBits(bits_per_table);
-  int tables = 1;
-  // The small tolerance keeps 8 x 7 itself from rounding up to 9 tables.
-  while (tables < max_tables && TableCollisionProbability(tables, bits_per_table) < target - 1e-12) ++tables;
-  return tables;
-}
-
-namespace {
-
 // The recall shape for the size, with the bits chosen (bits_per_table 0).
 TableShape ChooseRecallShape(size_t features_per_image, int num_tables) {
   TableShape shape;
@@ -64,6 +47,19 @@ TableShape ChooseRecallShape(size_t features_per_image, int num_tables) {
 }
 
 }  // namespace
+
+double TableCollisionProbability(int num_tables, int bits_per_table, double p) {
+  return 1.0 - std::pow(1.0 - std::pow(p, bits_per_table), num_tables);
+}
+
+int TablesForBits(int bits_per_table) {
+  const double target = TargetCollisionProbability();
+  const int max_tables = MaxTablesForBits(bits_per_table);
+  int tables = 1;
+  // The small tolerance keeps 8 x 7 itself from rounding up to 9 tables.
+  while (tables < max_tables && TableCollisionProbability(tables, bits_per_table) < target - 1e-12) ++tables;
+  return tables;
+}
 
 TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal) {
   TableShape shape;
