@@ -23,10 +23,10 @@ __device__ inline void WarpSymmetricJacobi9(double* a, double* v) {
   const int lane = threadIdx.x % 32;
   for (int i = lane; i < N * N; i += 32) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
   __syncwarp();
-  for (int sweep = 0; sweep < 50; ++sweep) {
+  for (int sweep = 0; sweep < five_point::kJacobiMaxSweeps; ++sweep) {
     double off, diag;
     five_point::JacobiNorms<N>(a, &off, &diag);
-    if (off <= 1e-32 * diag || off == 0) break;
+    if (off <= five_point::kJacobiTolerance * diag || off == 0) break;
     for (int p = 0; p < N - 1; ++p) {
       for (int q = p + 1; q < N; ++q) {
         const double apq = a[p * N + q];

@@ -109,12 +109,18 @@ CASHASH_HOST_DEVICE inline void RotatePair(double* x, double* y, double c, doubl
   *y = s * x0 + c * y0;
 }
 
+// SymmetricJacobi's default stopping rule, which the warp's decomposition
+// of E's local refit keeps too, so that both give the same basis.
+constexpr int kJacobiMaxSweeps = 50;
+constexpr double kJacobiTolerance = 1e-32;
+
 // Cyclic Jacobi on the symmetric n x n matrix `a` (row-major, destroyed):
 // eigenvalues on its diagonal, eigenvectors in the columns of `v`. Sweeps
 // stop once the squared off-diagonal norm is at most `tolerance` times the
 // diagonal's, or after `max_sweeps`.
 template <int N>
-CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v, int max_sweeps = 50, double tolerance = 1e-32) {
+CASHASH_HOST_DEVICE inline void SymmetricJacobi(double* a, double* v, int max_sweeps = kJacobiMaxSweeps,
+                                                double tolerance = kJacobiTolerance) {
   for (int i = 0; i < N * N; ++i) v[i] = (i % (N + 1) == 0) ? 1.0 : 0.0;
   for (int sweep = 0; sweep < max_sweeps; ++sweep) {
     double off, diag;
