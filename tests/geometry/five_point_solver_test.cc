@@ -211,45 +211,6 @@ TEST(FivePointSolver, NullSpaceIsOrthonormalAndAnnihilatesTheRows) {
   }
 }
 
-TEST(FivePointSolver, SturmRootsOfKnownPolynomials) {
-  auto expand = [](const std::vector<double>& real_roots, const std::vector<std::pair<double, double>>& complex_pairs,
-                   double lead) {
-    std::vector<double> c = {lead};
-    auto times = [&](const std::vector<double>& f) {
-      std::vector<double> out(c.size() + f.size() - 1, 0.0);
-      for (size_t i = 0; i < c.size(); ++i)
-        for (size_t j = 0; j < f.size(); ++j) out[i + j] += c[i] * f[j];
-      c = out;
-    };
-    for (double r : real_roots) times({-r, 1.0});
-    for (auto [re, im] : complex_pairs) times({re * re + im * im, -2 * re, 1.0});
-    return c;
-  };
-  struct Case {
-    std::vector<double> real;
-    std::vector<std::pair<double, double>> complex;
-    double lead;
-  };
-  const std::vector<Case> cases = {
-      {{-3, -1, -0.5, 0.1, 0.2, 0.7, 1.5, 2, 4, 9}, {}, 1.0},
-      {{-2.5, 0.3, 1.7, 30.0}, {{0.5, 1.0}, {-1, 0.2}, {2, 3}}, -0.02},
-      {{0.25, 0.2501, -7, 3}, {{1, 1}, {0, 2}, {-3, 0.5}}, 5e3},
-      {{}, {{1, 1}, {0, 2}, {-3, 0.5}, {4, 0.01}, {0.1, 0.1}}, 1.0},
-      {{1e-3, -2e-3, 12.0, -40.0, 100.0, 0.5}, {{1, 1}, {2, 2}}, 1e-4},
-  };
-  for (const Case& c : cases) {
-    const std::vector<double> coefficients = expand(c.real, c.complex, c.lead);
-    ASSERT_EQ(coefficients.size(), 11u);
-    double roots[10];
-    const int n = five_point::RealRoots(coefficients.data(), 10, roots);
-    ASSERT_EQ(n, static_cast<int>(c.real.size()));
-    std::vector<double> found(roots, roots + n), expected = c.real;
-    std::sort(found.begin(), found.end());
-    std::sort(expected.begin(), expected.end());
-    for (int i = 0; i < n; ++i) EXPECT_NEAR(found[i], expected[i], 1e-8 * std::max(1.0, std::fabs(expected[i])));
-  }
-}
-
 // The GPU's E algorithm (the portable minimal solver and least-squares
 // refit) inside the CPU's LoRansac: with the same seeds it draws the same
 // samples, so it must find what the Eigen-based estimator finds.

@@ -13,12 +13,15 @@
 // left 10 x 10 block; the 3 x 3 matrix of polynomials in z left by three
 // row differences, whose determinant is a degree-10 polynomial in z; its
 // real roots isolated with a Sturm sequence and polished by safeguarded
-// Newton steps; x and y from the null vector of the 3 x 3 matrix at each z.
+// Newton steps (sturm_roots.h); x and y from the null vector of the 3 x 3
+// matrix at each z. EliminateToDeterminant and ModelAtRoot are apart so that
+// the GPU's local refit can find each root's model on its own lane.
 #pragma once
 
 #include <cmath>
 
 #include "cashash/base/host_device.h"
+#include "cashash/geometry/sturm_roots.h"
 
 namespace cashash {
 namespace five_point {
@@ -274,135 +277,6 @@ CASHASH_HOST_DEVICE inline void ConstraintMatrix(const double (*basis)[9], doubl
   MulQuadLinear(minor, E[2], 1.0, C[9]);
 }
 
-// --- Polynomials in one variable (ascending coefficients) -------------------
-
-CASHASH_HOST_DEVICE inline double Horner(const double* c, int degree, double t) {
-  double v = c[degree];
-  for (int i = degree - 1; i >= 0; --i) v = v * t + c[i];
-  return v;
-}
-
-// A simple root of p in [lo, hi] (p(lo), p(hi) of opposite signs, else the
-// best point reached): Newton steps, bisection whenever Newton leaves the
-// bracket.
-CASHASH_HOST_DEVICE inline double PolishRoot(const double* p, int degree, double lo, double hi) {
-  double f_lo = Horner(p, degree, lo);
-  const double f_hi = Horner(p, degree, hi);
-  if (f_lo == 0) return lo;
-  if (f_hi == 0) return hi;
-  const bool bracketed = (f_lo < 0) != (f_hi < 0);
-  double x = 0.5 * (lo + hi);
-  for (int it = 0; it < 100; ++it) {
-    double f = p[degree], df = 0;
-    for (int i = degree - 1; i >= 0; --i) {
-      df = df * x + f;
-      f = f * x + p[i];
-    }
-    if (f == 0) return x;
-    if (bracketed) {
-      if ((f < 0) == (f_lo < 0)) {
-        lo = x;
-        f_lo = f;
-      } else {
-        hi = x;
-      }
-    }
-    double next = df != 0 ? x - f / df : 0.5 * (lo + hi);
-    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-    if (fabs(next - x) <= 1e-15 * fmax(1.0, fabs(x))) return next;
-    x = next;
-  }
-  return x;
-}
-
-// Real roots of sum_{i <= degree} c[i] t^i (degree <= 10), by a Sturm
-// sequence: intervals are split until each holds one root, which is then
-// polished. A cluster narrower than the working precision counts once.
-// One function because the Sturm table S/deg (fixed 11 x 11, no allocation in
-// device code) is built and then queried in place by the bisection's `variations`.
-CASHASH_HOST_DEVICE inline int RealRoots(const double* coefficients, int degree, double* roots) {
-  double scale = 0;
-  for (int i = 0; i <= degree; ++i) scale = fmax(scale, fabs(coefficients[i]));
-  if (!(scale > 0) || !isfinite(scale)) return 0;
-  int n = degree;
-  while (n > 0 && fabs(coefficients[n]) <= 1e-14 * scale) --n;
-  if (n == 0) return 0;
-  double S[11][11];
-  int deg[11];
-  for (int i = 0; i <= n; ++i) S[0][i] = coefficients[i] / coefficients[n];
-  deg[0] = n;
-  for (int i = 0; i < n; ++i) S[1][i] = S[0][i + 1] * (i + 1) / n;
-  deg[1] = n - 1;
-  int length = 2;
-  while (length < 11 && deg[length - 1] > 0) {
-    const double* u = S[length - 2];
-    const double* w = S[length - 1];
-    const int du = deg[length - 2], dw = deg[length - 1];
-    double r[11];
-    double u_max = 0;
-    for (int i = 0; i <= du; ++i) {
-      r[i] = u[i];
-      u_max = fmax(u_max, fabs(u[i]));
-    }
-    for (int k = du - dw; k >= 0; --k) {
-      const double q = r[dw + k] / w[dw];
-      for (int j = 0; j <= dw; ++j) r[j + k] -= q * w[j];
-    }
-    int dr = dw - 1;
-    while (dr >= 0 && fabs(r[dr]) <= 1e-14 * u_max) --dr;
-    if (dr < 0) break;  // exact division: the sequence ends at the gcd
-    const double lead = fabs(r[dr]);
-    for (int j = 0; j <= dr; ++j) S[length][j] = -r[j] / lead;
-    deg[length] = dr;
-    ++length;
-  }
-  auto variations = [&](double t) {
-    int count = 0;
-    double previous = 0;
-    for (int k = 0; k < length; ++k) {
-      const double value = Horner(S[k], deg[k], t);
-      if (value == 0) continue;
-      if (previous != 0 && (value < 0) != (previous < 0)) ++count;
-      previous = value;
-    }
-    return count;
-  };
-  // Fujiwara's bound on the roots' magnitude.
-  double bound = 0;
-  for (int i = 1; i <= n; ++i) {
-    double a = fabs(S[0][n - i]);
-    if (i == n) a *= 0.5;
-    bound = fmax(bound, pow(a, 1.0 / i));
-  }
-  bound = 2.0 * bound * 1.0001 + 1e-12;
-  struct Interval {
-    double lo, hi;
-    int v_lo, v_hi;
-  };
-  Interval stack[12];
-  int top = 0;
-  stack[top++] = {-bound, bound, variations(-bound), variations(bound)};
-  int num_roots = 0, splits = 0;
-  while (top > 0 && num_roots < n) {
-    const Interval I = stack[--top];
-    const int count = I.v_lo - I.v_hi;
-    if (count <= 0) continue;
-    if (count == 1) {
-      roots[num_roots++] = PolishRoot(S[0], n, I.lo, I.hi);
-      continue;
-    }
-    const double mid = 0.5 * (I.lo + I.hi);
-    if (I.hi - I.lo <= 1e-13 * fmax(1.0, fabs(mid)) || ++splits > 800 || top + 2 > 12) {
-      roots[num_roots++] = mid;
-      continue;
-    }
-    const int v_mid = variations(mid);
-    if (v_mid - I.v_hi > 0) stack[top++] = {mid, I.hi, v_mid, I.v_hi};
-    if (I.v_lo - v_mid > 0) stack[top++] = {I.lo, mid, I.v_lo, v_mid};
-  }
-  return num_roots;
-}
-
 // Polynomial product accumulation: out += s * a * b (ascending).
 template <int NA, int NB>
 CASHASH_HOST_DEVICE inline void PolyMulAdd(const double* a, const double* b, double s, double* out) {
@@ -412,12 +286,20 @@ CASHASH_HOST_DEVICE inline void PolyMulAdd(const double* a, const double* b, dou
 
 // --- The solver ---------------------------------------------------------------
 
-// Every essential matrix E = x b0 + y b1 + z b2 + b3 (row-major, unit norm)
-// that satisfies the cubic constraints; returns their number (<= 10).
+// The 3 x 3 system in z that the elimination leaves: rows i of
+// x px(z) + y py(z) + p1(z) = 0 (px, py cubic, p1 quartic, ascending), and
+// its determinant, a degree-10 polynomial whose real roots are the z of
+// the solutions.
+struct DeterminantSystem {
+  double px[3][4], py[3][4], p1[3][5];
+  double det[11];
+};
+
+// Gauss-Jordan elimination of the cubic constraints on E = x b0 + y b1 +
+// z b2 + b3, then the system in z; false when the elimination breaks down.
 // One function because it is one straight-line derivation on fixed device
-// arrays: elimination of C, the px/py/p1 rows, their determinant in z, then
-// x and y at each real root from the same px/py/p1.
-CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (*models)[9]) {
+// arrays: elimination of C, the px/py/p1 rows, their determinant in z.
+CASHASH_HOST_DEVICE inline bool EliminateToDeterminant(const double (*basis)[9], DeterminantSystem* out) {
   double C[10][20];
   ConstraintMatrix(basis, C);
   // Gauss-Jordan on the first 10 columns with partial pivoting: each row
@@ -425,12 +307,12 @@ CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (
   double left_max = 0;
   for (int i = 0; i < 10; ++i)
     for (int j = 0; j < 10; ++j) left_max = fmax(left_max, fabs(C[i][j]));
-  if (!(left_max > 0) || !isfinite(left_max)) return 0;
+  if (!(left_max > 0) || !isfinite(left_max)) return false;
   for (int k = 0; k < 10; ++k) {
     int p = k;
     for (int i = k + 1; i < 10; ++i)
       if (fabs(C[i][k]) > fabs(C[p][k])) p = i;
-    if (!(fabs(C[p][k]) > 1e-14 * left_max)) return 0;
+    if (!(fabs(C[p][k]) > 1e-14 * left_max)) return false;
     if (p != k)
       for (int j = k; j < 20; ++j) {
         const double t = C[k][j];
@@ -451,7 +333,9 @@ CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (
   }
   // Rows (x^2z) - z (x^2), (y^2z) - z (y^2), (xyz) - z (xy): each is
   // x px(z) + y py(z) + p1(z) = 0 with px, py cubic and p1 quartic.
-  double px[3][4], py[3][4], p1[3][5];
+  double (*px)[4] = out->px;
+  double (*py)[4] = out->py;
+  double (*p1)[5] = out->p1;
   for (int i = 0; i < 3; ++i) {
     const double* a = C[4 + 2 * i] + 10;  // x^2z, y^2z, xyz
     const double* b = C[5 + 2 * i] + 10;  // x^2, y^2, xy
@@ -478,49 +362,63 @@ CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (
   PolyMulAdd<4, 5>(py[2], p1[0], -1.0, m1);
   PolyMulAdd<4, 5>(py[0], p1[1], 1.0, m2);
   PolyMulAdd<4, 5>(py[1], p1[0], -1.0, m2);
-  double det[11] = {0};
+  double* det = out->det;
+  for (int i = 0; i < 11; ++i) det[i] = 0;
   PolyMulAdd<4, 8>(px[0], m0, 1.0, det);
   PolyMulAdd<4, 8>(px[1], m1, -1.0, det);
   PolyMulAdd<4, 8>(px[2], m2, 1.0, det);
-  double zs[10];
-  const int num_z = RealRoots(det, 10, zs);
-  int num_models = 0;
-  for (int r = 0; r < num_z; ++r) {
-    const double z = zs[r];
-    double v[3][3];
-    for (int i = 0; i < 3; ++i) {
-      v[i][0] = Horner(px[i], 3, z);
-      v[i][1] = Horner(py[i], 3, z);
-      v[i][2] = Horner(p1[i], 4, z);
-    }
-    // (x, y, 1) is orthogonal to the three rows: the largest cross product.
-    double best[3] = {0, 0, 0}, best_norm = -1;
-    const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
-    for (int k = 0; k < 3; ++k) {
-      const double* a = v[pairs[k][0]];
-      const double* b = v[pairs[k][1]];
-      const double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-      const double norm = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-      if (norm > best_norm) {
-        best_norm = norm;
-        best[0] = c[0];
-        best[1] = c[1];
-        best[2] = c[2];
-      }
-    }
-    if (!(fabs(best[2]) > 1e-12 * sqrt(best_norm))) continue;
-    const double x = best[0] / best[2], y = best[1] / best[2];
-    double norm2 = 0;
-    double* e = models[num_models];
-    for (int i = 0; i < 9; ++i) {
-      e[i] = x * basis[0][i] + y * basis[1][i] + z * basis[2][i] + basis[3][i];
-      norm2 += e[i] * e[i];
-    }
-    const double norm = sqrt(norm2);
-    if (!(norm > 0) || !isfinite(norm)) continue;
-    for (int i = 0; i < 9; ++i) e[i] /= norm;
-    ++num_models;
+  return true;
+}
+
+// The essential matrix (row-major, unit norm) at one root z of the
+// determinant: (x, y, 1) is orthogonal to the three rows at z. False when
+// they do not pin x and y down, or E is not finite.
+CASHASH_HOST_DEVICE inline bool ModelAtRoot(const double (*basis)[9], const DeterminantSystem& system, double z,
+                                            double* e) {
+  double v[3][3];
+  for (int i = 0; i < 3; ++i) {
+    v[i][0] = sturm::Horner(system.px[i], 3, z);
+    v[i][1] = sturm::Horner(system.py[i], 3, z);
+    v[i][2] = sturm::Horner(system.p1[i], 4, z);
   }
+  // (x, y, 1) is orthogonal to the three rows: the largest cross product.
+  double best[3] = {0, 0, 0}, best_norm = -1;
+  const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+  for (int k = 0; k < 3; ++k) {
+    const double* a = v[pairs[k][0]];
+    const double* b = v[pairs[k][1]];
+    const double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    const double norm = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    if (norm > best_norm) {
+      best_norm = norm;
+      best[0] = c[0];
+      best[1] = c[1];
+      best[2] = c[2];
+    }
+  }
+  if (!(fabs(best[2]) > 1e-12 * sqrt(best_norm))) return false;
+  const double x = best[0] / best[2], y = best[1] / best[2];
+  double norm2 = 0;
+  for (int i = 0; i < 9; ++i) {
+    e[i] = x * basis[0][i] + y * basis[1][i] + z * basis[2][i] + basis[3][i];
+    norm2 += e[i] * e[i];
+  }
+  const double norm = sqrt(norm2);
+  if (!(norm > 0) || !isfinite(norm)) return false;
+  for (int i = 0; i < 9; ++i) e[i] /= norm;
+  return true;
+}
+
+// Every essential matrix E = x b0 + y b1 + z b2 + b3 (row-major, unit norm)
+// that satisfies the cubic constraints; returns their number (<= 10).
+CASHASH_HOST_DEVICE inline int SolveFromBasis(const double (*basis)[9], double (*models)[9]) {
+  DeterminantSystem system;
+  if (!EliminateToDeterminant(basis, &system)) return 0;
+  double zs[10];
+  const int num_z = sturm::RealRoots(system.det, 10, zs);
+  int num_models = 0;
+  for (int r = 0; r < num_z; ++r)
+    if (ModelAtRoot(basis, system, zs[r], models[num_models])) ++num_models;
   return num_models;
 }
 
