@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <random>
 #include <string>
 #include <vector>
@@ -168,6 +169,72 @@ TEST(GpuEssential, WarpEigenDecompositionGivesTheHostsLocalBasis) {
       EXPECT_NEAR(std::abs(dot), 1.0, 1e-9) << "matrix " << m << " vector " << e;
     }
   }
+}
+
+// E's local refit solves the 5-point system on its basis by a warp
+// (WarpSolveFromBasis): roots isolated with the sequence's polynomials on
+// separate lanes, one root polished per lane. Every value comes from the
+// same functions as on one thread, so its models must be one device
+// thread's SolveFromBasis models to the bit, in the same order; and they
+// must be the host's solutions (up to sign, to 1e-6) on at least 99 % of
+// the bases (the host may round differently, e.g. without fused
+// multiply-adds).
+TEST(GpuEssential, WarpRefitSolveGivesTheOneThreadModelsBitForBit) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0, 1);
+  const int num = 2000;
+  std::vector<double> bases(36 * num);
+  for (int b = 0; b < num; ++b) {
+    double basis[4][9];
+    if (b % 2 == 0) {  // a minimal sample's basis
+      double rows[5][9];
+      for (auto& row : rows) five_point::EpipolarCoefficients(noise(rng), noise(rng), noise(rng), noise(rng), row);
+      ASSERT_TRUE(five_point::MinimalNullSpace(rows, basis));
+    } else {  // a least-squares basis of 12 to 60 rows
+      double upper[45] = {0};
+      for (int r = 0; r < 12 + b % 49; ++r) {
+        double row[9];
+        five_point::EpipolarCoefficients(noise(rng), noise(rng), noise(rng), noise(rng), row);
+        int k = 0;
+        for (int i = 0; i < 9; ++i)
+          for (int j = i; j < 9; ++j) upper[k++] += row[i] * row[j];
+      }
+      ASSERT_TRUE(five_point::LeastSquaresNullSpace(upper, basis));
+    }
+    for (int e = 0; e < 4; ++e)
+      for (int i = 0; i < 9; ++i) bases[36 * b + 9 * e + i] = basis[e][i];
+  }
+  const size_t model_doubles = static_cast<size_t>(num) * five_point::kMaxSolutions * 9;
+  std::vector<double> warp_models(model_doubles), thread_models(model_doubles);
+  std::vector<int> warp_counts(num), thread_counts(num);
+  cuda::EssentialSolveFromBasisOnDevice(bases.data(), num, warp_models.data(), warp_counts.data(),
+                                        thread_models.data(), thread_counts.data());
+  int total = 0, host_agrees = 0;
+  for (int b = 0; b < num; ++b) {
+    ASSERT_EQ(warp_counts[b], thread_counts[b]) << "basis " << b;
+    const double* warp = &warp_models[static_cast<size_t>(b) * five_point::kMaxSolutions * 9];
+    const double* thread = &thread_models[static_cast<size_t>(b) * five_point::kMaxSolutions * 9];
+    EXPECT_EQ(std::memcmp(warp, thread, sizeof(double) * 9 * warp_counts[b]), 0) << "basis " << b;
+    total += warp_counts[b];
+    double basis[4][9], host[five_point::kMaxSolutions][9];
+    for (int e = 0; e < 4; ++e)
+      for (int i = 0; i < 9; ++i) basis[e][i] = bases[36 * b + 9 * e + i];
+    const int host_num = five_point::SolveFromBasis(basis, host);
+    bool same = host_num == warp_counts[b];
+    for (int m = 0; same && m < host_num; ++m) {
+      bool matched = false;
+      for (int h = 0; h < host_num && !matched; ++h) {
+        double dot = 0;
+        for (int k = 0; k < 9; ++k) dot += warp[9 * m + k] * host[h][k];
+        matched = std::abs(dot) >= 1.0 - 1e-6;
+      }
+      same = matched;
+    }
+    host_agrees += same ? 1 : 0;
+  }
+  EXPECT_GT(total, 2 * num);  // real roots were found: the warp path was exercised
+  EXPECT_GE(host_agrees, num * 99 / 100);
 }
 
 TEST(GpuEssential, RansacAgreesWithCpuOnSyntheticPairs) {

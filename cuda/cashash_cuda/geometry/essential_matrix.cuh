@@ -7,6 +7,7 @@
 #include "cashash_cuda/geometry/ransac_numerics.cuh"
 #include "cashash/geometry/five_point_solver.h"
 #include "cashash_cuda/geometry/fundamental_matrix.cuh"
+#include "cashash_cuda/geometry/warp_five_point.cuh"
 #include "cashash_cuda/geometry/warp_symmetric_jacobi.cuh"
 
 namespace cashash {
@@ -43,8 +44,8 @@ struct EssentialModel {
   // upper-triangle entries, as five_point::LeastSquaresNullSpace gives it,
   // with the eigen decomposition by the calling warp (WarpSymmetricJacobi9;
   // `a` and `v`: 81 doubles of shared memory each). Every lane calls it and
-  // gets the same return value, false for non-finite input; lane 0 gets the
-  // basis.
+  // gets the same return value, false for non-finite input; lane 0 writes
+  // the basis.
   __device__ static bool WarpLocalBasis(const double* upper, double* a, double* v, double (*basis)[9]) {
     const int lane = threadIdx.x % 32;
     bool finite = true;
@@ -60,11 +61,12 @@ struct EssentialModel {
     return true;
   }
   // The CPU path's local refit, the 5-point solver on that basis (up to 10
-  // models): called by a whole warp, the models and their count on lane 0.
-  __device__ static int WarpLocalSolve(const double* upper, double* a, double* v, double (*models)[9]) {
-    double basis[4][9];
-    if (!WarpLocalBasis(upper, a, v, basis) || threadIdx.x % 32 != 0) return 0;
-    return five_point::SolveFromBasis(basis, models);
+  // models, in `models`, shared memory): called by a whole warp, the count
+  // on every lane.
+  __device__ static int WarpLocalSolve(const double* upper, double* a, double* v, WarpFivePointScratch& scratch,
+                                       double (*models)[9]) {
+    if (!WarpLocalBasis(upper, a, v, scratch.basis)) return 0;
+    return WarpSolveFromBasis(scratch, models);  // lane 0 wrote the basis it starts from
   }
 };
 

@@ -47,10 +47,11 @@ struct BlockScratch {
   double upper[45];
   double best_model[9];
   double local_models[kMaxLocalModels][9];
-  // E's local refit: the normal matrix's eigen decomposition by warp 0
-  // (EssentialModel::WarpLocalSolve).
+  // E's local refit by warp 0 (EssentialModel::WarpLocalSolve): the normal
+  // matrix's eigen decomposition, then the 5-point solver on its basis.
   double jacobi_a[81];
   double jacobi_v[81];
+  WarpFivePointScratch refit_solver;
   unsigned long long best_key;
   int best_count;
   int num_local;
@@ -123,10 +124,10 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   }
   __syncthreads();
   if constexpr (Model::kWarpLocalSolve) {
-    // E: warp 0 refits. On thread 0 alone its eigen decomposition kept
-    // the block's other warps waiting here (device run 59).
+    // E: warp 0 refits. On thread 0 alone its eigen decomposition (device
+    // run 59) and its roots (run 67) kept the block's other warps waiting here.
     if (threadIdx.x < 32) {
-      const int num = Model::WarpLocalSolve(s.upper, s.jacobi_a, s.jacobi_v, s.local_models);
+      const int num = Model::WarpLocalSolve(s.upper, s.jacobi_a, s.jacobi_v, s.refit_solver, s.local_models);
       if (threadIdx.x == 0) {
         s.num_local = num;
         ++s.num_local_refits;
@@ -420,6 +421,34 @@ __global__ void EssentialLocalBasisKernel(const double* uppers, int num_matrices
   }
 }
 
+// One warp per basis: the refit's 5-point solve by the warp, and by lane 0
+// alone as the minimal samples run it (tests).
+__global__ void EssentialSolveFromBasisKernel(const double* bases, int num_bases, double* warp_models,
+                                              int* warp_counts, double* thread_models, int* thread_counts) {
+  __shared__ WarpFivePointScratch scratch;
+  __shared__ double models[five_point::kMaxSolutions][9];
+  const int b = static_cast<int>(blockIdx.x);
+  if (b >= num_bases) return;
+  double basis[4][9];
+  for (int e = 0; e < 4; ++e)
+    for (int i = 0; i < 9; ++i) basis[e][i] = bases[36 * b + 9 * e + i];
+  if (threadIdx.x == 0) {
+    for (int e = 0; e < 4; ++e)
+      for (int i = 0; i < 9; ++i) scratch.basis[e][i] = basis[e][i];
+  }
+  const int num = WarpSolveFromBasis(scratch, models);
+  if (threadIdx.x == 0) {
+    warp_counts[b] = num;
+    for (int m = 0; m < num; ++m)
+      for (int k = 0; k < 9; ++k) warp_models[(b * five_point::kMaxSolutions + m) * 9 + k] = models[m][k];
+    double own[five_point::kMaxSolutions][9];
+    const int own_num = five_point::SolveFromBasis(basis, own);
+    thread_counts[b] = own_num;
+    for (int m = 0; m < own_num; ++m)
+      for (int k = 0; k < 9; ++k) thread_models[(b * five_point::kMaxSolutions + m) * 9 + k] = own[m][k];
+  }
+}
+
 }  // namespace
 
 void EssentialLocalBasisOnDevice(const double* uppers, int num_matrices, double* bases) {
@@ -433,6 +462,32 @@ void EssentialLocalBasisOnDevice(const double* uppers, int num_matrices, double*
   CUDA_CHECK(cudaMemcpy(bases, d_bases, sizeof(double) * 36 * num_matrices, cudaMemcpyDeviceToHost));
   cudaFree(d_uppers);
   cudaFree(d_bases);
+}
+
+void EssentialSolveFromBasisOnDevice(const double* bases, int num_bases, double* warp_models, int* warp_counts,
+                                     double* thread_models, int* thread_counts) {
+  if (num_bases <= 0) return;
+  const size_t model_doubles = static_cast<size_t>(num_bases) * five_point::kMaxSolutions * 9;
+  double *d_bases = nullptr, *d_warp = nullptr, *d_thread = nullptr;
+  int* d_counts = nullptr;
+  CUDA_CHECK(cudaMalloc(&d_bases, sizeof(double) * 36 * num_bases));
+  CUDA_CHECK(cudaMalloc(&d_warp, sizeof(double) * model_doubles));
+  CUDA_CHECK(cudaMalloc(&d_thread, sizeof(double) * model_doubles));
+  CUDA_CHECK(cudaMalloc(&d_counts, sizeof(int) * 2 * num_bases));
+  CUDA_CHECK(cudaMemcpy(d_bases, bases, sizeof(double) * 36 * num_bases, cudaMemcpyHostToDevice));
+  CUDA_CHECK(cudaMemset(d_warp, 0, sizeof(double) * model_doubles));
+  CUDA_CHECK(cudaMemset(d_thread, 0, sizeof(double) * model_doubles));
+  EssentialSolveFromBasisKernel<<<num_bases, 32>>>(d_bases, num_bases, d_warp, d_counts, d_thread,
+                                                   d_counts + num_bases);
+  CUDA_CHECK_LAUNCH();
+  CUDA_CHECK(cudaMemcpy(warp_models, d_warp, sizeof(double) * model_doubles, cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(thread_models, d_thread, sizeof(double) * model_doubles, cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(warp_counts, d_counts, sizeof(int) * num_bases, cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(thread_counts, d_counts + num_bases, sizeof(int) * num_bases, cudaMemcpyDeviceToHost));
+  cudaFree(d_bases);
+  cudaFree(d_warp);
+  cudaFree(d_thread);
+  cudaFree(d_counts);
 }
 
 void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {

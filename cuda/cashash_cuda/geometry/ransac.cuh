@@ -93,5 +93,13 @@ float EssentialFivePointOnDevice(const float* samples, int num_samples, double* 
 // kernel computes it, the eigen decomposition by a warp. Synchronous.
 void EssentialLocalBasisOnDevice(const double* uppers, int num_matrices, double* bases);
 
+// Tests: the 5-point solve of E's local refit on num_bases bases (36 doubles
+// each, as EssentialLocalBasisOnDevice gives them), by a warp as the RANSAC
+// kernel runs it (WarpSolveFromBasis) and by one device thread
+// (five_point::SolveFromBasis): up to 10 row-major models (90 doubles) and
+// their count per basis, for each. Synchronous; models past a count are 0.
+void EssentialSolveFromBasisOnDevice(const double* bases, int num_bases, double* warp_models, int* warp_counts,
+                                     double* thread_models, int* thread_counts);
+
 }  // namespace cuda
 }  // namespace cashash
