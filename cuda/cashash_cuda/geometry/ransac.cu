@@ -154,25 +154,6 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
 // same device time); with E's larger point cache (kEssentialMaxSharedPoints)
 // verification's device time fell about 5 % (run 55).
 template <typename Model>
-__device__ __forceinline__ void ScorePoint(const float* f, float4 p, float reject, float threshold, int& count,
-                                           float& sum) {
-  float r;
-  if constexpr (Model::kSampsonResidual) {
-    float num2, den;
-    SampsonParts(f, p, &num2, &den);
-    // den >= 1e-30: t * den stays a normal float, so the margin holds.
-    if (den >= 1e-30f && num2 > reject * den) return;
-    r = num2 / den;
-  } else {
-    r = Model::Residual(f, p);
-  }
-  if (r <= threshold) {
-    ++count;
-    sum += r;
-  }
-}
-
-template <typename Model>
 __device__ __forceinline__ bool ScanModel(const float* f, const float4* __restrict__ points, int n, float threshold,
                                           int must_reach, int* count_out, float* sum_out) {
   const float reject = threshold * (1.0f + 1.0f / 65536.0f);
@@ -181,7 +162,22 @@ __device__ __forceinline__ bool ScanModel(const float* f, const float4* __restri
   for (int base = 0; base < n; base += 64) {
     const int end = min(n, base + 64);
 #pragma unroll 4
-    for (int i = base; i < end; ++i) ScorePoint<Model>(f, points[i], reject, threshold, count, sum);
+    for (int i = base; i < end; ++i) {
+      float r;
+      if constexpr (Model::kSampsonResidual) {
+        float num2, den;
+        SampsonParts(f, points[i], &num2, &den);
+        // den >= 1e-30: t * den stays a normal float, so the margin holds.
+        if (den >= 1e-30f && num2 > reject * den) continue;
+        r = num2 / den;
+      } else {
+        r = Model::Residual(f, points[i]);
+      }
+      if (r <= threshold) {
+        ++count;
+        sum += r;
+      }
+    }
     // Give up once the pair's best so far is out of reach.
     if (end - base == 64 && count + (n - end) < must_reach) return false;
   }
@@ -189,46 +185,6 @@ __device__ __forceinline__ bool ScanModel(const float* f, const float4* __restri
   *sum_out = sum;
   return true;
 }
-
-// ScanModel of two models in one pass over the points (f1 only when
-// `two`): each point is loaded once for both, and the two models' sums are
-// independent chains, so more work is in flight per load in a loop that
-// waits on shared-memory loads (ncu, run 67: short scoreboard). Each model
-// gets ScanModel's counts, sums and decision to give up, to the bit.
-template <typename Model>
-__device__ __forceinline__ void ScanModelPair(const float* f0, const float* f1, bool two,
-                                              const float4* __restrict__ points, int n, float threshold,
-                                              int must_reach, int (&count)[2], float (&sum)[2], bool (&scanned)[2]) {
-  const float reject = threshold * (1.0f + 1.0f / 65536.0f);
-  int c0 = 0, c1 = 0;
-  float s0 = 0, s1 = 0;
-  bool live0 = true, live1 = two;
-  for (int base = 0; base < n; base += 64) {
-    const int end = min(n, base + 64);
-#pragma unroll 4
-    for (int i = base; i < end; ++i) {
-      const float4 p = points[i];
-      if (live0) ScorePoint<Model>(f0, p, reject, threshold, c0, s0);
-      if (live1) ScorePoint<Model>(f1, p, reject, threshold, c1, s1);
-    }
-    if (end - base == 64) {
-      live0 = live0 && c0 + (n - end) >= must_reach;
-      live1 = live1 && c1 + (n - end) >= must_reach;
-      if (!live0 && !live1) break;
-    }
-  }
-  count[0] = c0;
-  count[1] = c1;
-  sum[0] = s0;
-  sum[1] = s1;
-  scanned[0] = live0;
-  scanned[1] = live1;
-}
-
-// E's samples give up to 10 models (about 4 on average): they are scanned in
-// pairs. F (up to 3) and H (1) keep one model per pass.
-template <typename Model>
-constexpr bool kScanModelsInPairs = Model::kMaxModels > 3;
 
 // One function because each round's phases (per-thread sample and score in
 // registers, trial-order walk, stopping rule) share round state and block-wide
@@ -298,44 +254,19 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
       const int num_models = Model::Minimal(sample, models);
       my_hypotheses = num_models;
-      // Model m's support, in model order as the CPU compares them.
-      auto take = [&](int m, bool scanned, int count, float sum) {
-        if (!scanned) return;
+      for (int m = 0; m < num_models; ++m) {
+        float f[9];
+        for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
+        int count = 0;
+        float sum = 0;
+        const bool scanned = cached ? ScanModel<Model>(f, cached_points, n, threshold, must_reach, &count, &sum)
+                                    : ScanModel<Model>(f, global_points, n, threshold, must_reach, &count, &sum);
+        if (!scanned) continue;
         if (in_window) my_support_sum += count;
         const unsigned long long key = SupportKey(count, sum);
         if (key > my_key) {
           my_key = key;
           my_model = m;
-        }
-      };
-      if constexpr (kScanModelsInPairs<Model>) {
-        for (int m = 0; m < num_models; m += 2) {
-          const bool two = m + 1 < num_models;
-          float f0[9], f1[9];
-          for (int k = 0; k < 9; ++k) {
-            f0[k] = static_cast<float>(models[m][k]);
-            f1[k] = two ? static_cast<float>(models[m + 1][k]) : f0[k];
-          }
-          int count[2];
-          float sum[2];
-          bool scanned[2];
-          if (cached) {
-            ScanModelPair<Model>(f0, f1, two, cached_points, n, threshold, must_reach, count, sum, scanned);
-          } else {
-            ScanModelPair<Model>(f0, f1, two, global_points, n, threshold, must_reach, count, sum, scanned);
-          }
-          take(m, scanned[0], count[0], sum[0]);
-          if (two) take(m + 1, scanned[1], count[1], sum[1]);
-        }
-      } else {
-        for (int m = 0; m < num_models; ++m) {
-          float f[9];
-          for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
-          int count = 0;
-          float sum = 0;
-          const bool scanned = cached ? ScanModel<Model>(f, cached_points, n, threshold, must_reach, &count, &sum)
-                                      : ScanModel<Model>(f, global_points, n, threshold, must_reach, &count, &sum);
-          take(m, scanned, count, sum);
         }
       }
     }
