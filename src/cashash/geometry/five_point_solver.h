@@ -32,7 +32,6 @@ using std::copysign;
 using std::fabs;
 using std::fmax;
 using std::isfinite;
-using std::pow;
 using std::sqrt;
 #endif
 
