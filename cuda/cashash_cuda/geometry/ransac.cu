@@ -15,6 +15,7 @@
 #include <cfloat>
 
 #include "cashash/geometry/five_point_solver.h"
+#include "cashash/geometry/ransac_sprt.h"
 #include "cashash_cuda/geometry/essential_matrix.cuh"
 #include "cashash_cuda/geometry/fundamental_matrix.cuh"
 #include "cashash_cuda/geometry/homography_matrix.cuh"
@@ -186,6 +187,24 @@ __device__ __forceinline__ bool ScanModel(const float* f, const float4* __restri
   return true;
 }
 
+// Whether the sequential test (ransac_sprt.h) rejects the model before its
+// scan: matches start, start + step, ... read as ScanModel reads them (a
+// Sampson model compares without dividing; a NaN counts as an outlier).
+template <typename Model>
+__device__ __forceinline__ bool SprtRejectsModel(const SprtTest& t, const float* f,
+                                                 const float4* __restrict__ points, int n, float threshold,
+                                                 int start, int step) {
+  return SprtRejects(t, n, start, step, [&](int i) {
+    if constexpr (Model::kSampsonResidual) {
+      float num2, den;
+      SampsonParts(f, points[i], &num2, &den);
+      return num2 <= threshold * den;
+    } else {
+      return Model::Residual(f, points[i]) <= threshold;
+    }
+  });
+}
+
 // One function because each round's phases (per-thread sample and score in
 // registers, trial-order walk, stopping rule) share round state and block-wide
 // __syncthreads barriers; scoring and refits are already BlockScore/BlockLocalSolve.
@@ -237,11 +256,13 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     relevant_trials = max(launch.min_trials, RequiredTrials(relevant, n, launch.confidence, launch.trials_multiplier,
                                                             Model::kSampleSize));
   }
+  const int sprt_step = SprtOrderStep(n);
   for (int round = 0;; ++round) {
     const int trial = round * Threads + threadIdx.x;
     // Window trials are scored in full: their supports fit the chance model.
     const bool in_window = early.min_num_inliers > 0 && trial < early.window;
     const int must_reach = in_window ? 0 : s.best_count;
+    const SprtTest sprt = MakeSprtTest(must_reach, n, launch.sprt_max_risk);
     int my_hypotheses = 0, my_support_sum = 0;
     unsigned long long my_key = 0;
     double models[Model::kMaxModels][9];
@@ -250,6 +271,8 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       DeviceSplitMix64 rng = TrialRng(input.seed, static_cast<uint32_t>(trial));
       int idx[Model::kSampleSize];
       SampleDistinct<Model::kSampleSize>(rng, static_cast<uint32_t>(n), idx);
+      // Drawn after the sample, so the samples are those of a run without the test.
+      const int sprt_start = sprt.active ? static_cast<int>(rng.Below(static_cast<uint32_t>(n))) : 0;
       float4 sample[Model::kSampleSize];
       for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
       const int num_models = Model::Minimal(sample, models);
@@ -257,6 +280,11 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       for (int m = 0; m < num_models; ++m) {
         float f[9];
         for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
+        if (sprt.active && (cached ? SprtRejectsModel<Model>(sprt, f, cached_points, n, threshold, sprt_start, sprt_step)
+                                   : SprtRejectsModel<Model>(sprt, f, global_points, n, threshold, sprt_start,
+                                                             sprt_step))) {
+          continue;
+        }
         int count = 0;
         float sum = 0;
         const bool scanned = cached ? ScanModel<Model>(f, cached_points, n, threshold, must_reach, &count, &sum)

@@ -43,6 +43,9 @@ struct RansacLaunch {
   double trials_multiplier = 3.0;
   int shared_points = 0;        // pairs with at most this many points are cached in shared memory
   RansacEarlyExitOptions early_exit;  // the CPU path's chance test; off when min_num_inliers is 0
+  // The sequential test's risk per model (ransac_sprt.h); 0 scores every
+  // hypothesis in full.
+  float sprt_max_risk = 0;
   // H after F (TwoViewRelevantHomographyInliers): F's outputs of the same
   // pairs, read by the H blocks to stop once no H that could change the
   // decision exists; nullptr keeps COLMAP's loop.

@@ -195,6 +195,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   F_launch.trials_multiplier = ransac.num_trials_multiplier;
   F_launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
   F_launch.early_exit = TwoViewEarlyExitOptions(d.options);
+  F_launch.sprt_max_risk = TwoViewSprtMaxRisk(d.options);
   RansacLaunch H_launch = F_launch;
   RansacLaunch E_launch = F_launch;
   F_launch.pairs = d.inputs.as<RansacPairInput>();

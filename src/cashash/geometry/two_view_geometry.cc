@@ -116,6 +116,9 @@ std::string TwoViewGeometryOptions::Check() const {
   if (error.tellp() == 0 && !(early_exit_max_risk > 0 && early_exit_max_risk < 1)) {
     error << "TwoViewGeometry.early_exit_max_risk must be in (0, 1)";
   }
+  if (error.tellp() == 0 && !(sprt_max_risk > 0 && sprt_max_risk < 1)) {
+    error << "TwoViewGeometry.sprt_max_risk must be in (0, 1)";
+  }
   if (error.tellp() == 0 && max_num_trials < min_num_trials) {
     error << "TwoViewGeometry.max_num_trials must be >= min_num_trials";
   }
@@ -127,6 +130,10 @@ RansacEarlyExitOptions TwoViewEarlyExitOptions(const TwoViewGeometryOptions& opt
   early.min_num_inliers = options.early_exit ? std::max(1, options.min_num_inliers) : 0;
   early.max_risk = options.early_exit_max_risk;
   return early;
+}
+
+float TwoViewSprtMaxRisk(const TwoViewGeometryOptions& options) {
+  return options.sprt ? static_cast<float>(options.sprt_max_risk) : 0.f;
 }
 
 double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options) {

@@ -48,6 +48,12 @@ struct TwoViewGeometryOptions {
   // probability that the full run would have reached min_num_inliers.
   bool early_exit = true;
   double early_exit_max_risk = 0.001;
+  // Reject wrong hypotheses by a sequential test on a few dozen matches
+  // before scoring them over all (ransac_sprt.h; the GPU's RANSAC).
+  // sprt_max_risk bounds the probability that a model which would have
+  // beaten the best so far is rejected.
+  bool sprt = true;
+  double sprt_max_risk = 0.001;
   // Base seed; each pair's RANSAC is seeded from it and the pair, so results
   // do not depend on thread scheduling.
   uint64_t random_seed = 0;
@@ -112,6 +118,9 @@ bool TooFewMatchesForTwoView(size_t num_matches, const TwoViewGeometryOptions& o
 
 // The chance test of E, F and H RANSAC (both backends) for these options.
 RansacEarlyExitOptions TwoViewEarlyExitOptions(const TwoViewGeometryOptions& options);
+
+// The sequential test's max_risk for these options; 0 when sprt is off.
+float TwoViewSprtMaxRisk(const TwoViewGeometryOptions& options);
 
 // With early_exit: the fewest H inliers that can change the decision, given
 // F's count (0: F failed). H matters only above max_H_inlier_ratio x the
