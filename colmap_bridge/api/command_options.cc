@@ -102,8 +102,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"TwoViewGeometry.early_exit_max_risk"}, &o.two_view.early_exit_max_risk,
             "Largest chance, under the fitted chance model, that the full budget would have verified a stopped pair");
   table.Add({"TwoViewGeometry.sprt"}, &o.two_view.sprt,
-            "Reject wrong RANSAC hypotheses by a sequential test before scoring them over all matches (GPU; "
-            "0 = score every hypothesis as COLMAP does)");
+            "Reject wrong RANSAC hypotheses by a sequential test before scoring them over all matches "
+            "(0 = score every hypothesis as COLMAP does)");
   table.Add({"TwoViewGeometry.sprt_max_risk"}, &o.two_view.sprt_max_risk,
             "Largest chance that the sequential test rejects a model which would have beaten the best so far");
 

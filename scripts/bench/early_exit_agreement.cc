@@ -1,11 +1,12 @@
 // Verifies every pair of a verification pairs file twice on the CPU, with
-// COLMAP's full trial budget and with the early exit of RANSAC
-// (--TwoViewGeometry.early_exit), and reports how often the decision (the
+// COLMAP's full trial budget (every hypothesis scored in full) and with the
+// early exit of RANSAC (--TwoViewGeometry.early_exit) and, unless --sprt 0,
+// the sequential test of hypotheses (--TwoViewGeometry.sprt), and reports how often the decision (the
 // configuration) is the same, how many model estimations stopped early and
 // the time of each run.
 //
-//   early_exit_agreement PAIRS.bin [--threads T] [--max_risk R] [--min_agreement A]
-//                        [--min_stopped S]
+//   early_exit_agreement PAIRS.bin [--threads T] [--max_risk R] [--sprt 0|1]
+//                        [--min_agreement A] [--min_stopped S]
 //
 // Exits 1 when the share of pairs with the same configuration is below A
 // (default 0.995), or when fewer than S pairs' F estimations stopped early
@@ -52,7 +53,7 @@ bool Verified(const TwoViewGeometry& g) { return g.config >= kCalibrated; }
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::cerr << "usage: " << argv[0] << " PAIRS.bin [--threads T] [--max_risk R] [--min_agreement A]\n";
+    std::cerr << "usage: " << argv[0] << " PAIRS.bin [--threads T] [--max_risk R] [--sprt 0|1] [--min_agreement A]\n";
     return 2;
   }
   int threads = -1;
@@ -63,6 +64,7 @@ int main(int argc, char** argv) {
     const std::string flag = argv[i];
     if (flag == "--threads") threads = std::atoi(argv[i + 1]);
     else if (flag == "--max_risk") early.early_exit_max_risk = std::atof(argv[i + 1]);
+    else if (flag == "--sprt") early.sprt = std::atoi(argv[i + 1]) != 0;
     else if (flag == "--min_agreement") min_agreement = std::atof(argv[i + 1]);
     else if (flag == "--min_stopped") min_stopped = std::strtoull(argv[i + 1], nullptr, 10);
     else {
@@ -74,6 +76,7 @@ int main(int argc, char** argv) {
     const std::vector<StoredVerificationPair> pairs = ReadVerificationPairsFile(argv[1]);
     TwoViewGeometryOptions full = early;
     full.early_exit = false;
+    full.sprt = false;
     early.early_exit = true;
     const Run reference = VerifyAll(pairs, full, threads);
     const Run fast = VerifyAll(pairs, early, threads);
@@ -111,8 +114,8 @@ int main(int argc, char** argv) {
     const double agreement = same_config / n;
     std::printf("\n| run | seconds | verified pairs | inlier matches |\n|---|---:|---:|---:|\n");
     std::printf("| full budget | %.3f | %zu | %zu |\n", reference.seconds, verified_full, inliers_full);
-    std::printf("| early exit (max_risk %g) | %.3f | %zu | %zu |\n", early.early_exit_max_risk, fast.seconds,
-                verified_early, inliers_early);
+    std::printf("| early exit (max_risk %g)%s | %.3f | %zu | %zu |\n", early.early_exit_max_risk,
+                early.sprt ? " and the sequential test" : "", fast.seconds, verified_early, inliers_early);
     std::printf("\n%zu pairs (%zu with at least min_num_inliers matches): same configuration %.4f, "
                 "same verified/not %.4f, speed-up %.2fx\n",
                 pairs.size(), ransac_pairs, agreement, same_verified / n,

@@ -7,11 +7,12 @@
 #    that do not overlap (chance_matches_bench), and with the exact rematch
 #    (exact_rematch_feature_matcher.h) at most 1.1x, at tau 43 and at the
 #    runs' tau 32.
-# 2. The early exit of RANSAC (--TwoViewGeometry.early_exit) against COLMAP's
-#    full trial budget: the cascade matches every pair (raw matches only);
-#    every pair with at least 15 matches is verified with and without the
-#    early exit. The configuration must agree on at least 99.5 % of the
-#    pairs, and some F estimations must have stopped early.
+# 2. The early exit of RANSAC (--TwoViewGeometry.early_exit) and the
+#    sequential test of hypotheses (--TwoViewGeometry.sprt) against COLMAP's
+#    full trial budget with every hypothesis scored in full: the cascade
+#    matches every pair (raw matches only); every pair with at least 15
+#    matches is verified both ways. The configuration must agree on at least
+#    99.5 % of the pairs, and some F estimations must have stopped early.
 # Usage: early_exit_real_pairs.sh CASHASH_BINARY SHARED_DATA_DIR   (exit 77: skipped)
 set -euo pipefail
 

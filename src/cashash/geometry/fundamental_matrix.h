@@ -54,6 +54,11 @@ class EpipolarScorer {
     return ScoreResiduals(pairs_.size(), max_residual, must_reach,
                           [&](size_t i) { return SampsonSquaredError(f, x1[i], y1[i], x2[i], y2[i]); });
   }
+  bool RejectedBySprt(const Eigen::Matrix3d& model, double max_residual, const SprtTest& t, int start, int step) const {
+    float f[9];
+    RowMajor(model, f);
+    return SprtRejectsResiduals(pairs_.size(), max_residual, t, start, step, [&](size_t i) { return Residual(f, i); });
+  }
   void Inliers(const Eigen::Matrix3d& model, double max_residual, std::vector<int>* out) const {
     float f[9];
     RowMajor(model, f);

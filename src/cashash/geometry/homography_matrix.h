@@ -54,6 +54,11 @@ class HomographyEstimator {
       return HomographyTransferSquaredError(h, x1[i], y1[i], x2[i], y2[i]);
     });
   }
+  bool RejectedBySprt(const Model& model, double max_residual, const SprtTest& t, int start, int step) const {
+    float h[9];
+    RowMajor(model, h);
+    return SprtRejectsResiduals(pairs_.size(), max_residual, t, start, step, [&](size_t i) { return Residual(h, i); });
+  }
   void Inliers(const Model& model, double max_residual, std::vector<int>* out) const {
     float h[9];
     RowMajor(model, h);

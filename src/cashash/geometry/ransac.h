@@ -9,6 +9,8 @@
 //   int MinimalSolve(const int* sample, Model* models) const;
 //   int LocalSolve(const std::vector<int>& inliers, Model* models) const;
 //   RansacSupport Score(const Model&, double max_residual, int must_reach) const;
+//   bool RejectedBySprt(const Model&, double max_residual, const SprtTest&,
+//                       int start, int step) const;  // SprtRejectsResiduals
 //   void Inliers(const Model&, double max_residual, std::vector<int>*) const;
 //   void InlierMask(const Model&, double max_residual, std::vector<char>*) const;
 // where residuals are squared errors compared against max_residual
@@ -30,6 +32,7 @@
 
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/geometry/ransac_early_exit.h"
+#include "cashash/geometry/ransac_sprt.h"
 
 namespace cashash {
 
@@ -52,6 +55,9 @@ struct RansacOptions {
   // only matters to the decision above a fraction of F's (two-view
   // geometry); 0 keeps COLMAP's loop.
   int relevant_inliers = 0;
+  // Reject wrong hypotheses by the sequential test before scoring them
+  // (ransac_sprt.h) at this risk per model; 0 scores every one in full.
+  float sprt_max_risk = 0;
 };
 
 struct RansacSupport {
@@ -139,13 +145,26 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
                      RansacRequiredTrials(static_cast<size_t>(options.relevant_inliers), num_data, options.confidence,
                                           options.num_trials_multiplier, kSampleSize))
           : INT_MAX;
+  // The sequential test's own stream, so that the samples are those of a run
+  // without it.
+  SplitMix64 sprt_rng(DeriveSeed(options.seed, 0x5350525455ull));
+  const int sprt_step = SprtOrderStep(static_cast<int>(num_data));
   for (; trials < max_trials && !done; ++trials) {
     SampleDistinct(rng, static_cast<uint32_t>(num_data), kSampleSize, sample.data());
     const int num_models = estimator.MinimalSolve(sample.data(), models.data());
     const bool in_window = early.min_num_inliers > 0 && trials < early.window;
     hypotheses += num_models;
     for (int m = 0; m < num_models; ++m) {
-      const RansacSupport support = estimator.Score(models[m], max_residual, in_window ? 0 : best.num_inliers);
+      const int must_reach = in_window ? 0 : best.num_inliers;
+      const SprtTest sprt = MakeSprtTest(must_reach, static_cast<int>(num_data), options.sprt_max_risk);
+      // A model the test rejects counts as one that gave up in the scan.
+      const bool rejected =
+          sprt.active && estimator.RejectedBySprt(models[m], max_residual, sprt,
+                                                  static_cast<int>(sprt_rng.Below(static_cast<uint32_t>(num_data))),
+                                                  sprt_step);
+      RansacSupport support;
+      support.num_inliers = -1;
+      if (!rejected) support = estimator.Score(models[m], max_residual, must_reach);
       if (in_window) {
         window_support_sum += support.num_inliers;
         window_hypotheses += 1;
@@ -258,6 +277,16 @@ inline RansacSupport ScoreResiduals(size_t n, double max_residual, int must_reac
   support.num_inliers = count;
   support.residual_sum = sum;
   return support;
+}
+
+// The sequential test (ransac_sprt.h) on `residual(i)`, compared in float as
+// ScoreResiduals compares (a NaN counts as an outlier).
+template <typename ResidualFn>
+inline bool SprtRejectsResiduals(size_t n, double max_residual, const SprtTest& t, int start, int step,
+                                 ResidualFn residual) {
+  const float threshold = static_cast<float>(max_residual);
+  return SprtRejects(t, static_cast<int>(n), start, step,
+                     [&](int i) { return residual(static_cast<size_t>(i)) <= threshold; });
 }
 
 template <typename ResidualFn>

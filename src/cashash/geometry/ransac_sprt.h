@@ -28,7 +28,8 @@
 // with eps = 0.37 a model of rate 0.05 goes after about 30 matches. The
 // test runs only where that is much shorter than the scan it saves.
 //
-// Written once for the host and the device (cuda/cashash_cuda/geometry/ransac.cu).
+// Written once for the host (ransac.h) and the device
+// (cuda/cashash_cuda/geometry/ransac.cu).
 #pragma once
 
 #include <cmath>

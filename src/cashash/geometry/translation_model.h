@@ -38,6 +38,10 @@ class TranslationEstimator {
     return ScoreResiduals(pairs_.size(), max_residual, must_reach,
                           [&](size_t i) { return Residual(t, i); });
   }
+  bool RejectedBySprt(const Model& t, double max_residual, const SprtTest& test, int start, int step) const {
+    return SprtRejectsResiduals(pairs_.size(), max_residual, test, start, step,
+                                [&](size_t i) { return Residual(t, i); });
+  }
   void Inliers(const Model& t, double max_residual, std::vector<int>* out) const {
     CollectInliers(pairs_.size(), max_residual, [&](size_t i) { return Residual(t, i); }, out);
   }

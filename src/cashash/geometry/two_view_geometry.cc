@@ -34,6 +34,7 @@ RansacOptions MakeRansacOptions(const TwoViewGeometryOptions& options, uint64_t 
 RansacOptions MakeModelRansacOptions(const TwoViewGeometryOptions& options, uint64_t tag) {
   RansacOptions r = MakeRansacOptions(options, tag);
   r.early_exit = TwoViewEarlyExitOptions(options);
+  r.sprt_max_risk = TwoViewSprtMaxRisk(options);
   return r;
 }
 

@@ -49,7 +49,7 @@ struct TwoViewGeometryOptions {
   bool early_exit = true;
   double early_exit_max_risk = 0.001;
   // Reject wrong hypotheses by a sequential test on a few dozen matches
-  // before scoring them over all (ransac_sprt.h; the GPU's RANSAC).
+  // before scoring them over all (ransac_sprt.h; both backends).
   // sprt_max_risk bounds the probability that a model which would have
   // beaten the best so far is rejected.
   bool sprt = true;
