@@ -257,17 +257,28 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
                                                             Model::kSampleSize));
   }
   const int sprt_step = SprtOrderStep(n);
+  // The first round runs COLMAP's min_num_trials only where that is at most
+  // half a round: a pair that its first good model settles (most verified
+  // pairs need no more) stops there instead of scoring a whole round of
+  // hypotheses over all its matches. Later rounds end on multiples of
+  // Threads, where the early exit's window and checkpoints lie.
+  const bool short_first_round = launch.min_trials > 0 && 2 * launch.min_trials <= Threads;
+  int round_start = 0;
   for (int round = 0;; ++round) {
-    const int trial = round * Threads + threadIdx.x;
-    // Window trials are scored in full: their supports fit the chance model.
-    const bool in_window = early.min_num_inliers > 0 && trial < early.window;
+    const int round_end = round == 0 && short_first_round ? launch.min_trials : (round_start / Threads + 1) * Threads;
+    const int trial = round_start + threadIdx.x;
+    // Window trials are scored in full, their supports fitting the chance
+    // model, but only while no model has min_num_inliers: from then on the
+    // early exit cannot fire (RansacShouldExitEarly), so nothing reads them.
+    const bool in_window =
+        early.min_num_inliers > 0 && trial < early.window && s.best_count < early.min_num_inliers;
     const int must_reach = in_window ? 0 : s.best_count;
     const SprtTest sprt = MakeSprtTest(must_reach, n, launch.sprt_max_risk);
     int my_hypotheses = 0, my_support_sum = 0;
     unsigned long long my_key = 0;
     double models[Model::kMaxModels][9];
     int my_model = -1;
-    if (trial < launch.max_trials) {
+    if (trial < round_end && trial < launch.max_trials) {
       DeviceSplitMix64 rng = TrialRng(input.seed, static_cast<uint32_t>(trial));
       int idx[Model::kSampleSize];
       SampleDistinct<Model::kSampleSize>(rng, static_cast<uint32_t>(n), idx);
@@ -358,7 +369,8 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       best_key = s.best_key;
       __syncthreads();  // everyone has read the best before thread 0 may change it
     }
-    trials_done = min((round + 1) * Threads, launch.max_trials);
+    trials_done = min(round_end, launch.max_trials);
+    round_start = round_end;
     const bool irrelevant = relevant > 0 && s.best_count < relevant && trials_done >= relevant_trials;
     const bool stop = trials_done >= launch.max_trials ||
                       (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant;

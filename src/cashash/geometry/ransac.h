@@ -152,7 +152,10 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
   for (; trials < max_trials && !done; ++trials) {
     SampleDistinct(rng, static_cast<uint32_t>(num_data), kSampleSize, sample.data());
     const int num_models = estimator.MinimalSolve(sample.data(), models.data());
-    const bool in_window = early.min_num_inliers > 0 && trials < early.window;
+    // The window's supports fit the chance model; once a model has
+    // min_num_inliers the early exit cannot fire, so they are no longer read.
+    const bool in_window =
+        early.min_num_inliers > 0 && trials < early.window && best.num_inliers < early.min_num_inliers;
     hypotheses += num_models;
     for (int m = 0; m < num_models; ++m) {
       const int must_reach = in_window ? 0 : best.num_inliers;
