@@ -259,6 +259,38 @@ int main(int argc, char** argv) {
                 static_cast<double>(all.trials_E) / all.pairs_E, static_cast<double>(all.local_refits_E) / all.pairs_E,
                 all.pairs_E);
   }
+  if (all.pairs_E > 0) {
+    // Where E's device time goes: pairs by E rounds (256 trials each), and
+    // F, H and E again without the pairs of more than 4 rounds, the same
+    // seeds (so the same trials): what those few pairs cost the launch.
+    const int edges[] = {1, 4, 16, 40, 1 << 20};
+    size_t count[5] = {}, matches_in[5] = {};
+    std::vector<const cashash::TwoViewPoints*> short_points;
+    std::vector<const cashash::EssentialPoints*> short_essential;
+    std::vector<uint64_t> short_seeds;
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      if (essential_pointers[k] == nullptr) continue;
+      const int rounds = (E[k].num_trials + 255) / 256;
+      int b = 0;
+      while (rounds > edges[b]) ++b;
+      ++count[b];
+      matches_in[b] += pairs[k].matches->size();
+      if (rounds <= 4) {
+        short_points.push_back(pointers[k]);
+        short_essential.push_back(essential_pointers[k]);
+        short_seeds.push_back(seeds[k]);
+      }
+    }
+    std::printf("E rounds per pair (<= 1, 2-4, 5-16, 17-40, more): pairs");
+    for (size_t c : count) std::printf(" %zu", c);
+    std::printf("; mean matches");
+    for (int b = 0; b < 5; ++b) std::printf(" %.0f", count[b] ? static_cast<double>(matches_in[b]) / count[b] : 0.0);
+    std::vector<cashash::TwoViewModelEstimate> F2, H2, E2;
+    t0 = Clock::now();
+    ransac.Estimate(short_points, short_seeds, short_essential, &F2, &H2, &E2);
+    std::printf("\nF, H and E without the pairs of more than 4 E rounds (%zu of %zu pairs): %.3f s (all: %.3f s)\n",
+                short_points.size(), pairs.size(), Seconds(t0), gpu_fhe);
+  }
   if (!gpu_cpu_e_result.empty()) {
     const Agreement b = Compare(cpu_result, std::vector<cashash::TwoViewGeometry>(
                                                 gpu_cpu_e_result.begin(), gpu_cpu_e_result.begin() + cpu_result.size()));
