@@ -262,23 +262,31 @@ TEST(GpuTwoViewRansac, DegenerateInputsFailCleanly) {
   EXPECT_LT(H[2].num_inliers, 30);
 }
 
+// Each case twice, with the focal priors of `with_prior` (so E is estimated
+// too) and with `without`'s none; seeds from seed_base on.
+std::vector<VerificationPair> VerificationPairsOf(const std::vector<Case>& cases, const Camera& with_prior,
+                                                  const Camera& without, uint64_t seed_base) {
+  std::vector<VerificationPair> pairs;
+  for (const Case& c : cases) {
+    for (const Camera* camera : {&with_prior, &without}) {
+      VerificationPair p;
+      p.camera1 = p.camera2 = camera;
+      p.points1 = &c.scene.points1;
+      p.points2 = &c.scene.points2;
+      p.matches = &c.scene.matches;
+      p.random_seed = seed_base + pairs.size();
+      pairs.push_back(p);
+    }
+  }
+  return pairs;
+}
+
 // The whole verifier (GPU F/H/E, CPU decision) against the CPU one.
 TEST(GpuBatchVerifier, SameConfigurationsAsCpuOnSyntheticPairs) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const std::vector<Case> cases = SyntheticCases();
   const Camera with_prior = cases[0].scene.MakeCamera(true), without = cases[0].scene.MakeCamera(false);
-  std::vector<VerificationPair> pairs;
-  for (size_t k = 0; k < cases.size(); ++k) {
-    for (const Camera* camera : {&with_prior, &without}) {
-      VerificationPair p;
-      p.camera1 = p.camera2 = camera;
-      p.points1 = &cases[k].scene.points1;
-      p.points2 = &cases[k].scene.points2;
-      p.matches = &cases[k].scene.matches;
-      p.random_seed = 1000 + pairs.size();
-      pairs.push_back(p);
-    }
-  }
+  std::vector<VerificationPair> pairs = VerificationPairsOf(cases, with_prior, without, 1000);
   // Fewer matches than min_num_inliers: DEGENERATE without estimation.
   FeatureMatches few(cases[0].scene.matches.begin(), cases[0].scene.matches.begin() + 10);
   VerificationPair tiny = pairs[0];
@@ -309,18 +317,7 @@ TEST(GpuBatchVerifier, SprtKeepsTheFullScansDecisions) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const std::vector<Case> cases = SyntheticCases();
   const Camera with_prior = cases[0].scene.MakeCamera(true), without = cases[0].scene.MakeCamera(false);
-  std::vector<VerificationPair> pairs;
-  for (size_t k = 0; k < cases.size(); ++k) {
-    for (const Camera* camera : {&with_prior, &without}) {
-      VerificationPair p;
-      p.camera1 = p.camera2 = camera;
-      p.points1 = &cases[k].scene.points1;
-      p.points2 = &cases[k].scene.points2;
-      p.matches = &cases[k].scene.matches;
-      p.random_seed = 2000 + pairs.size();
-      pairs.push_back(p);
-    }
-  }
+  std::vector<VerificationPair> pairs = VerificationPairsOf(cases, with_prior, without, 2000);
   const size_t num_synthetic = pairs.size();
   std::vector<StoredVerificationPair> stored;
   const char* path = std::getenv("CASHASH_VERIFY_PAIRS_FILE");

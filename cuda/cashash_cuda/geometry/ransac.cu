@@ -205,6 +205,55 @@ __device__ __forceinline__ bool SprtRejectsModel(const SprtTest& t, const float*
   });
 }
 
+// One trial on one thread: the sample drawn from the trial's stream, its
+// models solved, and each tested (the sequential test) and scored; the
+// trial's best support (key 0: none) and that model's index in `models`,
+// its hypotheses and, in the window, the sum of their supports.
+struct TrialOutcome {
+  unsigned long long key = 0;
+  int model = -1;
+  int hypotheses = 0;
+  int support_sum = 0;
+};
+
+template <typename Model>
+__device__ __forceinline__ TrialOutcome RunTrial(uint64_t seed, int trial, const float4* points, bool cached,
+                                                 const float4* cached_points, const float4* global_points, int n,
+                                                 float threshold, bool in_window, int must_reach, const SprtTest& sprt,
+                                                 int sprt_step, double (&models)[Model::kMaxModels][9]) {
+  TrialOutcome out;
+  DeviceSplitMix64 rng = TrialRng(seed, static_cast<uint32_t>(trial));
+  int idx[Model::kSampleSize];
+  SampleDistinct<Model::kSampleSize>(rng, static_cast<uint32_t>(n), idx);
+  // Drawn after the sample, so the samples are those of a run without the test.
+  const int sprt_start = sprt.active ? static_cast<int>(rng.Below(static_cast<uint32_t>(n))) : 0;
+  float4 sample[Model::kSampleSize];
+  for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
+  const int num_models = Model::Minimal(sample, models);
+  out.hypotheses = num_models;
+  for (int m = 0; m < num_models; ++m) {
+    float f[9];
+    for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
+    // Shared and global points in separate calls: no generic addressing in the loops.
+    if (sprt.active && (cached ? SprtRejectsModel<Model>(sprt, f, cached_points, n, threshold, sprt_start, sprt_step)
+                            : SprtRejectsModel<Model>(sprt, f, global_points, n, threshold, sprt_start, sprt_step))) {
+      continue;
+    }
+    int count = 0;
+    float sum = 0;
+    const bool scanned = cached ? ScanModel<Model>(f, cached_points, n, threshold, must_reach, &count, &sum)
+                                : ScanModel<Model>(f, global_points, n, threshold, must_reach, &count, &sum);
+    if (!scanned) continue;
+    if (in_window) out.support_sum += count;
+    const unsigned long long key = SupportKey(count, sum);
+    if (key > out.key) {
+      out.key = key;
+      out.model = m;
+    }
+  }
+  return out;
+}
+
 // One function because each round's phases (per-thread sample and score in
 // registers, trial-order walk, stopping rule) share round state and block-wide
 // __syncthreads barriers; scoring and refits are already BlockScore/BlockLocalSolve.
@@ -274,41 +323,14 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
         early.min_num_inliers > 0 && trial < early.window && s.best_count < early.min_num_inliers;
     const int must_reach = in_window ? 0 : s.best_count;
     const SprtTest sprt = MakeSprtTest(must_reach, n, launch.sprt_max_risk);
-    int my_hypotheses = 0, my_support_sum = 0;
-    unsigned long long my_key = 0;
     double models[Model::kMaxModels][9];
-    int my_model = -1;
+    TrialOutcome mine;
     if (trial < round_end && trial < launch.max_trials) {
-      DeviceSplitMix64 rng = TrialRng(input.seed, static_cast<uint32_t>(trial));
-      int idx[Model::kSampleSize];
-      SampleDistinct<Model::kSampleSize>(rng, static_cast<uint32_t>(n), idx);
-      // Drawn after the sample, so the samples are those of a run without the test.
-      const int sprt_start = sprt.active ? static_cast<int>(rng.Below(static_cast<uint32_t>(n))) : 0;
-      float4 sample[Model::kSampleSize];
-      for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
-      const int num_models = Model::Minimal(sample, models);
-      my_hypotheses = num_models;
-      for (int m = 0; m < num_models; ++m) {
-        float f[9];
-        for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
-        if (sprt.active && (cached ? SprtRejectsModel<Model>(sprt, f, cached_points, n, threshold, sprt_start, sprt_step)
-                                   : SprtRejectsModel<Model>(sprt, f, global_points, n, threshold, sprt_start,
-                                                             sprt_step))) {
-          continue;
-        }
-        int count = 0;
-        float sum = 0;
-        const bool scanned = cached ? ScanModel<Model>(f, cached_points, n, threshold, must_reach, &count, &sum)
-                                    : ScanModel<Model>(f, global_points, n, threshold, must_reach, &count, &sum);
-        if (!scanned) continue;
-        if (in_window) my_support_sum += count;
-        const unsigned long long key = SupportKey(count, sum);
-        if (key > my_key) {
-          my_key = key;
-          my_model = m;
-        }
-      }
+      mine = RunTrial<Model>(input.seed, trial, points, cached, cached_points, global_points, n, threshold, in_window,
+                             must_reach, sprt, sprt_step, models);
     }
+    const int my_hypotheses = mine.hypotheses, my_support_sum = mine.support_sum, my_model = mine.model;
+    const unsigned long long my_key = mine.key;
     // Publish every trial's best model, then walk the round in trial order
     // as the CPU loop would: each trial that beats the best so far becomes
     // the best and is refined at once (refining only the round's winner
