@@ -208,7 +208,8 @@ __device__ __forceinline__ bool SprtRejectsModel(const SprtTest& t, const float*
 // One trial on one thread: the sample drawn from the trial's stream, its
 // models solved, and each tested (the sequential test) and scored; the
 // trial's best support (key 0: none) and that model's index in `models`,
-// its hypotheses and, in the window, the sum of their supports.
+// its hypotheses and, in the window, the sum of their supports. `points` is
+// cached_points or global_points, as `cached` says (the sample's loads).
 struct TrialOutcome {
   unsigned long long key = 0;
   int model = -1;
@@ -329,23 +330,21 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       mine = RunTrial<Model>(input.seed, trial, points, cached, cached_points, global_points, n, threshold, in_window,
                              must_reach, sprt, sprt_step, models);
     }
-    const int my_hypotheses = mine.hypotheses, my_support_sum = mine.support_sum, my_model = mine.model;
-    const unsigned long long my_key = mine.key;
     // Publish every trial's best model, then walk the round in trial order
     // as the CPU loop would: each trial that beats the best so far becomes
     // the best and is refined at once (refining only the round's winner
     // would refine lucky wide-band models that a least-squares refit cannot
     // improve, and lose inliers against the CPU).
-    s.keys[threadIdx.x] = my_key;
+    s.keys[threadIdx.x] = mine.key;
     if (early.min_num_inliers > 0) {
-      if (my_hypotheses > 0) atomicAdd(&s.hypotheses, my_hypotheses);
-      if (in_window && my_hypotheses > 0) {
-        atomicAdd(&s.window_hypotheses, my_hypotheses);
-        atomicAdd(&s.window_support_sum, static_cast<double>(my_support_sum));
+      if (mine.hypotheses > 0) atomicAdd(&s.hypotheses, mine.hypotheses);
+      if (in_window && mine.hypotheses > 0) {
+        atomicAdd(&s.window_hypotheses, mine.hypotheses);
+        atomicAdd(&s.window_support_sum, static_cast<double>(mine.support_sum));
       }
     }
-    if (my_model >= 0) {
-      for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[my_model][k];
+    if (mine.model >= 0) {
+      for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[mine.model][k];
     }
     __syncthreads();
     unsigned long long best_key = s.best_key;

@@ -147,7 +147,8 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
           : INT_MAX;
   // The sequential test's own stream, so that the samples are those of a run
   // without it.
-  SplitMix64 sprt_rng(DeriveSeed(options.seed, 0x5350525455ull));
+  constexpr uint64_t kSprtStreamTag = 0x5350525455ull;  // "SPRTU"
+  SplitMix64 sprt_rng(DeriveSeed(options.seed, kSprtStreamTag));
   const int sprt_step = SprtOrderStep(static_cast<int>(num_data));
   for (; trials < max_trials && !done; ++trials) {
     SampleDistinct(rng, static_cast<uint32_t>(num_data), kSampleSize, sample.data());
