@@ -1,9 +1,9 @@
 // Verifies every pair of a verification pairs file twice on the CPU, with
 // COLMAP's full trial budget (every hypothesis scored in full) and with the
 // early exit of RANSAC (--TwoViewGeometry.early_exit) and, unless --sprt 0,
-// the sequential test of hypotheses (--TwoViewGeometry.sprt), and reports how often the decision (the
-// configuration) is the same, how many model estimations stopped early and
-// the time of each run.
+// the sequential test of hypotheses (--TwoViewGeometry.sprt), and reports
+// how often the decision (the configuration) is the same, how many model
+// estimations stopped early and the time of each run.
 //
 //   early_exit_agreement PAIRS.bin [--threads T] [--max_risk R] [--sprt 0|1]
 //                        [--min_agreement A] [--min_stopped S]
