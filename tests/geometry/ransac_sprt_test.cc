@@ -79,6 +79,34 @@ TEST(RansacSprt, OffWhereItCannotPay) {
   EXPECT_GT(t.log_outlier, 0.f);
 }
 
+// The GPU reads the matches 8 at a time (ransac.cu): the same decision as
+// one at a time, for models near the boundary of the test and far from it,
+// and for max_matches that are not multiples of the group.
+TEST(RansacSprt, GroupedReadingDecidesAsOneAtATime) {
+  SplitMix64 rng(11);
+  int rejected = 0, kept = 0;
+  for (const int n : {37, 300, 1001, 3000}) {
+    const int step = SprtOrderStep(n);
+    for (const int must_reach : {n / 3, n / 2}) {
+      const SprtTest t = MakeSprtTest(must_reach, n, 0.001f);
+      if (!t.active) continue;
+      std::vector<char> inlier(n);
+      for (int r = 0; r < 2000; ++r) {
+        const double rate = (r % 8) * 0.1;
+        for (int i = 0; i < n; ++i) inlier[i] = static_cast<double>(rng.Next() >> 11) * 0x1.0p-53 < rate;
+        const int start = static_cast<int>(rng.Below(static_cast<uint32_t>(n)));
+        const auto is_inlier = [&](int i) { return inlier[i] != 0; };
+        const bool one = SprtRejects(t, n, start, step, is_inlier);
+        ASSERT_EQ(one, SprtRejects<8>(t, n, start, step, is_inlier)) << "n " << n << " run " << r;
+        ASSERT_EQ(one, SprtRejects<3>(t, n, start, step, is_inlier)) << "n " << n << " run " << r;
+        (one ? rejected : kept) += 1;
+      }
+    }
+  }
+  EXPECT_GT(rejected, 1000);  // both outcomes were exercised
+  EXPECT_GT(kept, 1000);
+}
+
 TEST(RansacSprt, SpreadOrderVisitsEveryMatchOnce) {
   for (int n = 1; n <= 3000; ++n) {
     const int step = SprtOrderStep(n);

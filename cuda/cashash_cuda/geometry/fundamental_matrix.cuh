@@ -11,7 +11,7 @@ namespace cuda {
 namespace ransac {
 
 // The squared Sampson error as its numerator and denominator, so that a
-// scan can reject a point without dividing (ransac.cu, ScanModel); the
+// scan can reject a point without dividing (ransac.cu, IsInlier); the
 // residual is exactly num2 / den either way.
 __device__ inline void SampsonParts(const float* f, float4 p, float* num2, float* den) {
   const float a = f[0] * p.x + f[1] * p.y + f[2];

@@ -141,60 +141,149 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   __syncthreads();
 }
 
-// Inliers and residual sum of one model over the pair by one thread, in
-// point order; false once `must_reach` is out of reach (checked after every
-// 64 points). ncu put two thirds of an E block's stall samples in this loop
-// (device run 53), hence:
-// - a Sampson model rejects a point without dividing when num2 exceeds the
-//   threshold times den by a margin (2^-16 relative, far above the float
-//   division's rounding), so every decision and every sum is the division's;
-// - the caller passes the points where they are (shared memory when cached),
-//   so that the loads need not go through generic addressing;
-// - blocks of 64 points, unrolled by 4, to keep several loads in flight.
-// Alone these changed nothing measurable (device run 54: the same rows, the
-// same device time); with E's larger point cache (kEssentialMaxSharedPoints)
-// verification's device time fell about 5 % (run 55).
+// The inlier test of one match for a model, by one thread: whether its
+// residual (num2 / den for a Sampson model) is at most the threshold. A
+// Sampson model decides without dividing wherever a margin of 2^-16
+// relative settles it (far above the float product's rounding, and t * den
+// stays a normal float for den >= 1e-30), and divides only inside that
+// band, or for den < 1e-30 or a NaN: the same decision as the division for
+// every match.
+struct SampsonDecision {
+  bool decided;  // by the margin
+  bool inlier;   // when decided
+};
+
+__device__ __forceinline__ SampsonDecision DecideByMargin(float num2, float den, float accept, float reject) {
+  const bool normal = den >= 1e-30f;
+  const bool sure_in = normal && num2 <= accept * den;
+  const bool sure_out = normal && num2 > reject * den;
+  return {sure_in || sure_out, sure_in};
+}
+
 template <typename Model>
-__device__ __forceinline__ bool ScanModel(const float* f, const float4* __restrict__ points, int n, float threshold,
-                                          int must_reach, int* count_out, float* sum_out) {
+__device__ __forceinline__ bool IsInlier(const float* f, float4 p, float threshold, float accept, float reject) {
+  if constexpr (Model::kSampsonResidual) {
+    float num2, den;
+    SampsonParts(f, p, &num2, &den);
+    const SampsonDecision d = DecideByMargin(num2, den, accept, reject);
+    return d.decided ? d.inlier : num2 / den <= threshold;  // rare: the band, a tiny den, a NaN
+  } else {
+    return Model::Residual(f, p) <= threshold;
+  }
+}
+
+// Inliers among points[i, i + kCountGroup) of a Sampson model: the loads
+// first, then every residual, with one branch for the whole group (taken
+// only when a match falls in the margin's band). ncu (device run 79) put 73
+// % of the E kernel's stall samples in the scan, one point after another,
+// each ending in a branch (the division of an inlier, which the warp's
+// other lanes waited for); so a thread ran one dependent chain at a time
+// at 2 warps per scheduler. Here it has kCountGroup independent chains.
+constexpr int kCountGroup = 8;
+
+template <typename Model>
+__device__ __forceinline__ int CountSampsonGroup(const float* f, const float4* __restrict__ points, float threshold,
+                                                 float accept, float reject) {
+  float4 p[kCountGroup];
+#pragma unroll
+  for (int k = 0; k < kCountGroup; ++k) p[k] = points[k];
+  float num2[kCountGroup], den[kCountGroup];
+  int count = 0;
+  bool all_decided = true;
+#pragma unroll
+  for (int k = 0; k < kCountGroup; ++k) {
+    SampsonParts(f, p[k], &num2[k], &den[k]);
+    const SampsonDecision d = DecideByMargin(num2[k], den[k], accept, reject);
+    count += d.inlier ? 1 : 0;
+    all_decided = all_decided && d.decided;
+  }
+  if (!all_decided) {
+#pragma unroll
+    for (int k = 0; k < kCountGroup; ++k) {
+      if (!DecideByMargin(num2[k], den[k], accept, reject).decided && num2[k] / den[k] <= threshold) ++count;
+    }
+  }
+  return count;
+}
+
+// Inliers of one model over the pair by one thread, in point order; false
+// once `must_reach` is out of reach (checked after every 64 points). No
+// residual is summed here: only a model that has its trial's most inliers
+// and at least the round's best needs its sum (RunTrial), and summing meant
+// the division above for every inlier. The caller passes the points where
+// they are (shared memory when cached), so that the loads need not go
+// through generic addressing.
+template <typename Model>
+__device__ __forceinline__ bool CountInliers(const float* f, const float4* __restrict__ points, int n, float threshold,
+                                             int must_reach, int* count_out) {
+  const float accept = threshold * (1.0f - 1.0f / 65536.0f);
   const float reject = threshold * (1.0f + 1.0f / 65536.0f);
   int count = 0;
-  float sum = 0;
   for (int base = 0; base < n; base += 64) {
     const int end = min(n, base + 64);
-#pragma unroll 4
-    for (int i = base; i < end; ++i) {
-      float r;
-      if constexpr (Model::kSampsonResidual) {
-        float num2, den;
-        SampsonParts(f, points[i], &num2, &den);
-        // den >= 1e-30: t * den stays a normal float, so the margin holds.
-        if (den >= 1e-30f && num2 > reject * den) continue;
-        r = num2 / den;
-      } else {
-        r = Model::Residual(f, points[i]);
-      }
-      if (r <= threshold) {
-        ++count;
-        sum += r;
+    int i = base;
+    if constexpr (Model::kSampsonResidual) {
+      for (; i + kCountGroup <= end; i += kCountGroup) {
+        count += CountSampsonGroup<Model>(f, points + i, threshold, accept, reject);
       }
     }
+    for (; i < end; ++i) count += IsInlier<Model>(f, points[i], threshold, accept, reject) ? 1 : 0;
     // Give up once the pair's best so far is out of reach.
     if (end - base == 64 && count + (n - end) < must_reach) return false;
   }
   *count_out = count;
-  *sum_out = sum;
   return true;
 }
 
+// The residual sum of a model's inliers, in point order (the order, and so
+// the float sum, that the walk's comparisons have always used). A Sampson
+// model divides kCountGroup points at a time, each as before, so that the
+// divisions do not wait for each other.
+template <typename Model>
+__device__ __forceinline__ float InlierResidualSum(const float* f, const float4* __restrict__ points, int n,
+                                                   float threshold) {
+  const float reject = threshold * (1.0f + 1.0f / 65536.0f);
+  float sum = 0;
+  int i = 0;
+  if constexpr (Model::kSampsonResidual) {
+    for (; i + kCountGroup <= n; i += kCountGroup) {
+      float num2[kCountGroup], den[kCountGroup], r[kCountGroup];
+#pragma unroll
+      for (int k = 0; k < kCountGroup; ++k) {
+        SampsonParts(f, points[i + k], &num2[k], &den[k]);
+        r[k] = num2[k] / den[k];
+      }
+#pragma unroll
+      for (int k = 0; k < kCountGroup; ++k) {
+        if (den[k] >= 1e-30f && num2[k] > reject * den[k]) continue;
+        if (r[k] <= threshold) sum += r[k];
+      }
+    }
+  }
+  for (; i < n; ++i) {
+    float r;
+    if constexpr (Model::kSampsonResidual) {
+      float num2, den;
+      SampsonParts(f, points[i], &num2, &den);
+      if (den >= 1e-30f && num2 > reject * den) continue;
+      r = num2 / den;
+    } else {
+      r = Model::Residual(f, points[i]);
+    }
+    if (r <= threshold) sum += r;
+  }
+  return sum;
+}
+
 // Whether the sequential test (ransac_sprt.h) rejects the model before its
-// scan: matches start, start + step, ... read as ScanModel reads them (a
-// Sampson model compares without dividing; a NaN counts as an outlier).
+// scan: matches start, start + step, ..., kCountGroup at a time (a Sampson
+// model compares num2 with threshold * den, without dividing; a NaN counts
+// as an outlier).
 template <typename Model>
 __device__ __forceinline__ bool SprtRejectsModel(const SprtTest& t, const float* f,
                                                  const float4* __restrict__ points, int n, float threshold,
                                                  int start, int step) {
-  return SprtRejects(t, n, start, step, [&](int i) {
+  return SprtRejects<kCountGroup>(t, n, start, step, [&](int i) {
     if constexpr (Model::kSampsonResidual) {
       float num2, den;
       SampsonParts(f, points[i], &num2, &den);
@@ -206,10 +295,15 @@ __device__ __forceinline__ bool SprtRejectsModel(const SprtTest& t, const float*
 }
 
 // One trial on one thread: the sample drawn from the trial's stream, its
-// models solved, and each tested (the sequential test) and scored; the
+// models solved, and each tested (the sequential test) and counted; the
 // trial's best support (key 0: none) and that model's index in `models`,
 // its hypotheses and, in the window, the sum of their supports. `points` is
 // cached_points or global_points, as `cached` says (the sample's loads).
+// The key orders by inliers, then by the smaller residual sum, so only the
+// models with the trial's most inliers can be its best, and the sum decides
+// nothing below `sum_from` (the round's best count: such a key loses to the
+// best in the walk whatever its sum): sums are taken only where they can
+// decide, and every key that can win is the one a full scan gave.
 struct TrialOutcome {
   unsigned long long key = 0;
   int model = -1;
@@ -220,8 +314,9 @@ struct TrialOutcome {
 template <typename Model>
 __device__ __forceinline__ TrialOutcome RunTrial(uint64_t seed, int trial, const float4* points, bool cached,
                                                  const float4* cached_points, const float4* global_points, int n,
-                                                 float threshold, bool in_window, int must_reach, const SprtTest& sprt,
-                                                 int sprt_step, double (&models)[Model::kMaxModels][9]) {
+                                                 float threshold, bool in_window, int must_reach, int sum_from,
+                                                 const SprtTest& sprt, int sprt_step,
+                                                 double (&models)[Model::kMaxModels][9]) {
   TrialOutcome out;
   DeviceSplitMix64 rng = TrialRng(seed, static_cast<uint32_t>(trial));
   int idx[Model::kSampleSize];
@@ -232,7 +327,10 @@ __device__ __forceinline__ TrialOutcome RunTrial(uint64_t seed, int trial, const
   for (int k = 0; k < Model::kSampleSize; ++k) sample[k] = points[idx[k]];
   const int num_models = Model::Minimal(sample, models);
   out.hypotheses = num_models;
+  int counts[Model::kMaxModels];
+  int most = -1;
   for (int m = 0; m < num_models; ++m) {
+    counts[m] = -1;
     float f[9];
     for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
     // Shared and global points in separate calls: no generic addressing in the loops.
@@ -241,16 +339,29 @@ __device__ __forceinline__ TrialOutcome RunTrial(uint64_t seed, int trial, const
       continue;
     }
     int count = 0;
-    float sum = 0;
-    const bool scanned = cached ? ScanModel<Model>(f, cached_points, n, threshold, must_reach, &count, &sum)
-                                : ScanModel<Model>(f, global_points, n, threshold, must_reach, &count, &sum);
-    if (!scanned) continue;
+    const bool counted = cached ? CountInliers<Model>(f, cached_points, n, threshold, must_reach, &count)
+                                : CountInliers<Model>(f, global_points, n, threshold, must_reach, &count);
+    if (!counted) continue;
     if (in_window) out.support_sum += count;
-    const unsigned long long key = SupportKey(count, sum);
+    counts[m] = count;
+    most = max(most, count);
+  }
+  if (most < 0) return out;
+  for (int m = 0; m < num_models; ++m) {
+    if (counts[m] != most) continue;
+    float sum = 0;
+    if (most >= sum_from) {
+      float f[9];
+      for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(models[m][k]);
+      sum = cached ? InlierResidualSum<Model>(f, cached_points, n, threshold)
+                   : InlierResidualSum<Model>(f, global_points, n, threshold);
+    }
+    const unsigned long long key = SupportKey(most, sum);
     if (key > out.key) {
       out.key = key;
       out.model = m;
     }
+    if (most < sum_from) break;  // no sum can decide: the first such model stands for the trial
   }
   return out;
 }
@@ -328,7 +439,7 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     TrialOutcome mine;
     if (trial < round_end && trial < launch.max_trials) {
       mine = RunTrial<Model>(input.seed, trial, points, cached, cached_points, global_points, n, threshold, in_window,
-                             must_reach, sprt, sprt_step, models);
+                             must_reach, s.best_count, sprt, sprt_step, models);
     }
     // Publish every trial's best model, then walk the round in trial order
     // as the CPU loop would: each trial that beats the best so far becomes

@@ -92,16 +92,30 @@ CASHASH_HOST_DEVICE inline int SprtOrderStep(int n) {
 
 // Whether the test rejects the model whose inlier test for match i is
 // `is_inlier(i)`: matches start, start + step, ... (mod n), at most
-// t.max_matches of them. Callers check t.active first.
-template <typename IsInlier>
+// t.max_matches of them. Callers check t.active first. The matches are
+// tested `Group` at a time (up to Group - 1 past the last one the test
+// needs): the tests of a group do not depend on each other, so a GPU thread
+// keeps them in flight together instead of one dependent chain per match;
+// the ratio grows in the same order and stops at the same match, so the
+// decision is the same for every Group.
+template <int Group = 1, typename IsInlier>
 CASHASH_HOST_DEVICE inline bool SprtRejects(const SprtTest& t, int n, int start, int step, IsInlier is_inlier) {
   float log_ratio = 0.f;
   int i = start;
-  for (int k = 0; k < t.max_matches; ++k) {
-    log_ratio += is_inlier(i) ? t.log_inlier : t.log_outlier;
-    if (log_ratio > t.log_reject) return true;
-    i += step;
-    if (i >= n) i -= n;
+  for (int k = 0; k < t.max_matches; k += Group) {
+    bool inlier[Group];
+#if defined(__CUDA_ARCH__)
+#pragma unroll
+#endif
+    for (int g = 0; g < Group; ++g) {
+      inlier[g] = is_inlier(i);
+      i += step;
+      if (i >= n) i -= n;
+    }
+    for (int g = 0; g < Group && k + g < t.max_matches; ++g) {
+      log_ratio += inlier[g] ? t.log_inlier : t.log_outlier;
+      if (log_ratio > t.log_reject) return true;
+    }
   }
   return false;
 }
