@@ -180,7 +180,7 @@ __device__ __forceinline__ bool IsInlier(const float* f, float4 p, float thresho
 // other lanes waited for); so a thread ran one dependent chain at a time
 // at 2 warps per scheduler. Here it has kCountGroup independent chains.
 // Measured (runs 80-81, every row the same): the division out alone gained
-// nothing, the groups E 3-11 % at 8,192 features and 3 % at 16,384; ncu
+// nothing, the groups E 2-12 % at 8,192 features and 3 % at 16,384; ncu
 // then put the scan at 24 % and the barrier after the trials at 52 %: the
 // round waits for its slowest warp (docs/gpu_verification.md).
 constexpr int kCountGroup = 8;
