@@ -148,6 +148,10 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
 // stays a normal float for den >= 1e-30), and divides only inside that
 // band, or for den < 1e-30 or a NaN: the same decision as the division for
 // every match.
+// The margin, relative to the threshold, on either side.
+constexpr float kMarginBelow = 1.0f - 1.0f / 65536.0f;  // accept = threshold * kMarginBelow
+constexpr float kMarginAbove = 1.0f + 1.0f / 65536.0f;  // reject = threshold * kMarginAbove
+
 struct SampsonDecision {
   bool decided;  // by the margin
   bool inlier;   // when decided
@@ -192,19 +196,21 @@ __device__ __forceinline__ int CountSampsonGroup(const float* f, const float4* _
 #pragma unroll
   for (int k = 0; k < kCountGroup; ++k) p[k] = points[k];
   float num2[kCountGroup], den[kCountGroup];
+  bool decided[kCountGroup];
   int count = 0;
   bool all_decided = true;
 #pragma unroll
   for (int k = 0; k < kCountGroup; ++k) {
     SampsonParts(f, p[k], &num2[k], &den[k]);
     const SampsonDecision d = DecideByMargin(num2[k], den[k], accept, reject);
+    decided[k] = d.decided;
     count += d.inlier ? 1 : 0;
     all_decided = all_decided && d.decided;
   }
   if (!all_decided) {
 #pragma unroll
     for (int k = 0; k < kCountGroup; ++k) {
-      if (!DecideByMargin(num2[k], den[k], accept, reject).decided && num2[k] / den[k] <= threshold) ++count;
+      if (!decided[k] && num2[k] / den[k] <= threshold) ++count;
     }
   }
   return count;
@@ -220,8 +226,8 @@ __device__ __forceinline__ int CountSampsonGroup(const float* f, const float4* _
 template <typename Model>
 __device__ __forceinline__ bool CountInliers(const float* f, const float4* __restrict__ points, int n, float threshold,
                                              int must_reach, int* count_out) {
-  const float accept = threshold * (1.0f - 1.0f / 65536.0f);
-  const float reject = threshold * (1.0f + 1.0f / 65536.0f);
+  const float accept = threshold * kMarginBelow;
+  const float reject = threshold * kMarginAbove;
   int count = 0;
   for (int base = 0; base < n; base += 64) {
     const int end = min(n, base + 64);
@@ -246,7 +252,7 @@ __device__ __forceinline__ bool CountInliers(const float* f, const float4* __res
 template <typename Model>
 __device__ __forceinline__ float InlierResidualSum(const float* f, const float4* __restrict__ points, int n,
                                                    float threshold) {
-  const float reject = threshold * (1.0f + 1.0f / 65536.0f);
+  const float reject = threshold * kMarginAbove;  // skip, as DecideByMargin, what is surely outside
   float sum = 0;
   int i = 0;
   if constexpr (Model::kSampsonResidual) {
