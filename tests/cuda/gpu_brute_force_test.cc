@@ -325,6 +325,60 @@ TEST_F(GpuBruteForceTest, MatchPairsEqualsReferenceAndCpuMatcher) {
   }
 }
 
+// The reverse search runs only over the rows of image 2 that an accepted
+// forward match names. Three shapes stress that gather: nearly every row
+// named (image 2 is image 1), no row named (unrelated images at max_distance
+// 0, which only angle 0 passes), and many rows of image 1 naming the same
+// few rows of image 2 (near copies of 3 rows), where the gathered count is
+// tiny and the cross-check must still reject every row whose reverse best
+// is another.
+TEST_F(GpuBruteForceTest, ReverseSearchOverNamedRowsEqualsFullReference) {
+  std::mt19937 rng(7);
+  const Image base = RandomImage(3000, rng);
+  const Image unrelated = RandomImage(2000, rng);
+  Image crowd;  // 4000 rows: noisy copies of rows 0..2 of `base`
+  std::uniform_int_distribution<int> noise(-3, 3);
+  for (int i = 0; i < 4000; ++i) {
+    const uint8_t* src = base.row(i % 3);
+    for (int d = 0; d < kDescriptorDim; ++d) {
+      crowd.data.push_back(static_cast<uint8_t>(std::clamp(int{src[d]} + noise(rng), 0, 255)));
+    }
+  }
+  const std::vector<std::pair<const Image*, const Image*>> cases = {
+      {&base, &base}, {&base, &unrelated}, {&crowd, &base}, {&base, &crowd}};
+  std::vector<std::unique_ptr<DeviceImage>> devices;
+  std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> pairs;
+  std::vector<Reference> r12, r21;
+  for (const auto& c : cases) {
+    devices.push_back(std::make_unique<DeviceImage>(*c.first));
+    devices.push_back(std::make_unique<DeviceImage>(*c.second));
+    pairs.emplace_back(devices[devices.size() - 2]->view(), devices.back()->view());
+    r12.push_back(NaiveBestTwo(*c.first, *c.second));
+    r21.push_back(NaiveBestTwo(*c.second, *c.first));
+  }
+  BruteForceKernels kernels;
+  const std::vector<MatchThresholds> settings = {{0.8f, 0.7f, true}, {0.8f, 0.0f, true}, {1.0f, 2.0f, true}};
+  size_t matched_identical = 0;
+  for (const MatchThresholds& t : settings) {
+    const std::vector<FeatureMatches> got = kernels.MatchPairs(pairs, t);
+    ASSERT_EQ(got.size(), pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      SCOPED_TRACE("case " + std::to_string(k) + " max_distance " + std::to_string(t.max_distance));
+      const FeatureMatches expected = ReferenceMatches(r12[k], r21[k], t);
+      EXPECT_EQ(got[k], expected);
+      if (t.max_distance == 0.0f && k == 1) {
+        EXPECT_TRUE(expected.empty());
+      }
+    }
+    if (t.max_distance == 0.7f) {
+      for (const FeatureMatch& m : got[0]) matched_identical += m.point2D_idx1 == m.point2D_idx2 ? 1 : 0;
+    }
+  }
+  // An image against itself: nearly every row is its own mutual best (a row
+  // whose dot with another also reaches angle 0 fails the ratio test).
+  EXPECT_GE(matched_identical, static_cast<size_t>(base.rows()) * 99 / 100);
+}
+
 // The acceptance boundary: dots on either side of the max_distance and
 // ratio thresholds decide exactly as AcceptSiftMatch on the CPU. Built from
 // descriptors with 4 equal non-zero dimensions, so that every dot is chosen

@@ -9,6 +9,10 @@
 // rows' running best two with packed (score, position) keys, three min/max per
 // dot. The two directions of a pair are two problems of the same launch.
 //
+// HitGatherKernel: with cross-check, one block per pair copies the rows of
+// image 2 that an accepted forward match names; the reverse search then runs
+// over those rows only (MatchPairs).
+//
 // MutualMatchKernel: one block per pair applies COLMAP's acceptance rule via a
 // table of the host's own acos values (so the GPU decides exactly as the CPU)
 // and the cross-check, and compacts the matches in idx1 order.
@@ -59,6 +63,10 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
 
   const int2 item = items[blockIdx.x];
   const BestTwoProblem p = problems[item.x];
+  // A reverse search is launched for its capacity; the rows past the count
+  // the gather wrote leave at once (the whole block, before any barrier).
+  const int n_a = p.live_rows != nullptr ? min(p.n_a, *p.live_rows) : p.n_a;
+  if (item.y * kBlockRows >= n_a) return;
   const int lane = threadIdx.x & 31;
   const int warp = threadIdx.x >> 5;
   const int g = lane >> 2;  // mma group: fragment row
@@ -75,8 +83,8 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
     const int row_hi = row_lo + 8;
     const uint32_t* lo = reinterpret_cast<const uint32_t*>(p.a + static_cast<size_t>(row_lo) * kRowBytes);
     const uint32_t* hi = reinterpret_cast<const uint32_t*>(p.a + static_cast<size_t>(row_hi) * kRowBytes);
-    const bool lo_ok = row_lo < p.n_a;
-    const bool hi_ok = row_hi < p.n_a;
+    const bool lo_ok = row_lo < n_a;
+    const bool hi_ok = row_hi < n_a;
 #pragma unroll
     for (int s = 0; s < 4; ++s) {
       a[i][s][0] = lo_ok ? __ldg(lo + 8 * s + t) : 0u;
@@ -172,7 +180,7 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
   for (int slot = 0; slot < 8; ++slot) {
     best[slot].WarpGroupMerge<4>();
     const int row = warp_row0 + 16 * (slot >> 1) + g + 8 * (slot & 1);
-    if (t == 0 && row < p.n_a) {
+    if (t == 0 && row < n_a) {
       const bool found = best[slot].best > 0;
       p.best_dot[row] = found ? best[slot].best : 0;
       p.best_idx[row] = found ? best[slot].index : -1;
@@ -192,13 +200,68 @@ __device__ __forceinline__ bool AcceptOnDevice(int dot, int second, int index, c
 
 constexpr int kMatchThreads = 256;
 
+// Position of each thread's flag among the set flags of the block, in thread
+// order, and their total; warp_counts holds kMatchThreads / 32 ints. Ends
+// with a barrier, so warp_counts may be reused at once.
+__device__ __forceinline__ int BlockCompactSlot(bool flag, int* warp_counts, int* total) {
+  const int lane = threadIdx.x & 31;
+  const int warp = threadIdx.x >> 5;
+  const unsigned ballot = __ballot_sync(0xffffffffu, flag);
+  if (lane == 0) warp_counts[warp] = __popc(ballot);
+  __syncthreads();
+  int offset = 0;
+  int sum = 0;
+#pragma unroll
+  for (int w = 0; w < kMatchThreads / 32; ++w) {
+    offset += w < warp ? warp_counts[w] : 0;
+    sum += warp_counts[w];
+  }
+  __syncthreads();
+  *total = sum;
+  return offset + __popc(ballot & ((1u << lane) - 1u));
+}
+
+__global__ void __launch_bounds__(kMatchThreads)
+    HitGatherKernel(const HitGatherProblem* __restrict__ problems, const float* __restrict__ angle,
+                    MatchThresholds thresholds) {
+  __shared__ int warp_counts[kMatchThreads / 32];
+  const HitGatherProblem p = problems[blockIdx.x];
+  // slot[] first holds a flag per row of image 2: named by an accepted
+  // forward match or not. The block's barriers order these global writes.
+  for (int j = threadIdx.x; j < p.n2; j += kMatchThreads) p.slot[j] = 0;
+  __syncthreads();
+  for (int i = threadIdx.x; i < p.n1; i += kMatchThreads) {
+    const int j = p.best_idx12[i];
+    if (j >= 0 && j < p.n2 &&
+        AcceptOnDevice(p.best_dot12[i], p.second_dot12[i], j, angle, thresholds.max_ratio, thresholds.max_distance)) {
+      p.slot[j] = 1;
+    }
+  }
+  __syncthreads();
+  // Flags to positions, in ascending row order, and the rows copied there.
+  int written = 0;
+  for (int base = 0; base < p.n2; base += kMatchThreads) {
+    const int j = base + threadIdx.x;
+    const bool needed = j < p.n2 && p.slot[j] != 0;
+    int total = 0;
+    const int position = written + BlockCompactSlot(needed, warp_counts, &total);
+    if (j < p.n2) p.slot[j] = needed ? position : -1;
+    if (needed) {
+      const uint4* src = reinterpret_cast<const uint4*>(p.b + static_cast<size_t>(j) * kRowBytes);
+      uint4* dst = reinterpret_cast<uint4*>(p.gathered + static_cast<size_t>(position) * kRowBytes);
+#pragma unroll
+      for (int q = 0; q < kRowBytes / 16; ++q) dst[q] = __ldg(src + q);
+    }
+    written += total;
+  }
+  if (threadIdx.x == 0) *p.num_gathered = written;
+}
+
 __global__ void __launch_bounds__(kMatchThreads)
     MutualMatchKernel(const MutualMatchProblem* __restrict__ problems, const float* __restrict__ angle,
                       MatchThresholds thresholds) {
   __shared__ int warp_counts[kMatchThreads / 32];
   const MutualMatchProblem p = problems[blockIdx.x];
-  const int lane = threadIdx.x & 31;
-  const int warp = threadIdx.x >> 5;
   int written = 0;
   for (int base = 0; base < p.n1; base += kMatchThreads) {
     const int i = base + threadIdx.x;
@@ -209,28 +272,19 @@ __global__ void __launch_bounds__(kMatchThreads)
       keep = AcceptOnDevice(p.best_dot12[i], p.second_dot12[i], j, angle, thresholds.max_ratio,
                             thresholds.max_distance);
       if (keep && thresholds.cross_check) {
-        keep = j < p.n2 && p.best_idx21[j] == i &&
-               AcceptOnDevice(p.best_dot21[j], p.second_dot21[j], i, angle, thresholds.max_ratio,
+        const int r = j >= p.n2 ? -1 : p.slot21 != nullptr ? p.slot21[j] : j;
+        keep = r >= 0 && p.best_idx21[r] == i &&
+               AcceptOnDevice(p.best_dot21[r], p.second_dot21[r], i, angle, thresholds.max_ratio,
                               thresholds.max_distance);
       }
     }
-    const unsigned ballot = __ballot_sync(0xffffffffu, keep);
-    if (lane == 0) warp_counts[warp] = __popc(ballot);
-    __syncthreads();
-    int offset = written;
     int total = 0;
-#pragma unroll
-    for (int w = 0; w < kMatchThreads / 32; ++w) {
-      offset += w < warp ? warp_counts[w] : 0;
-      total += warp_counts[w];
-    }
+    const int slot = written + BlockCompactSlot(keep, warp_counts, &total);
     if (keep) {
-      const int slot = offset + __popc(ballot & ((1u << lane) - 1u));
       p.matches[2 * slot] = static_cast<uint32_t>(i);
       p.matches[2 * slot + 1] = static_cast<uint32_t>(j);
     }
     written += total;
-    __syncthreads();  // warp_counts is rewritten by the next round
   }
   if (threadIdx.x == 0) *p.num_matches = written;
 }
@@ -277,6 +331,8 @@ class GrowingBuffer {
 struct BruteForceKernels::Scratch {
   GrowingBuffer angle_table{false};
   GrowingBuffer problems{false};  // BestTwoProblem[] then int2 items[]
+  GrowingBuffer reverse_problems{false};  // the reverse searches' BestTwoProblem[] and items
+  GrowingBuffer gather{false};    // HitGatherProblem[]
   GrowingBuffer mutual{false};    // MutualMatchProblem[]
   GrowingBuffer results{false};   // MatchPairs: best-two outputs, matches, counts
   GrowingBuffer host_counts{true};
@@ -306,15 +362,19 @@ BruteForceKernels::~BruteForceKernels() {
   delete scratch_;
 }
 
-void BruteForceKernels::EnqueueBestTwo(const std::vector<BestTwoProblem>& problems) {
+namespace {
+
+// Stages the problems and their items in `staging` and launches one
+// BestTwoKernel over them.
+void LaunchBestTwo(const std::vector<BestTwoProblem>& problems, GrowingBuffer* staging, cudaStream_t stream) {
   std::vector<int2> items;
   for (size_t k = 0; k < problems.size(); ++k) {
     const BestTwoProblem& p = problems[k];
     if (p.n_a < 0 || p.n_b < 0 || (p.n_a > 0 && p.a == nullptr) || (p.n_b > 0 && p.b == nullptr)) {
-      throw std::invalid_argument("EnqueueBestTwo: bad problem " + std::to_string(k));
+      throw std::invalid_argument("BestTwo: bad problem " + std::to_string(k));
     }
     if ((reinterpret_cast<uintptr_t>(p.a) | reinterpret_cast<uintptr_t>(p.b)) % 16 != 0) {
-      throw std::invalid_argument("EnqueueBestTwo: descriptors must be 16-byte aligned");
+      throw std::invalid_argument("BestTwo: descriptors must be 16-byte aligned, problem " + std::to_string(k));
     }
     for (int block = 0; block * kBlockRows < p.n_a; ++block) items.push_back(make_int2(static_cast<int>(k), block));
   }
@@ -324,11 +384,34 @@ void BruteForceKernels::EnqueueBestTwo(const std::vector<BestTwoProblem>& proble
   std::vector<uint8_t> staged(problem_bytes + item_bytes);
   std::memcpy(staged.data(), problems.data(), problems.size() * sizeof(BestTwoProblem));
   std::memcpy(staged.data() + problem_bytes, items.data(), item_bytes);
-  uint8_t* device = static_cast<uint8_t*>(scratch_->problems.Reserve(staged.size(), stream_));
-  CUDA_CHECK(cudaMemcpyAsync(device, staged.data(), staged.size(), cudaMemcpyHostToDevice, stream_));
-  BestTwoKernel<<<static_cast<unsigned>(items.size()), kThreads, 0, stream_>>>(
+  uint8_t* device = static_cast<uint8_t*>(staging->Reserve(staged.size(), stream));
+  CUDA_CHECK(cudaMemcpyAsync(device, staged.data(), staged.size(), cudaMemcpyHostToDevice, stream));
+  BestTwoKernel<<<static_cast<unsigned>(items.size()), kThreads, 0, stream>>>(
       reinterpret_cast<const BestTwoProblem*>(device), reinterpret_cast<const int2*>(device + problem_bytes),
       PackedBestTwo::kPositions);
+  CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace
+
+void BruteForceKernels::EnqueueBestTwo(const std::vector<BestTwoProblem>& problems) {
+  LaunchBestTwo(problems, &scratch_->problems, stream_);
+}
+
+void BruteForceKernels::EnqueueHitGather(const std::vector<HitGatherProblem>& problems,
+                                         const MatchThresholds& thresholds) {
+  if (problems.empty()) return;
+  for (size_t k = 0; k < problems.size(); ++k) {
+    if (reinterpret_cast<uintptr_t>(problems[k].gathered) % 16 != 0) {
+      throw std::invalid_argument("EnqueueHitGather: gathered rows must be 16-byte aligned, problem " +
+                                  std::to_string(k));
+    }
+  }
+  const size_t bytes = problems.size() * sizeof(HitGatherProblem);
+  void* device = scratch_->gather.Reserve(bytes, stream_);
+  CUDA_CHECK(cudaMemcpyAsync(device, problems.data(), bytes, cudaMemcpyHostToDevice, stream_));
+  HitGatherKernel<<<static_cast<unsigned>(problems.size()), kMatchThreads, 0, stream_>>>(
+      static_cast<const HitGatherProblem*>(device), scratch_->angle, thresholds);
   CUDA_CHECK_LAUNCH();
 }
 
@@ -344,81 +427,114 @@ void BruteForceKernels::EnqueueMutualMatches(const std::vector<MutualMatchProble
 }
 
 size_t BruteForceKernels::MatchPairsScratchBytes(int n1, int n2) {
-  // 3 ints per row each way, 2 uint32 per possible match, one count.
-  return (3 * static_cast<size_t>(n1) + 3 * static_cast<size_t>(n2) + 2 * static_cast<size_t>(n1) + 1) * 4;
+  // 3 ints per row each way, 2 uint32 per possible match, one count; the
+  // gather's slot per image-2 row, its count, and room for every image-2 row
+  // gathered (128 bytes each, after up to 3 ints of alignment).
+  const size_t ints = 3 * static_cast<size_t>(n1) + 3 * static_cast<size_t>(n2) + 2 * static_cast<size_t>(n1) + 1 +
+                      static_cast<size_t>(n2) + 1 + 3 + static_cast<size_t>(n2) * kRowBytes / 4;
+  return ints * 4;
 }
 
-std::vector<FeatureMatches> BruteForceKernels::MatchPairs(
-    const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs, const MatchThresholds& thresholds) {
-  std::vector<FeatureMatches> result(pairs.size());
-  if (pairs.empty()) return result;
-  size_t total = 0;
-  for (const auto& pair : pairs) total += MatchPairsScratchBytes(pair.first.rows, pair.second.rows) / 4;
-  int* base = static_cast<int*>(scratch_->results.Reserve(total * 4, stream_));
-  int* counts = base;  // one per pair, first
-  int* cursor = base + pairs.size();
+namespace {
 
-  std::vector<BestTwoProblem> best_two;
+// The problems of MatchPairs' four launches.
+struct PairProblems {
+  std::vector<BestTwoProblem> forward;
+  std::vector<HitGatherProblem> gather;
+  std::vector<BestTwoProblem> reverse;
   std::vector<MutualMatchProblem> mutual;
-  best_two.reserve(2 * pairs.size());
-  mutual.reserve(pairs.size());
+};
+
+// Carves each pair's outputs and scratch from `cursor` onwards (room for
+// MatchPairsScratchBytes per pair) and links the problems through them:
+// forward search, gather of the named rows, reverse search over those,
+// acceptance. Pair k's match count goes to counts[k].
+PairProblems LayOutPairProblems(const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
+                                bool cross_check, int* counts, int* cursor) {
+  auto take = [&cursor](size_t n) {
+    int* p = cursor;
+    cursor += n;
+    return p;
+  };
+  auto take_rows = [&cursor](int rows) {  // 16-byte aligned descriptor rows
+    while (reinterpret_cast<uintptr_t>(cursor) % 16 != 0) ++cursor;
+    uint8_t* p = reinterpret_cast<uint8_t*>(cursor);
+    cursor += static_cast<size_t>(rows) * kRowBytes / 4;
+    return p;
+  };
+  PairProblems out;
   for (size_t k = 0; k < pairs.size(); ++k) {
     const DeviceDescriptors& d1 = pairs[k].first;
     const DeviceDescriptors& d2 = pairs[k].second;
-    auto take = [&cursor](int n) {
-      int* p = cursor;
-      cursor += n;
-      return p;
-    };
-    BestTwoProblem p12, p21;
-    p12.a = p21.b = d1.data;
-    p12.b = p21.a = d2.data;
-    p12.n_a = p21.n_b = d1.rows;
-    p12.n_b = p21.n_a = d2.rows;
-    p12.best_dot = take(d1.rows);
-    p12.second_dot = take(d1.rows);
-    p12.best_idx = take(d1.rows);
-    p21.best_dot = take(d2.rows);
-    p21.second_dot = take(d2.rows);
-    p21.best_idx = take(d2.rows);
-    best_two.push_back(p12);
-    if (thresholds.cross_check) best_two.push_back(p21);
+    BestTwoProblem p12{d1.data, d2.data, take(d1.rows), take(d1.rows), take(d1.rows), d1.rows, d2.rows};
+    out.forward.push_back(p12);
     MutualMatchProblem m;
     m.best_dot12 = p12.best_dot;
     m.second_dot12 = p12.second_dot;
     m.best_idx12 = p12.best_idx;
-    m.best_dot21 = p21.best_dot;
-    m.second_dot21 = p21.second_dot;
-    m.best_idx21 = p21.best_idx;
-    m.matches = reinterpret_cast<uint32_t*>(take(2 * d1.rows));
+    m.matches = reinterpret_cast<uint32_t*>(take(2 * static_cast<size_t>(d1.rows)));
     m.num_matches = counts + k;
     m.n1 = d1.rows;
     m.n2 = d2.rows;
-    mutual.push_back(m);
+    if (cross_check) {
+      HitGatherProblem g{p12.best_dot, p12.second_dot, p12.best_idx, d2.data, take(d2.rows), nullptr, take(1),
+                         d1.rows, d2.rows};
+      g.gathered = take_rows(d2.rows);
+      out.gather.push_back(g);
+      // Sized for every row of image 2; the gather's count decides.
+      BestTwoProblem p21{g.gathered, d1.data, take(d2.rows), take(d2.rows), take(d2.rows),
+                         d2.rows,    d1.rows, g.num_gathered};
+      out.reverse.push_back(p21);
+      m.best_dot21 = p21.best_dot;
+      m.second_dot21 = p21.second_dot;
+      m.best_idx21 = p21.best_idx;
+      m.slot21 = g.slot;
+    }
+    out.mutual.push_back(m);
   }
-  EnqueueBestTwo(best_two);
-  EnqueueMutualMatches(mutual, thresholds);
+  return out;
+}
 
-  int* host_counts = static_cast<int*>(scratch_->host_counts.Reserve(pairs.size() * sizeof(int), stream_));
-  CUDA_CHECK(cudaMemcpyAsync(host_counts, counts, pairs.size() * sizeof(int), cudaMemcpyDeviceToHost, stream_));
+}  // namespace
+
+std::vector<FeatureMatches> BruteForceKernels::MatchPairs(
+    const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs, const MatchThresholds& thresholds) {
+  if (pairs.empty()) return {};
+  size_t total = pairs.size();
+  for (const auto& pair : pairs) total += MatchPairsScratchBytes(pair.first.rows, pair.second.rows) / 4;
+  int* counts = static_cast<int*>(scratch_->results.Reserve(total * 4, stream_));  // one per pair, first
+  const PairProblems problems = LayOutPairProblems(pairs, thresholds.cross_check, counts, counts + pairs.size());
+  EnqueueBestTwo(problems.forward);
+  EnqueueHitGather(problems.gather, thresholds);
+  LaunchBestTwo(problems.reverse, &scratch_->reverse_problems, stream_);
+  EnqueueMutualMatches(problems.mutual, thresholds);
+  return CopyMatchesBack(problems.mutual, counts);
+}
+
+std::vector<FeatureMatches> BruteForceKernels::CopyMatchesBack(const std::vector<MutualMatchProblem>& mutual,
+                                                               const int* device_counts) {
+  const size_t n = mutual.size();
+  int* host_counts = static_cast<int*>(scratch_->host_counts.Reserve(n * sizeof(int), stream_));
+  CUDA_CHECK(cudaMemcpyAsync(host_counts, device_counts, n * sizeof(int), cudaMemcpyDeviceToHost, stream_));
   CUDA_CHECK(cudaStreamSynchronize(stream_));
+  const std::vector<int> counts(host_counts, host_counts + n);  // the buffer below may be regrown
   size_t num_matches = 0;
-  for (size_t k = 0; k < pairs.size(); ++k) num_matches += static_cast<size_t>(host_counts[k]);
-  std::vector<int> counts_copy(host_counts, host_counts + pairs.size());
+  for (const int count : counts) num_matches += static_cast<size_t>(count);
   FeatureMatch* host_matches = static_cast<FeatureMatch*>(
       scratch_->host_matches.Reserve(std::max<size_t>(num_matches, 1) * sizeof(FeatureMatch), stream_));
   size_t offset = 0;
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    if (counts_copy[k] == 0) continue;
-    CUDA_CHECK(cudaMemcpyAsync(host_matches + offset, mutual[k].matches, counts_copy[k] * sizeof(FeatureMatch),
+  for (size_t k = 0; k < n; ++k) {
+    if (counts[k] == 0) continue;
+    CUDA_CHECK(cudaMemcpyAsync(host_matches + offset, mutual[k].matches, counts[k] * sizeof(FeatureMatch),
                                cudaMemcpyDeviceToHost, stream_));
-    offset += counts_copy[k];
+    offset += counts[k];
   }
   CUDA_CHECK(cudaStreamSynchronize(stream_));
+  std::vector<FeatureMatches> result(n);
   offset = 0;
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    result[k].assign(host_matches + offset, host_matches + offset + counts_copy[k]);
-    offset += counts_copy[k];
+  for (size_t k = 0; k < n; ++k) {
+    result[k].assign(host_matches + offset, host_matches + offset + counts[k]);
+    offset += counts[k];
   }
   return result;
 }

@@ -25,6 +25,10 @@ namespace cuda {
 //   best_idx[i]   = lowest row of b reaching it, -1 when best_dot is 0,
 //   second_dot[i] = second largest dot of the multiset (0 when n_b < 2),
 // exactly as BestTwo of the CPU matcher.
+// live_rows, when set, is a device count written by earlier work on the
+// stream (the gathered rows of a reverse search): only min(n_a,
+// *live_rows) rows are searched, and n_a is the capacity the launch is
+// sized for.
 struct BestTwoProblem {
   const uint8_t* a = nullptr;
   const uint8_t* b = nullptr;
@@ -33,12 +37,34 @@ struct BestTwoProblem {
   int* best_idx = nullptr;
   int n_a = 0;
   int n_b = 0;
+  const int* live_rows = nullptr;
+};
+
+// The rows of image 2 that the cross-check needs: those that are the
+// accepted best of some row of image 1. Their descriptors are copied in
+// ascending order to `gathered` (n2 x 128 capacity, 16-byte aligned),
+// slot[j] receives row j's position there or -1, and num_gathered their
+// count. Only these rows are searched in the reverse direction: a row of
+// image 2 that no accepted forward match names cannot pass the cross-check,
+// and a row's best two depend on that row alone, so the matches are those
+// of the full reverse search.
+struct HitGatherProblem {
+  const int* best_dot12 = nullptr;
+  const int* second_dot12 = nullptr;
+  const int* best_idx12 = nullptr;
+  const uint8_t* b = nullptr;
+  int* slot = nullptr;
+  uint8_t* gathered = nullptr;
+  int* num_gathered = nullptr;
+  int n1 = 0;
+  int n2 = 0;
 };
 
 // Final matches of one pair (image 1 rows n1, image 2 rows n2) from the two
 // best-two results; all pointers on the device. matches receives up to n1
 // (idx1, idx2) uint32 pairs (the layout of FeatureMatch) sorted by idx1 and
-// num_matches their count.
+// num_matches their count. With slot21 set, the reverse results are those
+// of the gathered rows (HitGatherProblem): row j's are at slot21[j].
 struct MutualMatchProblem {
   const int* best_dot12 = nullptr;
   const int* second_dot12 = nullptr;
@@ -46,6 +72,7 @@ struct MutualMatchProblem {
   const int* best_dot21 = nullptr;
   const int* second_dot21 = nullptr;
   const int* best_idx21 = nullptr;
+  const int* slot21 = nullptr;
   uint32_t* matches = nullptr;
   int* num_matches = nullptr;
   int n1 = 0;
@@ -80,13 +107,19 @@ class BruteForceKernels {
   // problem list itself may be freed after the call.
   void EnqueueBestTwo(const std::vector<BestTwoProblem>& problems);
 
+  // Enqueues the gathering of every pair's needed image-2 rows in one launch
+  // (one block per pair).
+  void EnqueueHitGather(const std::vector<HitGatherProblem>& problems, const MatchThresholds& thresholds);
+
   // Enqueues the acceptance test and compaction of every pair in one launch.
   void EnqueueMutualMatches(const std::vector<MutualMatchProblem>& problems,
                             const MatchThresholds& thresholds);
 
   // Convenience: matches each pair of device images (both directions, ratio
   // test, optional cross-check) and returns the matches of pair i, sorted by
-  // idx1, indexing (first image, second image). Blocks until done.
+  // idx1, indexing (first image, second image). Blocks until done. With
+  // cross-check, the reverse direction searches only the gathered rows
+  // (HitGatherProblem): about half the products when few rows match.
   std::vector<FeatureMatches> MatchPairs(
       const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
       const MatchThresholds& thresholds);
@@ -95,6 +128,10 @@ class BruteForceKernels {
   static size_t MatchPairsScratchBytes(int n1, int n2);
 
  private:
+  // Waits for the stream and copies each pair's compacted matches to the host.
+  std::vector<FeatureMatches> CopyMatchesBack(const std::vector<MutualMatchProblem>& mutual,
+                                              const int* device_counts);
+
   struct Scratch;
   cudaStream_t stream_ = nullptr;
   Scratch* scratch_ = nullptr;
