@@ -35,9 +35,19 @@ CASHASH_HOST_DEVICE inline double Horner(const double* c, int degree, double t) 
   return v;
 }
 
+// Half the spacing of doubles at 1: the relative rounding of one operation.
+constexpr double kUnitRoundoff = 1.1102230246251565e-16;
+
 // A simple root of p in [lo, hi] (p(lo), p(hi) of opposite signs, else the
-// best point reached): Newton steps, bisection whenever Newton leaves the
-// bracket.
+// best point reached): Newton steps, halving the bracket instead whenever
+// Newton would leave it or shrink it more slowly than halving (a Newton step
+// longer than half the step before: far from the root of a degree-10
+// polynomial Newton creeps), and done once |p(x)| is within Horner's rounding
+// bound, where the sign of p, and so any further step, is noise. Without
+// those two rules a sample of random correspondences took 71 steps for its
+// roots (16.7 a root, 19 % of roots 30 or more, mostly halvings inside the
+// noise); with them 33 (7.7 a root), and the slowest of 32 samples, which a
+// warp waits for, 52 instead of 158.
 CASHASH_HOST_DEVICE inline double PolishRoot(const double* p, int degree, double lo, double hi) {
   double f_lo = Horner(p, degree, lo);
   const double f_hi = Horner(p, degree, hi);
@@ -45,13 +55,16 @@ CASHASH_HOST_DEVICE inline double PolishRoot(const double* p, int degree, double
   if (f_hi == 0) return hi;
   const bool bracketed = (f_lo < 0) != (f_hi < 0);
   double x = 0.5 * (lo + hi);
+  double step = hi - lo, step_before = step;
   for (int it = 0; it < 100; ++it) {
-    double f = p[degree], df = 0;
+    double f = p[degree], df = 0, rounding = fabs(p[degree]);
+    const double ax = fabs(x);
     for (int i = degree - 1; i >= 0; --i) {
       df = df * x + f;
       f = f * x + p[i];
+      rounding = rounding * ax + fabs(p[i]);
     }
-    if (f == 0) return x;
+    if (fabs(f) <= 2 * degree * kUnitRoundoff * rounding) return x;  // f == 0 included
     if (bracketed) {
       if ((f < 0) == (f_lo < 0)) {
         lo = x;
@@ -61,8 +74,11 @@ CASHASH_HOST_DEVICE inline double PolishRoot(const double* p, int degree, double
       }
     }
     double next = df != 0 ? x - f / df : 0.5 * (lo + hi);
-    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-    if (fabs(next - x) <= 1e-15 * fmax(1.0, fabs(x))) return next;
+    const bool creeping = bracketed && fabs(2 * f) > fabs(step_before * df);
+    if (!(next > lo && next < hi) || creeping) next = 0.5 * (lo + hi);
+    step_before = step;
+    step = next - x;
+    if (fabs(step) <= 1e-15 * fmax(1.0, ax)) return next;
     x = next;
   }
   return x;
