@@ -254,6 +254,42 @@ TEST(AutoFeatureMatcher, ADecisiveGapEndsTheProbeOnAShortBatch) {
   EXPECT_EQ(close.brute_force.matched.size(), 64u + 128u + 256u + 512u + 1024u);
 }
 
+TEST(AutoFeatureMatcher, TheGpuProbeIsShortForADecisiveGapAndForACloseCall) {
+  // The H200 at 8,192 features once brute force searched the reverse
+  // direction over the named rows only (device run 93): cascade 0.006 ms,
+  // brute force 0.028 ms per pair (4.7x). With the GPU's settings the
+  // 256-pair round's 7.2 ms of brute force decide, in the second chunk.
+  Harness h(0.000006, 0.000028, GpuAutoMatcherOptions());
+  RunChunks(&h, 80, 1225);
+  ASSERT_TRUE(h.matcher->decision().decided);
+  EXPECT_TRUE(h.matcher->decision().cascade_won);
+  ASSERT_FALSE(h.log.empty());
+  EXPECT_NE(h.log.back().find("(timed on 256 pairs each)"), std::string::npos) << h.log.back();
+  // Brute force matched its 8 warm-up pairs of the untimed first chunk (the
+  // cascade the rest of it) and its share of the rounds of 64, 128 and 256.
+  EXPECT_EQ(h.brute_force.matched.size(), 8u + 64u + 128u + 256u);
+  EXPECT_EQ(h.matcher->decision().cascade_pairs, 1225u - 8u + 64u + 128u + 256u);
+  // With the 10 ms of before, the 512-pair round, which reaches into the
+  // third chunk.
+  AutoMatcherOptions before = GpuAutoMatcherOptions();
+  before.min_decisive_seconds = 0.01;
+  Harness old(0.000006, 0.000028, before);
+  RunChunks(&old, 80, 1225);
+  ASSERT_FALSE(old.log.empty());
+  EXPECT_NE(old.log.back().find("(timed on 512 pairs each)"), std::string::npos) << old.log.back();
+  EXPECT_GT(old.brute_force.matched.size(), h.brute_force.matched.size() + 400);
+  // A close call (2,048 features, device run 95: cascade 0.002 ms, brute
+  // force 0.003 ms per pair) ends after the 512-pair round, for the faster.
+  Harness close(0.000002, 0.000003, GpuAutoMatcherOptions());
+  RunChunks(&close, 80, 1225);
+  ASSERT_TRUE(close.matcher->decision().decided);
+  EXPECT_TRUE(close.matcher->decision().cascade_won);
+  ASSERT_FALSE(close.log.empty());
+  EXPECT_NE(close.log.back().find("(timed on 512 pairs each)"), std::string::npos) << close.log.back();
+  // Its rounds, and at most the odd last pair of a chunk, untimed.
+  EXPECT_LE(close.brute_force.matched.size(), 8u + 64u + 128u + 256u + 512u + 1u);
+}
+
 TEST(AutoFeatureMatcher, ALoadThatEndsMidRoundDoesNotDecide) {
   // The GPU's settings (rounds from 64 pairs, slices of 64). The device is
   // 20x slower until 19 ms: the cascade's first 64 pairs take 19.2 ms there,

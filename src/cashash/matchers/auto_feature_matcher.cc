@@ -32,6 +32,20 @@ AutoMatcherOptions GpuAutoMatcherOptions() {
   options.min_batch_pairs = 64;
   options.interleave_slice_pairs = 64;
   options.first_timed_call = 2;
+  // Brute force searches the reverse direction over the named rows only
+  // (1.7x faster): at 8,192 features its 512-pair round of far pairs took
+  // under 10 ms on the H200, so the probe went on into the run's third chunk
+  // with verification held back (device run 93: auto 4-7 % behind the
+  // cascade forced). No verification shares the GPU while the probe runs,
+  // so 5 ms of a 3x gap is far above the jitter.
+  options.min_decisive_seconds = 0.005;
+  // A close call (within 1.5x, batches short of min_probe_seconds) ends
+  // after the 512-pair round: on the H200 at 2,048 features (cascade 0.002,
+  // brute force 0.003 ms a pair) 4,096 timed pairs each held verification
+  // back for a tenth of the run and made auto 15-20 % slower than either
+  // backend forced (device run 95); 960 pairs each in interleaved turns
+  // measure a per-pair time well within that 1.5x.
+  options.max_probe_pairs = 64 + 128 + 256 + 512;
   return options;
 }
 
@@ -112,6 +126,7 @@ std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairs(const std::vector<Ima
   size_t next = 0;
   while (winner_ == nullptr && next < pairs.size()) {
     const bool warmup = warmup_left_ > 0;
+    if (!timed_call && !warmup) break;  // the rest of an untimed call: the cascade's
     // A round gives batch_ pairs to each backend, over several calls when
     // the chunks are small.
     const size_t want = warmup ? warmup_left_ : batch_ - pending_pairs_;
@@ -168,7 +183,8 @@ std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairs(const std::vector<Ima
   if (next < pairs.size()) {
     std::vector<size_t> rest;
     for (size_t i = next; i < pairs.size(); ++i) rest.push_back(i);
-    MatchSubset(winner_, pairs, rest, &results);
+    if (winner_ == nullptr) decision_.cascade_pairs += rest.size();
+    MatchSubset(winner_ != nullptr ? winner_ : cascade_.get(), pairs, rest, &results);
   }
   return results;
 }

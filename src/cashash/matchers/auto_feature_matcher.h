@@ -59,13 +59,18 @@ struct AutoMatcherOptions {
   size_t max_interleaved_slices = 4;
   // Timed pairs per backend after which the faster so far wins anyway.
   size_t max_probe_pairs = 4096;
-  // The MatchPairs call (chunk) from which on timings count: earlier calls
-  // are shared by both backends untimed. Runs give 2: an exhaustive run's
+  // The MatchPairs call (chunk) from which on timings count: in earlier
+  // calls each backend takes its warm-up pairs and the cascade the rest,
+  // untimed. Runs give 2: an exhaustive run's
   // first chunk is one block against itself, mostly neighbouring images,
   // where the cascade (cross-check queries and thin-list lookups for each
   // match) is slowest, while most of a run's pairs do not overlap. At
   // 16,384 features the first chunk made brute force look 1.2x faster
-  // while the cascade was 1.9x faster over the whole run.
+  // while the cascade was 1.9x faster over the whole run. The untimed
+  // pairs go to the cascade because they decide nothing: where brute force
+  // wins, both cost microseconds a pair, and where the cascade does, brute
+  // force's half of that chunk cost the H200 about 60 ms at 16,384 features
+  // (device run 94).
   size_t first_timed_call = 1;
   // Seconds of a monotonic clock; the default is std::chrono::steady_clock.
   // Tests pass a fake one.
