@@ -109,19 +109,75 @@ size_t AutoFeatureMatcher::SlicesFor(size_t pairs_each) const {
                             std::max<size_t>(1, options_.max_interleaved_slices));
 }
 
+void AutoFeatureMatcher::RestartTimings() {
+  pending_pairs_ = 0;
+  pending_slices_ = 0;
+  pending_cascade_seconds_ = pending_brute_force_seconds_ = 0;
+  cascade_timing_ = Timing();
+  brute_force_timing_ = Timing();
+  batch_ = options_.min_batch_pairs;
+}
+
+AutoFeatureMatcher::Turns AutoFeatureMatcher::SplitWindow(size_t next, size_t window) const {
+  // Alternate pairs of the window, the same number to each backend; which
+  // one goes first alternates by round. An odd last pair of a chunk goes to
+  // the first one, untimed.
+  Turns turns;
+  turns.cascade_first = round_ % 2 == 0;
+  turns.first = turns.cascade_first ? cascade_.get() : brute_force_.get();
+  turns.second = turns.cascade_first ? brute_force_.get() : cascade_.get();
+  for (size_t k = 0; k + 1 < window; k += 2) {
+    turns.to_first.push_back(next + k);
+    turns.to_second.push_back(next + k + 1);
+  }
+  if (window % 2 == 1) turns.extra.push_back(next + window - 1);
+  return turns;
+}
+
+void AutoFeatureMatcher::MatchInTurns(Turns* turns, size_t slices, const std::vector<ImagePair>& pairs,
+                                      std::vector<FeatureMatches>* results) {
+  // Turns of equal slices, so that a load on the device that comes or goes
+  // during the round falls on both backends.
+  const std::vector<size_t>& to_first = turns->to_first;
+  const std::vector<size_t>& to_second = turns->to_second;
+  for (size_t slice = 0; slice < slices; ++slice) {
+    const size_t begin = to_first.size() * slice / slices, end = to_first.size() * (slice + 1) / slices;
+    const std::vector<size_t> part1(to_first.begin() + begin, to_first.begin() + end);
+    const std::vector<size_t> part2(to_second.begin() + begin, to_second.begin() + end);
+    turns->first_seconds += MatchSubset(turns->first, pairs, part1, results);
+    turns->second_seconds += MatchSubset(turns->second, pairs, part2, results);
+  }
+  MatchSubset(turns->first, pairs, turns->extra, results);
+  (turns->cascade_first ? decision_.cascade_pairs : decision_.brute_force_pairs) +=
+      to_first.size() + turns->extra.size();
+  (turns->cascade_first ? decision_.brute_force_pairs : decision_.cascade_pairs) += to_second.size();
+}
+
+void AutoFeatureMatcher::CountRound(const Turns& turns, size_t slices, bool timed_call) {
+  pending_cascade_seconds_ += turns.cascade_first ? turns.first_seconds : turns.second_seconds;
+  pending_brute_force_seconds_ += turns.cascade_first ? turns.second_seconds : turns.first_seconds;
+  pending_pairs_ += turns.to_first.size();
+  pending_slices_ += slices;
+  if (pending_pairs_ < batch_) return;  // the round goes on in the next call
+  const bool interleaved = options_.interleave_slice_pairs == 0 || pending_slices_ >= 2;
+  pending_slices_ = 0;
+  cascade_timing_.seconds = pending_cascade_seconds_;
+  brute_force_timing_.seconds = pending_brute_force_seconds_;
+  cascade_timing_.pairs = brute_force_timing_.pairs = pending_pairs_;
+  cascade_timing_.timed_pairs += pending_pairs_;
+  brute_force_timing_.timed_pairs += pending_pairs_;
+  pending_cascade_seconds_ = pending_brute_force_seconds_ = 0;
+  pending_pairs_ = 0;
+  ++round_;
+  batch_ = std::min(2 * batch_, options_.max_batch_pairs);
+  if (timed_call && interleaved) TryDecide();
+}
+
 std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
   if (winner_ != nullptr) return winner_->MatchPairs(pairs);
   ++calls_;
   const bool timed_call = calls_ >= options_.first_timed_call;
-  if (calls_ == options_.first_timed_call && calls_ > 1) {
-    // Timings start afresh here (see first_timed_call).
-    pending_pairs_ = 0;
-    pending_slices_ = 0;
-    pending_cascade_seconds_ = pending_brute_force_seconds_ = 0;
-    cascade_timing_ = Timing();
-    brute_force_timing_ = Timing();
-    batch_ = options_.min_batch_pairs;
-  }
+  if (calls_ == options_.first_timed_call && calls_ > 1) RestartTimings();  // see first_timed_call
   std::vector<FeatureMatches> results(pairs.size());
   size_t next = 0;
   while (winner_ == nullptr && next < pairs.size()) {
@@ -131,54 +187,15 @@ std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairs(const std::vector<Ima
     // the chunks are small.
     const size_t want = warmup ? warmup_left_ : batch_ - pending_pairs_;
     const size_t window = std::min(pairs.size() - next, 2 * want);
-    // Alternate pairs of the window, the same number to each backend; which
-    // one goes first alternates by round. An odd last pair of a chunk goes
-    // to the first one, untimed.
-    const bool cascade_first = round_ % 2 == 0;
-    FeatureMatcher* first = cascade_first ? cascade_.get() : brute_force_.get();
-    FeatureMatcher* second = cascade_first ? brute_force_.get() : cascade_.get();
-    std::vector<size_t> to_first, to_second, extra;
-    for (size_t k = 0; k + 1 < window; k += 2) {
-      to_first.push_back(next + k);
-      to_second.push_back(next + k + 1);
-    }
-    if (window % 2 == 1) extra.push_back(next + window - 1);
-    // Turns of equal slices, so that a load on the device that comes or
-    // goes during the round falls on both backends.
-    double first_seconds = 0, second_seconds = 0;
-    const size_t slices = warmup ? 1 : SlicesFor(to_first.size());
-    for (size_t slice = 0; slice < slices; ++slice) {
-      const size_t begin = to_first.size() * slice / slices, end = to_first.size() * (slice + 1) / slices;
-      const std::vector<size_t> part1(to_first.begin() + begin, to_first.begin() + end);
-      const std::vector<size_t> part2(to_second.begin() + begin, to_second.begin() + end);
-      first_seconds += MatchSubset(first, pairs, part1, &results);
-      second_seconds += MatchSubset(second, pairs, part2, &results);
-    }
-    MatchSubset(first, pairs, extra, &results);
-    (cascade_first ? decision_.cascade_pairs : decision_.brute_force_pairs) += to_first.size() + extra.size();
-    (cascade_first ? decision_.brute_force_pairs : decision_.cascade_pairs) += to_second.size();
+    Turns turns = SplitWindow(next, window);
+    const size_t slices = warmup ? 1 : SlicesFor(turns.to_first.size());
+    MatchInTurns(&turns, slices, pairs, &results);
     next += window;
     if (warmup) {
-      warmup_left_ = to_second.size() >= warmup_left_ ? 0 : warmup_left_ - to_second.size();
-      continue;
+      warmup_left_ = turns.to_second.size() >= warmup_left_ ? 0 : warmup_left_ - turns.to_second.size();
+    } else {
+      CountRound(turns, slices, timed_call);
     }
-    pending_cascade_seconds_ += cascade_first ? first_seconds : second_seconds;
-    pending_brute_force_seconds_ += cascade_first ? second_seconds : first_seconds;
-    pending_pairs_ += to_first.size();
-    pending_slices_ += slices;
-    if (pending_pairs_ < batch_) continue;
-    const bool interleaved = options_.interleave_slice_pairs == 0 || pending_slices_ >= 2;
-    pending_slices_ = 0;
-    cascade_timing_.seconds = pending_cascade_seconds_;
-    brute_force_timing_.seconds = pending_brute_force_seconds_;
-    cascade_timing_.pairs = brute_force_timing_.pairs = pending_pairs_;
-    cascade_timing_.timed_pairs += pending_pairs_;
-    brute_force_timing_.timed_pairs += pending_pairs_;
-    pending_cascade_seconds_ = pending_brute_force_seconds_ = 0;
-    pending_pairs_ = 0;
-    ++round_;
-    batch_ = std::min(2 * batch_, options_.max_batch_pairs);
-    if (timed_call && interleaved) TryDecide();
   }
   if (next < pairs.size()) {
     std::vector<size_t> rest;

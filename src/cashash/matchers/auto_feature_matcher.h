@@ -124,9 +124,25 @@ class AutoFeatureMatcher : public FeatureMatcher {
   // Matches `pairs[indices]` on `backend` into `results`; returns seconds.
   double MatchSubset(FeatureMatcher* backend, const std::vector<ImagePair>& pairs,
                      const std::vector<size_t>& indices, std::vector<FeatureMatches>* results);
+  // One round's (or warm-up's) share of a call: which backend goes first,
+  // the pairs (indices into the call) each takes, and their times.
+  struct Turns {
+    bool cascade_first = true;
+    FeatureMatcher* first = nullptr;
+    FeatureMatcher* second = nullptr;
+    std::vector<size_t> to_first, to_second, extra;
+    double first_seconds = 0, second_seconds = 0;
+  };
   // Slices each of `to_first` and `to_second` is matched in (see
   // interleave_slice_pairs).
   size_t SlicesFor(size_t pairs_each) const;
+  void RestartTimings();
+  Turns SplitWindow(size_t next, size_t window) const;
+  void MatchInTurns(Turns* turns, size_t slices, const std::vector<ImagePair>& pairs,
+                    std::vector<FeatureMatches>* results);
+  // Adds a timed share to the round; a full round updates the timings and
+  // may decide.
+  void CountRound(const Turns& turns, size_t slices, bool timed_call);
   void TryDecide();
   void Decide(bool cascade, const std::string& reason);
   double Now() const;
