@@ -7,7 +7,8 @@
 // shared-memory tile. Per 8 columns a warp issues 16 m16n8k32 u8 mma (K = 128
 // exactly: the dot products are exact in s32) and folds the 64x8 dots into its
 // rows' running best two with packed (score, position) keys, three min/max per
-// dot. The two directions of a pair are two problems of the same launch.
+// dot. MatchPairs runs it twice per pair: forward over every row, then in
+// reverse over the rows HitGatherKernel gathered.
 //
 // HitGatherKernel: with cross-check, one block per pair copies the rows of
 // image 2 that an accepted forward match names; the reverse search then runs

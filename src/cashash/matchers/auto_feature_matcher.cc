@@ -109,15 +109,6 @@ size_t AutoFeatureMatcher::SlicesFor(size_t pairs_each) const {
                             std::max<size_t>(1, options_.max_interleaved_slices));
 }
 
-void AutoFeatureMatcher::RestartTimings() {
-  pending_pairs_ = 0;
-  pending_slices_ = 0;
-  pending_cascade_seconds_ = pending_brute_force_seconds_ = 0;
-  cascade_timing_ = Timing();
-  brute_force_timing_ = Timing();
-  batch_ = options_.min_batch_pairs;
-}
-
 AutoFeatureMatcher::Turns AutoFeatureMatcher::SplitWindow(size_t next, size_t window) const {
   // Alternate pairs of the window, the same number to each backend; which
   // one goes first alternates by round. An odd last pair of a chunk goes to
@@ -153,7 +144,7 @@ void AutoFeatureMatcher::MatchInTurns(Turns* turns, size_t slices, const std::ve
   (turns->cascade_first ? decision_.brute_force_pairs : decision_.cascade_pairs) += to_second.size();
 }
 
-void AutoFeatureMatcher::CountRound(const Turns& turns, size_t slices, bool timed_call) {
+void AutoFeatureMatcher::CountRound(const Turns& turns, size_t slices) {
   pending_cascade_seconds_ += turns.cascade_first ? turns.first_seconds : turns.second_seconds;
   pending_brute_force_seconds_ += turns.cascade_first ? turns.second_seconds : turns.first_seconds;
   pending_pairs_ += turns.to_first.size();
@@ -170,14 +161,15 @@ void AutoFeatureMatcher::CountRound(const Turns& turns, size_t slices, bool time
   pending_pairs_ = 0;
   ++round_;
   batch_ = std::min(2 * batch_, options_.max_batch_pairs);
-  if (timed_call && interleaved) TryDecide();
+  if (interleaved) TryDecide();
 }
 
 std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
   if (winner_ != nullptr) return winner_->MatchPairs(pairs);
   ++calls_;
+  // An untimed call (see first_timed_call) only takes the warm-up pairs,
+  // so no round has begun when the first timed call comes.
   const bool timed_call = calls_ >= options_.first_timed_call;
-  if (calls_ == options_.first_timed_call && calls_ > 1) RestartTimings();  // see first_timed_call
   std::vector<FeatureMatches> results(pairs.size());
   size_t next = 0;
   while (winner_ == nullptr && next < pairs.size()) {
@@ -194,7 +186,7 @@ std::vector<FeatureMatches> AutoFeatureMatcher::MatchPairs(const std::vector<Ima
     if (warmup) {
       warmup_left_ = turns.to_second.size() >= warmup_left_ ? 0 : warmup_left_ - turns.to_second.size();
     } else {
-      CountRound(turns, slices, timed_call);
+      CountRound(turns, slices);
     }
   }
   if (next < pairs.size()) {

@@ -136,13 +136,12 @@ class AutoFeatureMatcher : public FeatureMatcher {
   // Slices each of `to_first` and `to_second` is matched in (see
   // interleave_slice_pairs).
   size_t SlicesFor(size_t pairs_each) const;
-  void RestartTimings();
   Turns SplitWindow(size_t next, size_t window) const;
   void MatchInTurns(Turns* turns, size_t slices, const std::vector<ImagePair>& pairs,
                     std::vector<FeatureMatches>* results);
   // Adds a timed share to the round; a full round updates the timings and
   // may decide.
-  void CountRound(const Turns& turns, size_t slices, bool timed_call);
+  void CountRound(const Turns& turns, size_t slices);
   void TryDecide();
   void Decide(bool cascade, const std::string& reason);
   double Now() const;
