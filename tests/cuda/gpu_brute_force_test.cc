@@ -276,6 +276,92 @@ TEST_F(GpuBruteForceTest, BestTwoEqualsNaiveReferenceInOneBatch) {
   for (int* out : outputs) cudaFree(out);
 }
 
+// The kernel skips an 8-column strip when no dot in it beats its row's
+// second best so far. Orders that make it skip almost everything, or
+// nothing, and ties the skip must not break: b is 3,000 random rows and
+// then the same rows again (every best has an equal later copy, which must
+// not take the index, and the second equals the best), 8 late noisy copies
+// of rows of a (a late best after thousands of skipped strips), and b
+// sorted by the dot with a's row 0, descending and ascending; a has a zero
+// row and a row that is b's first row. Every row must be the reference's.
+TEST_F(GpuBruteForceTest, SkippedStripsKeepTheReferenceBestTwo) {
+  std::mt19937 rng(77);
+  Image a = RandomImage(300, rng);
+  std::fill(a.data.begin() + 5 * kDescriptorDim, a.data.begin() + 6 * kDescriptorDim, 0);  // zero row
+  Image twice = RandomImage(3000, rng);
+  std::copy(twice.row(0), twice.row(1), a.data.begin() + 7 * kDescriptorDim);  // a row 7 = b row 0
+  twice.data.insert(twice.data.end(), twice.data.begin(), twice.data.end());
+  std::uniform_int_distribution<int> noise(-3, 3);
+  for (int i = 0; i < 8; ++i) {
+    std::vector<uint8_t> copy(a.row(10 + i), a.row(11 + i));
+    for (uint8_t& v : copy) v = static_cast<uint8_t>(std::clamp(int{v} + noise(rng), 0, 255));
+    twice.data.insert(twice.data.end(), copy.begin(), copy.end());
+  }
+  auto sorted_by_row0 = [&](bool descending) {
+    Image b = RandomImage(5000, rng);
+    std::vector<std::pair<int, int>> order;
+    for (int j = 0; j < b.rows(); ++j) {
+      int dot = 0;
+      for (int d = 0; d < kDescriptorDim; ++d) dot += int{a.row(0)[d]} * int{b.row(j)[d]};
+      order.emplace_back(descending ? -dot : dot, j);
+    }
+    std::sort(order.begin(), order.end());
+    Image out;
+    for (const auto& o : order) out.data.insert(out.data.end(), b.row(o.second), b.row(o.second + 1));
+    return out;
+  };
+  const std::vector<Image> bs = {twice, sorted_by_row0(true), sorted_by_row0(false)};
+
+  DeviceImage da(a);
+  std::vector<std::unique_ptr<DeviceImage>> db;
+  std::vector<BestTwoProblem> problems;
+  std::vector<int*> outputs;
+  for (const Image& b : bs) {
+    db.push_back(std::make_unique<DeviceImage>(b));
+    BestTwoProblem p;
+    p.a = da.view().data;
+    p.n_a = a.rows();
+    p.b = db.back()->view().data;
+    p.n_b = b.rows();
+    int* out = nullptr;
+    ASSERT_CUDA(cudaMalloc(&out, 3 * p.n_a * sizeof(int)));
+    ASSERT_CUDA(cudaMemset(out, 0xAB, 3 * p.n_a * sizeof(int)));  // poison
+    outputs.push_back(out);
+    p.best_dot = out;
+    p.second_dot = out + p.n_a;
+    p.best_idx = out + 2 * p.n_a;
+    problems.push_back(p);
+  }
+  BruteForceKernels kernels;
+  kernels.EnqueueBestTwo(problems);
+  ASSERT_CUDA(cudaStreamSynchronize(kernels.stream()));
+  const int n = a.rows();
+  for (size_t q = 0; q < bs.size(); ++q) {
+    SCOPED_TRACE("b " + std::to_string(q));
+    const Reference ref = NaiveBestTwo(a, bs[q]);
+    std::vector<int> got(3 * static_cast<size_t>(n));
+    ASSERT_CUDA(cudaMemcpy(got.data(), outputs[q], got.size() * sizeof(int), cudaMemcpyDeviceToHost));
+    int mismatches = 0;
+    for (int i = 0; i < n; ++i) {
+      const bool same = got[i] == ref.best_dot[i] && got[n + i] == ref.second_dot[i] &&
+                        got[2 * n + i] == ref.best_idx[i];
+      if (!same && ++mismatches <= 5) {
+        ADD_FAILURE() << "row " << i << ": gpu (" << got[i] << ", " << got[n + i] << ", " << got[2 * n + i]
+                      << ") reference (" << ref.best_dot[i] << ", " << ref.second_dot[i] << ", "
+                      << ref.best_idx[i] << ")";
+      }
+    }
+    EXPECT_EQ(mismatches, 0);
+    if (q == 0) {  // the cases were really there
+      EXPECT_EQ(ref.best_idx[5], -1);
+      EXPECT_EQ(ref.best_idx[7], 0);
+      EXPECT_EQ(ref.second_dot[7], ref.best_dot[7]);
+      for (int i = 0; i < 8; ++i) EXPECT_EQ(ref.best_idx[10 + i], 6000 + i) << "planted row " << 10 + i;
+    }
+  }
+  for (int* out : outputs) cudaFree(out);
+}
+
 // Final matches through MatchPairs equal the reference and the CPU matcher,
 // with and without cross-check and at non-default thresholds.
 TEST_F(GpuBruteForceTest, MatchPairsEqualsReferenceAndCpuMatcher) {

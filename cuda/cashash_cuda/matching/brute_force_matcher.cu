@@ -7,8 +7,10 @@
 // shared-memory tile. Per 8 columns a warp issues 16 m16n8k32 u8 mma (K = 128
 // exactly: the dot products are exact in s32) and folds the 64x8 dots into its
 // rows' running best two with packed (score, position) keys, three min/max per
-// dot. MatchPairs runs it twice per pair: forward over every row, then in
-// reverse over the rows HitGatherKernel gathered.
+// dot, unless no dot of the 64x8 beats its row's second best so far: then
+// nothing can change and the fold is skipped. MatchPairs runs it twice per
+// pair: forward over every row, then in reverse over the rows HitGatherKernel
+// gathered.
 //
 // HitGatherKernel: with cross-check, one block per pair copies the rows of
 // image 2 that an accepted forward match names; the reverse search then runs
@@ -127,6 +129,31 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
     CopyAsyncCommit();
     CopyAsyncWait<1>();
     __syncthreads();
+    // A dot at most its row's second best so far changes nothing: the two
+    // dots that make that second stay, the second only grows, and a tie
+    // with the best goes to the best's lower, earlier column. So the
+    // accumulators start at -(second + 1), the products come out as
+    // dot - second - 1, >= 0 exactly where a dot can matter, and an 8-column
+    // strip where none can in the whole warp skips the fold (three min/max
+    // and a multiply-add per dot). The second is the row's, over the four
+    // lanes that share it (each holds the best two of its own columns): with
+    // random order a row's second is beaten by about 2 of the next j columns
+    // after j, so most strips past the first thousand columns skip. The
+    // window then holds keys relative to the tile's seconds, which the merge
+    // adds back.
+    int bias[8];
+#pragma unroll
+    for (int slot = 0; slot < 8; ++slot) {
+      int row_best = best[slot].best, row_second = best[slot].second;
+#pragma unroll
+      for (int offset = 1; offset < 4; offset <<= 1) {
+        const int other_best = __shfl_xor_sync(0xffffffffu, row_best, offset);
+        const int other_second = __shfl_xor_sync(0xffffffffu, row_second, offset);
+        row_second = max(min(row_best, other_best), max(row_second, other_second));
+        row_best = max(row_best, other_best);
+      }
+      bias[slot] = -(row_second + 1);
+    }
 
     const uint32_t stage = SharedAddress(&tiles[tile & 1][0]) + lane_offset;
 #pragma unroll(kStripUnroll)
@@ -141,16 +168,20 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
       }
       int acc[4][4];
 #pragma unroll
-      for (int i = 0; i < 4; ++i) acc[i][0] = acc[i][1] = acc[i][2] = acc[i][3] = 0;
+      for (int i = 0; i < 4; ++i) {
+        acc[i][0] = acc[i][1] = bias[2 * i];
+        acc[i][2] = acc[i][3] = bias[2 * i + 1];
+      }
 #pragma unroll
       for (int s = 0; s < 4; ++s) {
 #pragma unroll
         for (int i = 0; i < 4; ++i) MmaU8(acc[i], a[i][s], b[2 * s], b[2 * s + 1]);
       }
       // Accumulator j of tile i: row 16i + g (+8 for j >= 2), column
-      // n*8 + 2t + (j & 1). key = dot * 256 + (255 - column in tile); the
-      // scale comes in as a kernel argument so the multiply stays an IMAD
-      // (FMA pipe) instead of a shift on the min/max (ALU) pipe.
+      // n*8 + 2t + (j & 1), holding dot - second - 1. key = that * 256 +
+      // (255 - column in tile); the scale comes in as a kernel argument so
+      // the multiply stays an IMAD (FMA pipe) instead of a shift on the
+      // min/max (ALU) pipe.
       const int position_key = PackedBestTwo::kPositions - 1 - (n * 8 + 2 * t);
 #ifdef CASHASH_BF_PROBE_MMA_ONLY
       // Timing probe only (wrong results): the tensor-core part without the
@@ -159,19 +190,28 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
       for (int i = 0; i < 4; ++i) window[2 * i].best += acc[i][0] + acc[i][1] + acc[i][2] + acc[i][3];
       (void)position_key;
 #else
+      // All 16 negative (no dot beats its second) iff their AND is negative.
+      int all = acc[0][0];
 #pragma unroll
-      for (int i = 0; i < 4; ++i) {
-        window[2 * i].Push(acc[i][0] * key_scale + position_key);
-        window[2 * i].Push(acc[i][1] * key_scale + position_key - 1);
-        window[2 * i + 1].Push(acc[i][2] * key_scale + position_key);
-        window[2 * i + 1].Push(acc[i][3] * key_scale + position_key - 1);
+      for (int i = 0; i < 4; ++i) all &= acc[i][0] & acc[i][1] & acc[i][2] & acc[i][3];
+      if (__any_sync(0xffffffffu, all >= 0)) {
+#pragma unroll
+        for (int i = 0; i < 4; ++i) {
+          window[2 * i].Push(acc[i][0] * key_scale + position_key);
+          window[2 * i].Push(acc[i][1] * key_scale + position_key - 1);
+          window[2 * i + 1].Push(acc[i][2] * key_scale + position_key);
+          window[2 * i + 1].Push(acc[i][3] * key_scale + position_key - 1);
+        }
       }
 #endif
     }
     const int col0 = tile * kTileCols;
 #pragma unroll
     for (int slot = 0; slot < 8; ++slot) {
-      best[slot].Merge(window[slot].BestScore(), col0 + window[slot].BestPosition(), window[slot].SecondScore());
+      if (!window[slot].Empty()) {  // pushes come two at a time, so the second is set too
+        best[slot].Merge(window[slot].BestScore() - bias[slot], col0 + window[slot].BestPosition(),
+                         window[slot].SecondScore() - bias[slot]);
+      }
       window[slot].Reset();
     }
     __syncthreads();  // the stage is refilled by the next iteration's load

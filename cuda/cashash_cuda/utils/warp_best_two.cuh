@@ -10,19 +10,24 @@ namespace cuda {
 
 // Hot-loop form: score and position packed into one int key, so a new
 // candidate costs three min/max instructions. key = score * 256 + (255 - pos)
-// with 0 <= pos < 256 and 0 <= score < 2^23, so the key fits a positive int,
-// orders by score first and, on equal scores, prefers the lower position.
+// with 0 <= pos < 256 and |score| < 2^23, so the key fits an int, orders by
+// score first and, on equal scores, prefers the lower position. The score may
+// be relative (a dot less a constant of the row, as BestTwoKernel's are), so
+// keys may be negative and "nothing seen" is INT_MIN.
 struct PackedBestTwo {
   static constexpr int kPositions = 256;
-  int best = -1;    // key, -1 = nothing seen
-  int second = -1;  // key of the second best
+  static constexpr int kNothing = -2147483647 - 1;  // INT_MIN
+  int best = kNothing;    // key
+  int second = kNothing;  // key of the second best
 
   __device__ __forceinline__ void Push(int key) {
     second = max(second, min(best, key));
     best = max(best, key);
   }
-  __device__ __forceinline__ void Reset() { best = second = -1; }
-  // Decoded parts (valid after at least two pushes, resp. one for best).
+  __device__ __forceinline__ void Reset() { best = second = kNothing; }
+  __device__ __forceinline__ bool Empty() const { return best == kNothing; }
+  // Decoded parts (valid after at least two pushes, resp. one for best); the
+  // shift is arithmetic, so a negative score decodes too.
   __device__ __forceinline__ int BestScore() const { return best >> 8; }
   __device__ __forceinline__ int BestPosition() const { return 255 - (best & 255); }
   __device__ __forceinline__ int SecondScore() const { return second >> 8; }
