@@ -98,11 +98,11 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(run.cashash.num_tables, 8);
   EXPECT_EQ(run.cashash.bits_per_table, 7);
   // Left at 0, they follow the images: at 32,768 features 8 x 8 for
-  // recall, and 7 x 9 while the exact rematch decides (the default), since
+  // recall, and 6 x 10 while the exact rematch decides (the default), since
   // the cascade then only screens the pairs (TableShapeGoal).
   const MatcherCommandOptions chosen = ResolveOptionsForRun(defaults, {32768, 32768, 32768}, nullptr);
-  EXPECT_EQ(chosen.cashash.num_tables, 7);
-  EXPECT_EQ(chosen.cashash.bits_per_table, 9);
+  EXPECT_EQ(chosen.cashash.num_tables, 6);
+  EXPECT_EQ(chosen.cashash.bits_per_table, 10);
   MatcherCommandOptions kept;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "0"}, &kept), ParseOutcome::kRun);
   const MatcherCommandOptions for_recall = ResolveOptionsForRun(kept, {32768, 32768, 32768}, nullptr);
@@ -111,7 +111,7 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
   EXPECT_EQ(ResolveOptionsForRun(guided, {8192, 8192}, nullptr).cashash.bits_per_table, 7);
-  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, nullptr).cashash.bits_per_table, 8);
+  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, nullptr).cashash.bits_per_table, 9);  // 6 x 9
   MatcherCommandOptions auto_named;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "auto"}, &auto_named), ParseOutcome::kRun);
   EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);

@@ -8,6 +8,9 @@
 
 #include <gtest/gtest.h>
 
+#include <utility>
+#include <vector>
+
 #include "cashash/matchers/feature_matcher.h"
 #include "synthetic_sift.h"
 
@@ -113,35 +116,45 @@ TEST(TableShape, ExplicitValuesWin) {
   EXPECT_EQ(chosen.tau, CasHashOptions().tau);
 }
 
-TEST(TableShape, AScreeningCascadeTakesOneBitMoreWhileTheCollisionFloorHolds) {
+TEST(TableShape, AScreeningCascadeTakesSmallerBuckets) {
   const auto screening = [](size_t features, int tables = 0, int bits = 0) {
     return ChooseTableShape(features, tables, bits, TableShapeGoal::kScreening);
   };
-  // Half the candidates per query of the recall shape at every size: 8 x 8
-  // where recall takes 8 x 7, 7 x 9 where it takes 8 x 8.
-  for (size_t features : {size_t{0}, size_t{2048}, size_t{8192}, size_t{12500}}) {
+  // Below 8,192 features: one bit more than recall while the collision
+  // floor holds, 8 x 8 where recall takes 8 x 7.
+  for (size_t features : {size_t{100}, size_t{2048}, size_t{8191}}) {
     EXPECT_EQ(screening(features).num_tables, 8) << features;
     EXPECT_EQ(screening(features).bits_per_table, 8) << features;
   }
-  for (size_t features : {size_t{16384}, size_t{32768}, size_t{1} << 20}) {
-    EXPECT_EQ(screening(features).num_tables, 7) << features;
-    EXPECT_EQ(screening(features).bits_per_table, 9) << features;
+  // From 8,192 on: 6 tables, buckets of about 16 features, at most 6 x 10
+  // (60 of the 64 signature bits).
+  const std::vector<std::pair<size_t, int>> bits_by_size = {
+      {0, 9}, {8192, 9}, {12500, 9}, {16384, 10}, {32768, 10}, {size_t{1} << 20, 10}};
+  for (const auto& [features, bits] : bits_by_size) {
+    EXPECT_EQ(screening(features).num_tables, 6) << features;
+    EXPECT_EQ(screening(features).bits_per_table, bits) << features;
   }
-  EXPECT_GE(TableCollisionProbability(7, 9), kScreeningCollisionFloor);
-  // 6 x 10 is below the floor: the bits stop at 9.
-  EXPECT_LT(TableCollisionProbability(6, 10), kScreeningCollisionFloor);
+  // About 96 candidates per query at 8,192 and 16,384 features, against
+  // 8 x 8's 256 and 7 x 9's 224.
+  EXPECT_EQ(6 * 8192 / (1 << 9), 96);
+  EXPECT_EQ(6 * 16384 / (1 << 10), 96);
   // Explicit bits are kept; explicit tables get the extra bit only within
-  // 64 signature bits and the floor.
+  // 64 signature bits and the floor, whatever the size.
   EXPECT_EQ(screening(8192, 0, 7).bits_per_table, 7);
   EXPECT_EQ(screening(8192, 0, 7).num_tables, 8);
   EXPECT_EQ(screening(8192, 8, 0).bits_per_table, 8);
   EXPECT_EQ(screening(8192, 16, 0).bits_per_table, 4);  // 16 x 5 > 64 bits
   EXPECT_EQ(screening(8192, 4, 0).bits_per_table, 7);   // 4 x 8: 0.69
+  EXPECT_EQ(screening(16384, 7, 0).bits_per_table, 8);  // recall 7 x 7, one bit more
   const CasHashOptions resolved = ResolveTableShape(CasHashOptions(), 8192, TableShapeGoal::kScreening);
-  EXPECT_EQ(resolved.num_tables, 8);
-  EXPECT_EQ(resolved.bits_per_table, 8);
+  EXPECT_EQ(resolved.num_tables, 6);
+  EXPECT_EQ(resolved.bits_per_table, 9);
   EXPECT_EQ(DescribeTableShape(CasHashOptions(), resolved, 8192, 300, TableShapeGoal::kScreening),
-            "Hash tables: 8 x 8 bits (chosen for 8192 features per image, the median of 300 images, a bit more "
+            "Hash tables: 6 x 9 bits (chosen for 8192 features per image, the median of 300 images, buckets of "
+            "about 16 features: the exact rematch decides)");
+  const CasHashOptions small = ResolveTableShape(CasHashOptions(), 2048, TableShapeGoal::kScreening);
+  EXPECT_EQ(DescribeTableShape(CasHashOptions(), small, 2048, 300, TableShapeGoal::kScreening),
+            "Hash tables: 8 x 8 bits (chosen for 2048 features per image, the median of 300 images, a bit more "
             "than for recall: the exact rematch decides)");
 }
 

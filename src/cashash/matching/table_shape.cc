@@ -28,6 +28,29 @@ int BitsForSize(size_t features_per_image) {
   return std::max(kMinShapeBits, kTableShapeReferenceBits + log2_n - log2_reference);
 }
 
+// Whether a screening shape of this size takes buckets of a fixed size
+// (tables not set by the options).
+bool BucketScreening(size_t features_per_image, int num_tables) {
+  const size_t n = features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image;
+  return num_tables == 0 && n >= kBucketScreeningFeatures;
+}
+
+// kBucketScreeningTables tables whose buckets hold about
+// kBucketScreeningBucket features, within the signature's bits.
+TableShape BucketScreeningShape(size_t features_per_image) {
+  size_t buckets = (features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image) /
+                   kBucketScreeningBucket;
+  int bits = 0;
+  while (buckets > 1) {
+    buckets >>= 1;
+    ++bits;
+  }
+  TableShape shape;
+  shape.num_tables = kBucketScreeningTables;
+  shape.bits_per_table = std::min(bits, kMaxSignatureBits / kBucketScreeningTables);
+  return shape;
+}
+
 // The recall shape for the size, with the bits chosen (bits_per_table 0).
 TableShape ChooseRecallShape(size_t features_per_image, int num_tables) {
   TableShape shape;
@@ -73,6 +96,9 @@ TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_
     shape.num_tables = TablesForBits(bits_per_table);
     return shape;
   }
+  if (goal == TableShapeGoal::kScreening && BucketScreening(features_per_image, num_tables)) {
+    return BucketScreeningShape(features_per_image);
+  }
   shape = ChooseRecallShape(features_per_image, num_tables);
   if (goal != TableShapeGoal::kScreening) return shape;
   const int bits = shape.bits_per_table + 1;
@@ -115,7 +141,9 @@ std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOpt
   text << "chosen for " << features_per_image << " features per image, the median of " << num_images << " image"
        << (num_images == 1 ? "" : "s");
   if (goal == TableShapeGoal::kScreening && requested.bits_per_table == 0) {
-    text << ", a bit more than for recall: the exact rematch decides";
+    text << (BucketScreening(features_per_image, requested.num_tables)
+                 ? ", buckets of about 16 features: the exact rematch decides"
+                 : ", a bit more than for recall: the exact rematch decides");
   }
   text << ")";
   return text.str();

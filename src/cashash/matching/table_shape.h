@@ -56,21 +56,33 @@ constexpr int kMaxSignatureBits = 64;
 constexpr int kMaxShapeTables = 32;
 // Fewest bits the rule chooses: the reference's (8 x 7 for every smaller image).
 constexpr int kMinShapeBits = kTableShapeReferenceBits;
-// Lowest collision probability of a screening shape (TableShapeGoal):
-// admits 8 x 8 (0.954) and 7 x 9 (0.897), not 6 x 10 (0.807).
+// Lowest collision probability of a screening shape below
+// kBucketScreeningFeatures (TableShapeGoal): admits 8 x 8 (0.954).
 constexpr double kScreeningCollisionFloor = 0.89;
+// From this size on a screening shape is kBucketScreeningTables tables whose
+// buckets hold about kBucketScreeningBucket features (bits = log2(n / 16),
+// at most 64 / 6 = 10): 6 x 9 at 8,192 features, 6 x 10 from 16,384, about
+// 96 candidates per query.
+constexpr size_t kBucketScreeningFeatures = 8192;
+constexpr int kBucketScreeningTables = 6;
+constexpr size_t kBucketScreeningBucket = 16;
 
 // What the cascade's matches are for. kRecall: they are the run's matches
 // (guided matching, no exact rematch), so the shape holds the reference's
 // collision probability. kScreening: the exact rematch decides which pairs
 // may verify and gives their matches, so the cascade only has to find its
-// threshold of matches on the pairs that verify; the shape takes one bit
-// more than kRecall's (half the candidates per query) while its collision
-// probability stays at kScreeningCollisionFloor or above
-// (CascadeOnlyScreens says which). Device runs 65-66, H200 streets: 8 x 8
-// at 8,192 features and 7 x 9 at 16,384 verified the same pairs with the
-// same inlier matches as 8 x 7 and 8 x 8 (and as brute force), 3-13 %
-// faster end to end.
+// threshold of matches on the pairs that verify. Below 8,192 features the
+// shape takes one bit more than kRecall's (half the candidates per query)
+// while its collision probability stays at kScreeningCollisionFloor or
+// above; from 8,192 on, 6 tables of buckets of about 16 features
+// (kBucketScreeningFeatures). CascadeOnlyScreens says which goal a run has.
+// Device runs 65-66, H200 streets: 8 x 8 at 8,192 features and 7 x 9 at
+// 16,384 verified the same pairs with the same inlier matches as 8 x 7 and
+// 8 x 8 (and as brute force), 3-13 % faster end to end. Device run 104:
+// 6 x 9 at 8,192 and 6 x 10 at 16,384 again the same pairs and inlier
+// matches, the cascade's matching time 15-20 % lower; at 2,048 features
+// smaller buckets were slower (more buckets per pair), so the rule starts at
+// 8,192.
 enum class TableShapeGoal { kRecall, kScreening };
 
 // 1 - (1 - p^bits)^tables.
