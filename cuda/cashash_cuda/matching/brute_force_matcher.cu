@@ -57,6 +57,43 @@ constexpr int kAngleTableMaxDot = 512 * 512;
 #endif
 constexpr int kStripUnroll = CASHASH_BF_STRIP_UNROLL;
 
+// -(s + 1) for each of a lane's 8 row slots, s the row's second best so far
+// over the four lanes that share it (each holds the best two of its own
+// columns): BestTwoKernel's accumulators start there.
+__device__ __forceinline__ void RowSecondBias(const IndexedBestTwo (&best)[8], int (&bias)[8]) {
+#pragma unroll
+  for (int slot = 0; slot < 8; ++slot) {
+    int row_best = best[slot].best, row_second = best[slot].second;
+#pragma unroll
+    for (int offset = 1; offset < 4; offset <<= 1) {
+      const int other_best = __shfl_xor_sync(0xffffffffu, row_best, offset);
+      const int other_second = __shfl_xor_sync(0xffffffffu, row_second, offset);
+      row_second = max(min(row_best, other_best), max(row_second, other_second));
+      row_best = max(row_best, other_best);
+    }
+    bias[slot] = -(row_second + 1);
+  }
+}
+
+// Folds one 8-column strip's products (dot - s - 1, accumulator j of m tile
+// i: slot 2i + (j >= 2), column 2t + (j & 1)) into the windows, unless none
+// in the warp is >= 0: then no row's best two can change.
+__device__ __forceinline__ void FoldStrip(const int (&acc)[4][4], int key_scale, int position_key,
+                                          PackedBestTwo (&window)[8]) {
+  // All 16 negative iff their AND is negative.
+  int all = acc[0][0];
+#pragma unroll
+  for (int i = 0; i < 4; ++i) all &= acc[i][0] & acc[i][1] & acc[i][2] & acc[i][3];
+  if (!__any_sync(0xffffffffu, all >= 0)) return;
+#pragma unroll
+  for (int i = 0; i < 4; ++i) {
+    window[2 * i].Push(acc[i][0] * key_scale + position_key);
+    window[2 * i].Push(acc[i][1] * key_scale + position_key - 1);
+    window[2 * i + 1].Push(acc[i][2] * key_scale + position_key);
+    window[2 * i + 1].Push(acc[i][3] * key_scale + position_key - 1);
+  }
+}
+
 // One function because the warp's A fragments (a[4][4][4]) and best-two slots
 // must stay in registers across the whole double-buffered sweep over b; the
 // fully unrolled mma and fold loops index those arrays with constants only.
@@ -142,18 +179,7 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
     // window then holds keys relative to the tile's seconds, which the merge
     // adds back.
     int bias[8];
-#pragma unroll
-    for (int slot = 0; slot < 8; ++slot) {
-      int row_best = best[slot].best, row_second = best[slot].second;
-#pragma unroll
-      for (int offset = 1; offset < 4; offset <<= 1) {
-        const int other_best = __shfl_xor_sync(0xffffffffu, row_best, offset);
-        const int other_second = __shfl_xor_sync(0xffffffffu, row_second, offset);
-        row_second = max(min(row_best, other_best), max(row_second, other_second));
-        row_best = max(row_best, other_best);
-      }
-      bias[slot] = -(row_second + 1);
-    }
+    RowSecondBias(best, bias);
 
     const uint32_t stage = SharedAddress(&tiles[tile & 1][0]) + lane_offset;
 #pragma unroll(kStripUnroll)
@@ -190,19 +216,7 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
       for (int i = 0; i < 4; ++i) window[2 * i].best += acc[i][0] + acc[i][1] + acc[i][2] + acc[i][3];
       (void)position_key;
 #else
-      // All 16 negative (no dot beats its second) iff their AND is negative.
-      int all = acc[0][0];
-#pragma unroll
-      for (int i = 0; i < 4; ++i) all &= acc[i][0] & acc[i][1] & acc[i][2] & acc[i][3];
-      if (__any_sync(0xffffffffu, all >= 0)) {
-#pragma unroll
-        for (int i = 0; i < 4; ++i) {
-          window[2 * i].Push(acc[i][0] * key_scale + position_key);
-          window[2 * i].Push(acc[i][1] * key_scale + position_key - 1);
-          window[2 * i + 1].Push(acc[i][2] * key_scale + position_key);
-          window[2 * i + 1].Push(acc[i][3] * key_scale + position_key - 1);
-        }
-      }
+      FoldStrip(acc, key_scale, position_key, window);
 #endif
     }
     const int col0 = tile * kTileCols;
