@@ -141,9 +141,11 @@ std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOpt
   text << "chosen for " << features_per_image << " features per image, the median of " << num_images << " image"
        << (num_images == 1 ? "" : "s");
   if (goal == TableShapeGoal::kScreening && requested.bits_per_table == 0) {
-    text << (BucketScreening(features_per_image, requested.num_tables)
-                 ? ", buckets of about 16 features: the exact rematch decides"
-                 : ", a bit more than for recall: the exact rematch decides");
+    if (BucketScreening(features_per_image, requested.num_tables)) {
+      text << ", buckets of about " << kBucketScreeningBucket << " features: the exact rematch decides";
+    } else {
+      text << ", a bit more than for recall: the exact rematch decides";
+    }
   }
   text << ")";
   return text.str();
