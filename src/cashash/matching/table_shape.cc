@@ -15,36 +15,33 @@ int MaxTablesForBits(int bits_per_table) {
   return std::max(1, std::min(kMaxShapeTables, kMaxSignatureBits / bits_per_table));
 }
 
+// The size a rule decides from: 0 (unknown) stands for the reference size.
+size_t SizeOrReference(size_t features_per_image) {
+  return features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image;
+}
+
+int FloorLog2(size_t n) {
+  int log2_n = 0;
+  for (; n > 1; n >>= 1) ++log2_n;
+  return log2_n;
+}
+
 // One bit per doubling: floor(log2(n / 8192)) + 7, at least kMinShapeBits.
 int BitsForSize(size_t features_per_image) {
-  size_t n = features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image;
-  int log2_n = 0;
-  while (n > 1) {
-    n >>= 1;
-    ++log2_n;
-  }
-  int log2_reference = 0;
-  for (size_t r = kTableShapeReferenceFeatures; r > 1; r >>= 1) ++log2_reference;
-  return std::max(kMinShapeBits, kTableShapeReferenceBits + log2_n - log2_reference);
+  const int log2_n = FloorLog2(SizeOrReference(features_per_image));
+  return std::max(kMinShapeBits, kTableShapeReferenceBits + log2_n - FloorLog2(kTableShapeReferenceFeatures));
 }
 
 // Whether a screening shape of this size takes buckets of a fixed size
 // (tables not set by the options).
 bool BucketScreening(size_t features_per_image, int num_tables) {
-  const size_t n = features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image;
-  return num_tables == 0 && n >= kBucketScreeningFeatures;
+  return num_tables == 0 && SizeOrReference(features_per_image) >= kBucketScreeningFeatures;
 }
 
 // kBucketScreeningTables tables whose buckets hold about
 // kBucketScreeningBucket features, within the signature's bits.
 TableShape BucketScreeningShape(size_t features_per_image) {
-  size_t buckets = (features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image) /
-                   kBucketScreeningBucket;
-  int bits = 0;
-  while (buckets > 1) {
-    buckets >>= 1;
-    ++bits;
-  }
+  const int bits = FloorLog2(SizeOrReference(features_per_image) / kBucketScreeningBucket);
   TableShape shape;
   shape.num_tables = kBucketScreeningTables;
   shape.bits_per_table = std::min(bits, kMaxSignatureBits / kBucketScreeningTables);
