@@ -254,6 +254,15 @@ TEST(AutoFeatureMatcher, ADecisiveGapEndsTheProbeOnAShortBatch) {
   EXPECT_EQ(close.brute_force.matched.size(), 64u + 128u + 256u + 512u + 1024u);
 }
 
+// The probe decided for the cascade, and its log line names the round:
+// "(timed on `pairs` pairs each)".
+void ExpectCascadeDecidedAt(const Harness& h, const std::string& pairs) {
+  ASSERT_TRUE(h.matcher->decision().decided);
+  EXPECT_TRUE(h.matcher->decision().cascade_won);
+  ASSERT_FALSE(h.log.empty());
+  EXPECT_NE(h.log.back().find("(timed on " + pairs + " pairs each)"), std::string::npos) << h.log.back();
+}
+
 TEST(AutoFeatureMatcher, TheGpuProbeIsShortForADecisiveGapAndForACloseCall) {
   // The H200 at 8,192 features once brute force searched the reverse
   // direction over the named rows only (device run 93): cascade 0.006 ms,
@@ -261,10 +270,7 @@ TEST(AutoFeatureMatcher, TheGpuProbeIsShortForADecisiveGapAndForACloseCall) {
   // 256-pair round's 7.2 ms of brute force decide, in the second chunk.
   Harness h(0.000006, 0.000028, GpuAutoMatcherOptions());
   RunChunks(&h, 80, 1225);
-  ASSERT_TRUE(h.matcher->decision().decided);
-  EXPECT_TRUE(h.matcher->decision().cascade_won);
-  ASSERT_FALSE(h.log.empty());
-  EXPECT_NE(h.log.back().find("(timed on 256 pairs each)"), std::string::npos) << h.log.back();
+  ASSERT_NO_FATAL_FAILURE(ExpectCascadeDecidedAt(h, "256"));
   // Brute force matched its 8 warm-up pairs of the untimed first chunk (the
   // cascade the rest of it) and its share of the rounds of 64, 128 and 256.
   EXPECT_EQ(h.brute_force.matched.size(), 8u + 64u + 128u + 256u);
@@ -282,10 +288,7 @@ TEST(AutoFeatureMatcher, TheGpuProbeIsShortForADecisiveGapAndForACloseCall) {
   // force 0.003 ms per pair) ends after the 512-pair round, for the faster.
   Harness close(0.000002, 0.000003, GpuAutoMatcherOptions());
   RunChunks(&close, 80, 1225);
-  ASSERT_TRUE(close.matcher->decision().decided);
-  EXPECT_TRUE(close.matcher->decision().cascade_won);
-  ASSERT_FALSE(close.log.empty());
-  EXPECT_NE(close.log.back().find("(timed on 512 pairs each)"), std::string::npos) << close.log.back();
+  ASSERT_NO_FATAL_FAILURE(ExpectCascadeDecidedAt(close, "512"));
   // Its rounds, and at most the odd last pair of a chunk, untimed.
   EXPECT_LE(close.brute_force.matched.size(), 8u + 64u + 128u + 256u + 512u + 1u);
 }

@@ -115,8 +115,6 @@ AutoFeatureMatcher::Turns AutoFeatureMatcher::SplitWindow(size_t next, size_t wi
   // the first one, untimed.
   Turns turns;
   turns.cascade_first = round_ % 2 == 0;
-  turns.first = turns.cascade_first ? cascade_.get() : brute_force_.get();
-  turns.second = turns.cascade_first ? brute_force_.get() : cascade_.get();
   for (size_t k = 0; k + 1 < window; k += 2) {
     turns.to_first.push_back(next + k);
     turns.to_second.push_back(next + k + 1);
@@ -129,16 +127,18 @@ void AutoFeatureMatcher::MatchInTurns(Turns* turns, size_t slices, const std::ve
                                       std::vector<FeatureMatches>* results) {
   // Turns of equal slices, so that a load on the device that comes or goes
   // during the round falls on both backends.
+  FeatureMatcher* first = turns->cascade_first ? cascade_.get() : brute_force_.get();
+  FeatureMatcher* second = turns->cascade_first ? brute_force_.get() : cascade_.get();
   const std::vector<size_t>& to_first = turns->to_first;
   const std::vector<size_t>& to_second = turns->to_second;
   for (size_t slice = 0; slice < slices; ++slice) {
     const size_t begin = to_first.size() * slice / slices, end = to_first.size() * (slice + 1) / slices;
     const std::vector<size_t> part1(to_first.begin() + begin, to_first.begin() + end);
     const std::vector<size_t> part2(to_second.begin() + begin, to_second.begin() + end);
-    turns->first_seconds += MatchSubset(turns->first, pairs, part1, results);
-    turns->second_seconds += MatchSubset(turns->second, pairs, part2, results);
+    turns->first_seconds += MatchSubset(first, pairs, part1, results);
+    turns->second_seconds += MatchSubset(second, pairs, part2, results);
   }
-  MatchSubset(turns->first, pairs, turns->extra, results);
+  MatchSubset(first, pairs, turns->extra, results);
   (turns->cascade_first ? decision_.cascade_pairs : decision_.brute_force_pairs) +=
       to_first.size() + turns->extra.size();
   (turns->cascade_first ? decision_.brute_force_pairs : decision_.cascade_pairs) += to_second.size();

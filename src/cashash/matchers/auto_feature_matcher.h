@@ -124,12 +124,10 @@ class AutoFeatureMatcher : public FeatureMatcher {
   // Matches `pairs[indices]` on `backend` into `results`; returns seconds.
   double MatchSubset(FeatureMatcher* backend, const std::vector<ImagePair>& pairs,
                      const std::vector<size_t>& indices, std::vector<FeatureMatches>* results);
-  // One round's (or warm-up's) share of a call: which backend goes first,
-  // the pairs (indices into the call) each takes, and their times.
+  // One round's (or warm-up's) share of a call: whether the cascade goes
+  // first, the pairs (indices into the call) each takes, and their times.
   struct Turns {
     bool cascade_first = true;
-    FeatureMatcher* first = nullptr;
-    FeatureMatcher* second = nullptr;
     std::vector<size_t> to_first, to_second, extra;
     double first_seconds = 0, second_seconds = 0;
   };
