@@ -221,7 +221,11 @@ int main(int argc, char** argv) {
     if (!cashash::TwoViewIsCalibrated(*cpu_pairs[k].camera1, *cpu_pairs[k].camera2)) return;
     cashash::TwoViewGeometryOptions o = options;
     o.random_seed = cpu_pairs[k].random_seed;
-    cashash::EstimateEssential(*cpu_pairs[k].camera1, *cpu_pairs[k].camera2, points[k].pixels, o);
+    // Stopped as the GPU's E is, from the counts of F and H.
+    cashash::EstimateEssential(
+        *cpu_pairs[k].camera1, *cpu_pairs[k].camera2, points[k].pixels, o,
+        cashash::TwoViewEssentialSettledInliers(F[k].success ? F[k].num_inliers : 0, H[k].success ? H[k].num_inliers : 0,
+                                            static_cast<int>(points[k].pixels.size()), o));
   });
   const double cpu_e = Seconds(t0) * cpu_scale;
   // The decision (with the watermark test) from the GPU's F and H, no E.

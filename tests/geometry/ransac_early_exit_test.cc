@@ -1,7 +1,8 @@
 // The early exit of RANSAC (ransac_early_exit.h): its binomial tail, that a
 // pair of pure chance matches stops long before the trial cap with the
-// decision of the full budget, and that pairs with a real model run exactly
-// as COLMAP's loop. Real pairs from ../shared are checked against the full
+// decision of the full budget, that pairs with a real model run exactly
+// as COLMAP's loop, and that H and E stop where they can no longer change
+// the decision. Real pairs from ../shared are checked against the full
 // budget by tests/integration/early_exit_real_pairs.sh.
 #include <gtest/gtest.h>
 
@@ -180,6 +181,87 @@ TEST(RansacEarlyExit, HomographyStopsWhenItCannotChangeTheDecision) {
     EXPECT_EQ(b.config, a.config) << (planar ? "planar" : "general");
     EXPECT_EQ(b.inlier_matches.size(), a.inlier_matches.size());
   }
+}
+
+// E's settled count against the decision's own tests, by brute force: the
+// first count from which every larger one is CALIBRATED (more than 0.95 x
+// F's, at least 15, H / E at most 0.8).
+TEST(RansacEarlyExit, EssentialSettledInliersFollowTheDecisionRule) {
+  const TwoViewGeometryOptions options;
+  auto calibrated = [&](int e, int num_F, int num_H) {
+    const double e_f = static_cast<double>(e) / num_F;  // infinite when F failed, as in the decision
+    const double h_e = static_cast<double>(num_H) / e;
+    return e > 0 && e_f > options.min_E_F_inlier_ratio && e >= options.min_num_inliers &&
+           !(h_e > options.max_H_inlier_ratio);
+  };
+  const int num_matches = 400;
+  for (int num_F : {0, 1, 14, 15, 16, 20, 40, 60, 100, 399}) {
+    for (int num_H : {0, 5, 12, 16, 30, 48, 100, 380}) {
+      const int settled = TwoViewEssentialSettledInliers(num_F, num_H, num_matches, options);
+      int first = 0;
+      for (int e = 1; e <= num_matches && first == 0; ++e) {
+        if (calibrated(e, num_F, num_H)) first = e;
+      }
+      EXPECT_EQ(settled, first) << "F " << num_F << ", H " << num_H;
+      for (int e = first; first > 0 && e <= num_matches; ++e) {
+        ASSERT_TRUE(calibrated(e, num_F, num_H)) << "F " << num_F << ", H " << num_H << ", E " << e;
+      }
+    }
+  }
+  EXPECT_EQ(TwoViewEssentialSettledInliers(40, 5, num_matches, options), 39);  // 39 / 40 > 0.95
+  EXPECT_EQ(TwoViewEssentialSettledInliers(0, 0, num_matches, options), 15);
+  EXPECT_EQ(TwoViewEssentialSettledInliers(399, 5, num_matches, options), 380);
+  EXPECT_EQ(TwoViewEssentialSettledInliers(399, 390, num_matches, options), 0);  // H / E > 0.8 up to 400
+  TwoViewGeometryOptions off = options;
+  off.early_exit = false;
+  EXPECT_EQ(TwoViewEssentialSettledInliers(40, 5, num_matches, off), 0);
+}
+
+// A calibrated pair of low inlier ratio, where COLMAP's loop runs E to the
+// trial cap: E stops once F's and H's counts settle the decision, with the
+// full budget's configuration and nearly all of its inliers.
+TEST(RansacEarlyExit, EssentialStopsOnceTheDecisionIsSettled) {
+  int stopped = 0;
+  for (unsigned seed : {3u, 7u, 11u, 19u}) {
+    SceneOptions o;
+    o.num_inliers = 50;
+    o.outlier_ratio = 0.78;  // about 230 matches, an inlier ratio of 0.22
+    o.seed = seed;
+    const SyntheticScene scene = MakeScene(o);
+    const Camera camera = scene.MakeCamera(/*prior=*/true);
+    const TwoViewPoints points = PrepareTwoViewPoints(scene.points1, scene.points2, scene.matches);
+    TwoViewGeometryOptions options = Options(true);
+    options.random_seed = seed;
+    const TwoViewModelEstimate F = EstimateFundamental(points, options);
+    const TwoViewModelEstimate H =
+        EstimateHomography(points, options, TwoViewRelevantHomographyInliers(F.success ? F.num_inliers : 0, options));
+    const int settled = TwoViewEssentialSettledInliers(F.success ? F.num_inliers : 0, H.success ? H.num_inliers : 0,
+                                                       static_cast<int>(scene.matches.size()), options);
+    const TwoViewModelEstimate full_E = EstimateEssential(camera, camera, points.pixels, options);
+    const TwoViewModelEstimate E = EstimateEssential(camera, camera, points.pixels, options, settled);
+    SCOPED_TRACE(testing::Message() << "seed " << seed << ": F " << F.num_inliers << ", H " << H.num_inliers
+                                    << ", E " << E.num_inliers << " in " << E.num_trials << " trials, full "
+                                    << full_E.num_inliers << " in " << full_E.num_trials << ", settled at "
+                                    << settled);
+    EXPECT_GT(settled, 0);
+    EXPECT_EQ(full_E.num_trials, options.max_num_trials);  // COLMAP's loop runs to the cap here
+    if (E.num_trials < full_E.num_trials) {
+      ++stopped;
+      EXPECT_TRUE(E.early_exit);
+      EXPECT_GE(E.num_inliers, settled);
+      EXPECT_GE(E.num_trials, options.min_num_trials);
+    }
+    EXPECT_GE(E.num_inliers, full_E.num_inliers - 5);
+    TwoViewGeometryOptions full = Options(false);
+    full.random_seed = seed;
+    const TwoViewGeometry a = EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2, scene.matches, full);
+    const TwoViewGeometry b =
+        EstimateTwoViewGeometry(camera, scene.points1, camera, scene.points2, scene.matches, options);
+    EXPECT_EQ(a.config, kCalibrated);
+    EXPECT_EQ(b.config, a.config);
+    EXPECT_GE(b.inlier_matches.size() + 5, a.inlier_matches.size());
+  }
+  EXPECT_GE(stopped, 3);
 }
 
 TEST(RansacEarlyExit, OptionIsChecked) {

@@ -60,7 +60,11 @@ TEST(TwoViewDecision, StepsComposeToEstimateTwoViewGeometry) {
       const bool calibrated = TwoViewIsCalibrated(camera, camera);
       EXPECT_EQ(calibrated, priors);
       const TwoViewModelEstimate E =
-          calibrated ? EstimateEssential(camera, camera, points.pixels, options) : TwoViewModelEstimate();
+          calibrated ? EstimateEssential(camera, camera, points.pixels, options,
+                                         TwoViewEssentialSettledInliers(F.success ? F.num_inliers : 0,
+                                                                    H.success ? H.num_inliers : 0,
+                                                                    static_cast<int>(scene.matches.size()), options))
+                     : TwoViewModelEstimate();
       const TwoViewGeometry steps =
           DecideTwoViewGeometry(camera, camera, points.pixels, scene.matches, calibrated, F, H, E, options);
       ExpectSameGeometry(whole, steps);

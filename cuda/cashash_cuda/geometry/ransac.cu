@@ -427,6 +427,16 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     relevant_trials = max(launch.min_trials, RequiredTrials(relevant, n, launch.confidence, launch.trials_multiplier,
                                                             Model::kSampleSize));
   }
+  // E after F and H: from `settled` inliers on, more trials cannot change
+  // the decision (the CPU's TwoViewEssentialSettledInliers).
+  int settled = 0;
+  if (launch.reference_F != nullptr && input.reference >= 0) {
+    const RansacPairOutput& f = launch.reference_F[input.reference];
+    const RansacPairOutput& h = launch.reference_H[input.reference];
+    settled = EssentialSettledInliers(launch.reference_E_F_ratio, launch.reference_max_H_ratio,
+                                      launch.reference_min_inliers, f.success ? f.num_inliers : 0,
+                                      h.success ? h.num_inliers : 0, n);
+  }
   const int sprt_step = SprtOrderStep(n);
   // The first round runs COLMAP's min_num_trials only where that is at most
   // half a round: a pair that its first good model settles (most verified
@@ -514,9 +524,10 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     trials_done = min(round_end, launch.max_trials);
     round_start = round_end;
     const bool irrelevant = relevant > 0 && s.best_count < relevant && trials_done >= relevant_trials;
+    const bool decided = settled > 0 && s.best_count >= settled && trials_done >= launch.min_trials;
     const bool stop = trials_done >= launch.max_trials ||
-                      (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant;
-    if (irrelevant && threadIdx.x == 0) s.exit_early = 1;
+                      (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant || decided;
+    if ((irrelevant || decided) && threadIdx.x == 0) s.exit_early = 1;
     if (!stop && threadIdx.x == 0 && RansacEarlyExitCheckpoint(early, trials_done) &&
         RansacShouldExitEarly(early, n, Model::kSampleSize, s.window_support_sum, s.window_hypotheses,
                               s.best_count, s.hypotheses, trials_done, launch.max_trials - trials_done)) {

@@ -18,7 +18,7 @@ struct RansacPairInput {
   int offset = 0;
   int count = 0;
   float squared_threshold = 0;  // compared against float residuals, as on the CPU
-  int unused = 0;
+  int reference = -1;           // E: the pair's slot in RansacLaunch::reference_F / _H; -1 none
   uint64_t seed = 0;            // DeriveSeed(pair seed, model tag)
 };
 
@@ -28,7 +28,7 @@ struct RansacPairOutput {
   int num_inliers;
   int num_trials;
   int num_local_refits;
-  int early_exit;  // 1 when the chance test stopped the pair
+  int early_exit;  // 1 when a rule COLMAP's loop lacks stopped the pair (chance, or no effect on the decision)
 };
 
 struct RansacLaunch {
@@ -52,6 +52,15 @@ struct RansacLaunch {
   const RansacPairOutput* relevance = nullptr;
   double relevance_ratio = 0;
   int relevance_min_inliers = 0;
+  // E after F and H (TwoViewEssentialSettledInliers): their outputs, read
+  // at each E pair's `reference` slot, so that E stops once it can no longer
+  // change the decision (EssentialSettledInliers); nullptr keeps COLMAP's
+  // loop.
+  const RansacPairOutput* reference_F = nullptr;
+  const RansacPairOutput* reference_H = nullptr;
+  double reference_E_F_ratio = 0;    // min_E_F_inlier_ratio
+  double reference_max_H_ratio = 0;  // max_H_inlier_ratio
+  int reference_min_inliers = 0;     // max(min_num_inliers, E's sample size)
   // Threads per block (trials per round): kRansacThreads, or for E also
   // kEssentialLargeBlockThreads.
   int block_threads = 128;

@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "cashash/geometry/essential_matrix.h"
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/geometry/ransac.h"
 #include "cashash/pipeline/thread_pool.h"
@@ -120,8 +121,11 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     return pairs[a]->normalized.size() > pairs[b]->normalized.size();
   });
   std::vector<size_t> order_E;
+  std::vector<int> slot_E;  // F/H slot of each E pair
   for (size_t j = 0; j < essential.size(); ++j) {
-    if (essential[order[j]] != nullptr) order_E.push_back(order[j]);
+    if (essential[order[j]] == nullptr) continue;
+    order_E.push_back(order[j]);
+    slot_E.push_back(static_cast<int>(j));
   }
   const size_t num_E = order_E.size();
   std::vector<RansacPairInput> inputs(2 * num_pairs + num_E);
@@ -158,6 +162,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     // As LoRansac compares: float residuals against float(max_error^2).
     in.squared_threshold = static_cast<float>(e.max_error * e.max_error);
     in.seed = DeriveSeed(seeds[order_E[j]], kSeedE);
+    in.reference = slot_E[j];
     total_E += n;
     max_count_E = std::max(max_count_E, in.count);
   }
@@ -222,8 +227,19 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   E_launch.max_trials = RansacMaxTrials(ransac, 5);
   E_launch.block_threads = EssentialBlockThreadsFromEnvironment();
   E_launch.shared_points = std::min(max_count_E, kEssentialMaxSharedPoints);
-  if (num_E > 0) {
-    // E (the longest) starts first on its own stream; F and H run beside it.
+  const bool E_after_F_and_H = d.options.early_exit;
+  if (E_after_F_and_H) {
+    // E reads F's and H's counts and stops once it cannot change the
+    // decision (TwoViewEssentialSettledInliers): many of its trials were on
+    // pairs whose configuration was settled long before the cap.
+    E_launch.reference_F = F_launch.outputs;
+    E_launch.reference_H = H_launch.outputs;
+    E_launch.reference_E_F_ratio = d.options.min_E_F_inlier_ratio;
+    E_launch.reference_max_H_ratio = d.options.max_H_inlier_ratio;
+    E_launch.reference_min_inliers = std::max(d.options.min_num_inliers, EssentialEstimator::kSampleSize);
+  } else if (num_E > 0) {
+    // COLMAP's loop: E (the longest) starts first on its own stream; F and
+    // H run beside it.
     CUDA_CHECK(cudaEventRecord(d.uploaded, d.stream));
     CUDA_CHECK(cudaStreamWaitEvent(d.stream_E, d.uploaded, 0));
     LaunchEssentialRansac(E_launch, d.stream_E);
@@ -238,7 +254,11 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   } else {
     LaunchTwoViewRansac(F_launch, H_launch, d.stream);
   }
-  if (num_E > 0) CUDA_CHECK(cudaStreamWaitEvent(d.stream, d.done_E, 0));
+  if (E_after_F_and_H) {
+    if (num_E > 0) LaunchEssentialRansac(E_launch, d.stream);
+  } else if (num_E > 0) {
+    CUDA_CHECK(cudaStreamWaitEvent(d.stream, d.done_E, 0));
+  }
 
   const size_t num_outputs = inputs.size();
   Reserve(&d.host_outputs, num_outputs * sizeof(RansacPairOutput));
@@ -356,7 +376,7 @@ class GpuBatchVerifier : public BatchVerifier {
     std::snprintf(line, sizeof(line),
                   "GPU verification: %zu pairs (%zu with E), device busy %.3f s of %.3f s (summed over up to %d "
                   "chunks at once, E blocks of %d threads); trials per pair F %.0f, "
-                  "H %.0f, E %.0f; stopped early (chance, or H below what could change the decision) F %lld, "
+                  "H %.0f, E %.0f; stopped early (chance, or unable to change the decision) F %lld, "
                   "H %lld, E %lld",
                   st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, max_calls_,
                   EssentialBlockThreadsFromEnvironment(), per_pair(st.trials_F, st.pairs),

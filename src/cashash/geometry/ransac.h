@@ -55,6 +55,11 @@ struct RansacOptions {
   // only matters to the decision above a fraction of F's (two-view
   // geometry); 0 keeps COLMAP's loop.
   int relevant_inliers = 0;
+  // When > 0: stop (after min_num_trials) once the best model has this many
+  // inliers, from which more inliers cannot change the decision, only which
+  // inliers it keeps (E against F's and H's counts, two-view geometry;
+  // SettledInliers). 0 keeps COLMAP's loop.
+  int settled_inliers = 0;
   // Reject wrong hypotheses by the sequential test before scoring them
   // (ransac_sprt.h) at this risk per model; 0 scores every one in full.
   float sprt_max_risk = 0;
@@ -76,7 +81,7 @@ template <typename Model>
 struct RansacReport {
   bool success = false;
   int num_trials = 0;
-  bool early_exit = false;  // stopped by the chance test before the cap
+  bool early_exit = false;  // stopped before the cap by a rule COLMAP's loop lacks
   RansacSupport support;
   Model model = Model::Zero();
   std::vector<char> inlier_mask;
@@ -106,9 +111,9 @@ inline int RansacMaxTrials(const RansacOptions& options, int sample_size) {
   return std::min(options.max_num_trials, from_ratio);
 }
 
-// One function because the trial loop, the local optimisation and the three
-// stopping rules (adaptive, relevant_inliers, early exit) read and update the
-// same best support, model and trial counters, in COLMAP's order.
+// One function because the trial loop, the local optimisation and the four
+// stopping rules (adaptive, relevant_inliers, settled_inliers, early exit)
+// read and update the same best support, model and trial counters, in COLMAP's order.
 template <typename Estimator>
 RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
                                                  const RansacOptions& options) {
@@ -203,6 +208,11 @@ RansacReport<typename Estimator::Model> LoRansac(const Estimator& estimator,
       }
     }
     if (!done && best.num_inliers < options.relevant_inliers && trials + 1 >= relevant_trials) {
+      done = true;
+      report.early_exit = true;
+    }
+    if (!done && options.settled_inliers > 0 && best.num_inliers >= options.settled_inliers &&
+        trials + 1 >= options.min_num_trials) {
       done = true;
       report.early_exit = true;
     }

@@ -118,6 +118,30 @@ CASHASH_HOST_DEVICE inline int RelevantInliers(double ratio, int reference, int 
   return relevant > 1 ? relevant : 1;
 }
 
+// Fewest E inliers from which the decision is CALIBRATED whatever E finds
+// later (two_view_geometry.h), given F's and H's inlier counts (0 where that
+// model failed): more than e_f_ratio x F's (any count when F failed, as
+// COLMAP's division by zero gives), at least min_inliers, and H / E at most
+// max_h_ratio. E's count only grows during a run, so from there on more
+// trials change which inliers are kept, not the decision. 0 when no count
+// up to num_matches settles it. One function for the CPU and the GPU.
+CASHASH_HOST_DEVICE inline int EssentialSettledInliers(double e_f_ratio, double max_h_ratio, int min_inliers,
+                                                       int num_F, int num_H, int num_matches) {
+  // Truncated lower bounds (each at or below where its test starts to
+  // pass), then the tests exactly as the decision writes them.
+  int count = min_inliers > 1 ? min_inliers : 1;
+  const int from_F = static_cast<int>(e_f_ratio * num_F);
+  const int from_H = max_h_ratio > 0 ? static_cast<int>(num_H / max_h_ratio) : num_matches + 1;
+  if (from_F > count) count = from_F;
+  if (from_H > count) count = from_H;
+  for (; count <= num_matches; ++count) {
+    const bool above_F = num_F <= 0 || static_cast<double>(count) / num_F > e_f_ratio;
+    const bool H_below = !(static_cast<double>(num_H) / count > max_h_ratio);
+    if (above_F && H_below) return count;
+  }
+  return 0;
+}
+
 // Trial counts at which the test runs: the window, then each doubling.
 CASHASH_HOST_DEVICE inline bool RansacEarlyExitCheckpoint(const RansacEarlyExitOptions& options, int trials) {
   if (options.min_num_inliers <= 0 || options.window <= 0 || trials < options.window) return false;

@@ -146,6 +146,15 @@ int TwoViewRelevantHomographyInliers(int num_F_inliers, const TwoViewGeometryOpt
   return RelevantInliers(TwoViewRelevantHomographyRatio(options), num_F_inliers, options.min_num_inliers);
 }
 
+int TwoViewEssentialSettledInliers(int num_F_inliers, int num_H_inliers, int num_matches,
+                                   const TwoViewGeometryOptions& options) {
+  if (!options.early_exit) return 0;
+  // E succeeds only with a sample's worth of inliers (EssentialEstimator).
+  return EssentialSettledInliers(options.min_E_F_inlier_ratio, options.max_H_inlier_ratio,
+                                 std::max(options.min_num_inliers, EssentialEstimator::kSampleSize), num_F_inliers,
+                                 num_H_inliers, num_matches);
+}
+
 TwoViewGeometry TwoViewGeometry::Inverted() const {
   TwoViewGeometry inv;
   inv.config = config;
@@ -246,17 +255,19 @@ EssentialPoints PrepareEssentialPoints(const Camera& camera1, const Camera& came
   return points;
 }
 
-TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options) {
+TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options,
+                                       int settled_inliers) {
   RansacOptions e_options = MakeModelRansacOptions(options, kSeedE);
   e_options.max_error = points.max_error;
+  e_options.settled_inliers = settled_inliers;
   TwoViewModelEstimate E = ToEstimate(LoRansac(EssentialEstimator(points.world), e_options));
   if (!E.success) E.model = Eigen::Matrix3d::Zero();
   return E;
 }
 
 TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
-                                       const TwoViewGeometryOptions& options) {
-  return EstimateEssential(PrepareEssentialPoints(camera1, camera2, pixels, options), options);
+                                       const TwoViewGeometryOptions& options, int settled_inliers) {
+  return EstimateEssential(PrepareEssentialPoints(camera1, camera2, pixels, options), options, settled_inliers);
 }
 
 TwoViewGeometry DecideTwoViewGeometry(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
@@ -349,7 +360,11 @@ TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
       EstimateHomography(points, options, TwoViewRelevantHomographyInliers(F.success ? F.num_inliers : 0, options));
   const bool calibrated = TwoViewIsCalibrated(camera1, camera2);
   const TwoViewModelEstimate E =
-      calibrated ? EstimateEssential(camera1, camera2, points.pixels, options) : TwoViewModelEstimate();
+      calibrated ? EstimateEssential(camera1, camera2, points.pixels, options,
+                                     TwoViewEssentialSettledInliers(F.success ? F.num_inliers : 0,
+                                                                    H.success ? H.num_inliers : 0,
+                                                                    static_cast<int>(matches.size()), options))
+                 : TwoViewModelEstimate();
   return DecideTwoViewGeometry(camera1, camera2, points.pixels, matches, calibrated, F, H, E, options);
 }
 

@@ -81,7 +81,8 @@ struct TwoViewGeometry {
 // positions (pixels) of the two images, indexed by the match indices.
 // Equivalent to PrepareTwoViewPoints, EstimateFundamental,
 // EstimateHomography (bounded by TwoViewRelevantHomographyInliers of F's
-// count), EstimateEssential (calibrated pairs only) and
+// count), EstimateEssential (calibrated pairs only, stopped at
+// TwoViewEssentialSettledInliers of F's and H's counts) and
 // DecideTwoViewGeometry in a row; a batch verifier (the GPU one) runs the
 // same steps with F and H estimated elsewhere.
 TwoViewGeometry EstimateTwoViewGeometry(const Camera& camera1,
@@ -132,12 +133,28 @@ int TwoViewRelevantHomographyInliers(int num_F_inliers, const TwoViewGeometryOpt
 // The constant ratio of TwoViewRelevantHomographyInliers (both backends).
 double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options);
 
+// With early_exit: E's inlier count from which the pair is CALIBRATED
+// whatever E finds later, given F's and H's counts (0 where that model
+// failed) and the pair's matches (EssentialSettledInliers); E stops there
+// (RansacOptions::settled_inliers): more trials would change which inliers
+// are kept, not the decision. 0 when early_exit is off or no count settles
+// it. (Asking E's chance test for more than min_num_inliers where F's count
+// is higher was tried and dropped: on a 300-image street it stopped E on 4
+// of 4,136 pairs before E found the model F had found, and flipped them to
+// UNCALIBRATED; docs/gpu_verification.md.)
+int TwoViewEssentialSettledInliers(int num_F_inliers, int num_H_inliers, int num_matches,
+                                   const TwoViewGeometryOptions& options);
+
 // One estimated model of a pair, as the decision reads it.
 struct TwoViewModelEstimate {
   bool success = false;
   int num_inliers = 0;
   int num_trials = 0;
-  bool early_exit = false;  // stopped by the chance test (ransac_early_exit.h)
+  // Stopped before COLMAP's loop would have: by the chance test
+  // (ransac_early_exit.h), or where the model could no longer change the
+  // decision (H below TwoViewRelevantHomographyInliers, E at
+  // TwoViewEssentialSettledInliers).
+  bool early_exit = false;
   // F and H in pixel coordinates (unit Frobenius norm); E in normalised
   // camera coordinates.
   Eigen::Matrix3d model = Eigen::Matrix3d::Zero();
@@ -168,7 +185,7 @@ bool TwoViewIsCalibrated(const Camera& camera1, const Camera& camera2);
 
 // E by 5-point LO-RANSAC on undistorted, normalised camera coordinates.
 TwoViewModelEstimate EstimateEssential(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
-                                       const TwoViewGeometryOptions& options);
+                                       const TwoViewGeometryOptions& options, int settled_inliers = 0);
 
 // What EstimateEssential runs its RANSAC on: the matched pixels undistorted
 // to normalised camera coordinates, and the threshold there (the pixel
@@ -180,8 +197,11 @@ struct EssentialPoints {
 };
 EssentialPoints PrepareEssentialPoints(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
                                        const TwoViewGeometryOptions& options);
-// EstimateEssential on prepared points.
-TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options);
+// EstimateEssential on prepared points; with `settled_inliers`
+// (TwoViewEssentialSettledInliers of the pair's F and H), stopped once E
+// can no longer change the decision.
+TwoViewModelEstimate EstimateEssential(const EssentialPoints& points, const TwoViewGeometryOptions& options,
+                                       int settled_inliers = 0);
 
 // COLMAP's configuration decision from the three estimates (E unused unless
 // `calibrated`), then the inlier matches and the watermark test. F, H and E
