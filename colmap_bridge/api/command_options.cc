@@ -98,7 +98,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Border band for the watermark test, relative to the image diagonal");
   table.Add({"TwoViewGeometry.detect_watermark"}, &o.two_view.detect_watermark, "Run the watermark test");
   table.Add({"TwoViewGeometry.early_exit"}, &o.two_view.early_exit,
-            "Stop RANSAC early on pairs whose matches look like chance (0 = COLMAP's full trial budget)");
+            "Stop RANSAC early on pairs whose matches look like chance, and H and E once they cannot change the "
+            "decision (0 = COLMAP's full trial budget)");
   table.Add({"TwoViewGeometry.early_exit_max_risk"}, &o.two_view.early_exit_max_risk,
             "Largest chance, under the fitted chance model, that the full budget would have verified a stopped pair");
   table.Add({"TwoViewGeometry.sprt"}, &o.two_view.sprt,

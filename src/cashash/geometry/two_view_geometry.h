@@ -44,8 +44,10 @@ struct TwoViewGeometryOptions {
   double min_inlier_ratio = 0.25;
   // Stop E, F and H RANSAC early on pairs whose supports look like chance
   // (ransac_early_exit.h; not in COLMAP, which runs such pairs to
-  // max_num_trials). early_exit_max_risk bounds, under the chance model, the
-  // probability that the full run would have reached min_num_inliers.
+  // max_num_trials), and H and E once they cannot change the decision
+  // (TwoViewRelevantHomographyInliers, TwoViewEssentialSettledInliers).
+  // early_exit_max_risk bounds, under the chance model, the probability that
+  // the full run would have reached min_num_inliers.
   bool early_exit = true;
   double early_exit_max_risk = 0.001;
   // Reject wrong hypotheses by a sequential test on a few dozen matches
