@@ -420,7 +420,9 @@ class GpuBatchVerifier : public BatchVerifier {
       ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
       for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
     } else {
-      // E (calibrated pairs) on the CPU while the GPU estimates F and H.
+      // E (calibrated pairs) on the CPU while the GPU estimates F and H: a
+      // diagnostic path, so E runs without F's and H's counts and does not
+      // stop where the decision is settled.
       ransac->Estimate(batch_points, batch_seeds, &F, &H, [&]() {
         ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
           const size_t k = calibrated_pairs[i];
