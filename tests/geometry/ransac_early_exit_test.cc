@@ -184,10 +184,10 @@ TEST(RansacEarlyExit, HomographyStopsWhenItCannotChangeTheDecision) {
 }
 
 // E's settled count against the decision's own tests, by brute force: the
-// first count from which every larger one is CALIBRATED (more than 0.95 x
-// F's, at least 15, H / E at most 0.8).
-TEST(RansacEarlyExit, EssentialSettledInliersFollowTheDecisionRule) {
-  const TwoViewGeometryOptions options;
+// first count from which every larger one is CALIBRATED (more than
+// min_E_F_inlier_ratio x F's, at least min_num_inliers, H / E at most
+// max_H_inlier_ratio).
+void ExpectSettledInliersFollowTheDecisionRule(const TwoViewGeometryOptions& options) {
   auto calibrated = [&](int e, int num_F, int num_H) {
     const double e_f = static_cast<double>(e) / num_F;  // infinite when F failed, as in the decision
     const double h_e = static_cast<double>(num_H) / e;
@@ -208,10 +208,23 @@ TEST(RansacEarlyExit, EssentialSettledInliersFollowTheDecisionRule) {
       }
     }
   }
+}
+
+TEST(RansacEarlyExit, EssentialSettledInliersFollowTheDecisionRule) {
+  TwoViewGeometryOptions zero_H_ratio;
+  zero_H_ratio.max_H_inlier_ratio = 0;  // the option's edge: no H inlier is allowed at all
+  for (const TwoViewGeometryOptions& options : {TwoViewGeometryOptions(), zero_H_ratio}) {
+    SCOPED_TRACE(testing::Message() << "max_H_inlier_ratio " << options.max_H_inlier_ratio);
+    ASSERT_NO_FATAL_FAILURE(ExpectSettledInliersFollowTheDecisionRule(options));
+  }
+  const TwoViewGeometryOptions options;
+  const int num_matches = 400;
   EXPECT_EQ(TwoViewEssentialSettledInliers(40, 5, num_matches, options), 39);  // 39 / 40 > 0.95
   EXPECT_EQ(TwoViewEssentialSettledInliers(0, 0, num_matches, options), 15);
   EXPECT_EQ(TwoViewEssentialSettledInliers(399, 5, num_matches, options), 380);
   EXPECT_EQ(TwoViewEssentialSettledInliers(399, 390, num_matches, options), 0);  // H / E > 0.8 up to 400
+  EXPECT_EQ(TwoViewEssentialSettledInliers(40, 0, num_matches, zero_H_ratio), 39);
+  EXPECT_EQ(TwoViewEssentialSettledInliers(40, 1, num_matches, zero_H_ratio), 0);
   TwoViewGeometryOptions off = options;
   off.early_exit = false;
   EXPECT_EQ(TwoViewEssentialSettledInliers(40, 5, num_matches, off), 0);

@@ -131,7 +131,8 @@ CASHASH_HOST_DEVICE inline int EssentialSettledInliers(double e_f_ratio, double 
   // pass), then the tests exactly as the decision writes them.
   int count = min_inliers > 1 ? min_inliers : 1;
   const int from_F = static_cast<int>(e_f_ratio * num_F);
-  const int from_H = max_h_ratio > 0 ? static_cast<int>(num_H / max_h_ratio) : num_matches + 1;
+  // A ratio of 0 admits no H inlier at all: then only num_H == 0 settles.
+  const int from_H = max_h_ratio > 0 ? static_cast<int>(num_H / max_h_ratio) : (num_H > 0 ? num_matches + 1 : 0);
   if (from_F > count) count = from_F;
   if (from_H > count) count = from_H;
   for (; count <= num_matches; ++count) {
