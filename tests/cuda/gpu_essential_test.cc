@@ -60,6 +60,37 @@ EssentialPoints ScenePoints(const SyntheticScene& scene, const TwoViewGeometryOp
   return PrepareEssentialPoints(camera, camera, scene.Pairs(), options);
 }
 
+// F, H and E of synthetic calibrated scenes in one GPU call, pair k seeded
+// with PairRandomSeed(seed_base, (1, k + 2)); the points stay here for the
+// checks.
+struct SceneBatch {
+  std::vector<TwoViewPoints> points;
+  std::vector<EssentialPoints> essential;
+  std::vector<uint64_t> seeds;
+  std::vector<TwoViewModelEstimate> F, H, E;
+};
+
+SceneBatch EstimateScenesOnGpu(const std::vector<const SyntheticScene*>& scenes, const TwoViewGeometryOptions& options,
+                               uint64_t seed_base, cuda::GpuRansacStats* stats = nullptr) {
+  SceneBatch batch;
+  for (size_t k = 0; k < scenes.size(); ++k) {
+    const SyntheticScene& s = *scenes[k];
+    batch.points.push_back(PrepareTwoViewPoints(s.points1, s.points2, s.matches));
+    batch.essential.push_back(ScenePoints(s, options));
+    batch.seeds.push_back(PairRandomSeed(seed_base, ImagePair(1, static_cast<image_t>(k + 2))));
+  }
+  std::vector<const TwoViewPoints*> pointers;
+  std::vector<const EssentialPoints*> essential_pointers;
+  for (size_t k = 0; k < scenes.size(); ++k) {
+    pointers.push_back(&batch.points[k]);
+    essential_pointers.push_back(&batch.essential[k]);
+  }
+  cuda::GpuTwoViewRansac ransac(options, 0);
+  ransac.Estimate(pointers, batch.seeds, essential_pointers, &batch.F, &batch.H, &batch.E);
+  if (stats != nullptr) *stats = ransac.stats();
+  return batch;
+}
+
 TEST(GpuEssential, DeviceFivePointRecoversTrueE) {
   SKIP_WITHOUT_CUDA_DEVICE();
   SceneOptions o;
@@ -241,24 +272,14 @@ TEST(GpuEssential, RansacAgreesWithCpuOnSyntheticPairs) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const std::vector<EssentialCase> cases = EssentialCases();
   const TwoViewGeometryOptions options;
-  std::vector<TwoViewPoints> points;
-  std::vector<EssentialPoints> essential;
-  std::vector<uint64_t> seeds;
-  for (size_t k = 0; k < cases.size(); ++k) {
-    const SyntheticScene& s = cases[k].scene;
-    points.push_back(PrepareTwoViewPoints(s.points1, s.points2, s.matches));
-    essential.push_back(ScenePoints(s, options));
-    seeds.push_back(PairRandomSeed(5, ImagePair(1, static_cast<image_t>(k + 2))));
-  }
-  std::vector<const TwoViewPoints*> pointers;
-  std::vector<const EssentialPoints*> essential_pointers;
-  for (size_t k = 0; k < cases.size(); ++k) {
-    pointers.push_back(&points[k]);
-    essential_pointers.push_back(&essential[k]);
-  }
-  cuda::GpuTwoViewRansac ransac(options, 0);
-  std::vector<TwoViewModelEstimate> F, H, E;
-  ransac.Estimate(pointers, seeds, essential_pointers, &F, &H, &E);
+  std::vector<const SyntheticScene*> scenes;
+  for (const EssentialCase& c : cases) scenes.push_back(&c.scene);
+  cuda::GpuRansacStats st;
+  const SceneBatch batch = EstimateScenesOnGpu(scenes, options, 5, &st);
+  const std::vector<TwoViewPoints>& points = batch.points;
+  const std::vector<EssentialPoints>& essential = batch.essential;
+  const std::vector<uint64_t>& seeds = batch.seeds;
+  const std::vector<TwoViewModelEstimate>& F = batch.F, &H = batch.H, &E = batch.E;
   ASSERT_EQ(E.size(), cases.size());
   std::printf("%-22s %7s %7s %7s %8s %8s %7s %7s\n", "case", "matches", "E cpu", "E gpu", "err cpu", "err gpu",
               "trials", "refits");
@@ -297,7 +318,6 @@ TEST(GpuEssential, RansacAgreesWithCpuOnSyntheticPairs) {
     // F and H are estimated alongside, as without E.
     EXPECT_TRUE(F[k].success);
   }
-  const cuda::GpuRansacStats& st = ransac.stats();
   EXPECT_EQ(st.pairs_E, cases.size());
   std::printf("E: %.0f trials, %.1f local refits per pair\n", static_cast<double>(st.trials_E) / st.pairs_E,
               static_cast<double>(st.local_refits_E) / st.pairs_E);
@@ -317,26 +337,15 @@ TEST(GpuEssential, StopsOnceTheDecisionIsSettled) {
     o.seed = seed;
     scenes.push_back(MakeScene(o));
   }
+  std::vector<const SyntheticScene*> scene_pointers;
+  for (const SyntheticScene& scene : scenes) scene_pointers.push_back(&scene);
   for (const bool early_exit : {true, false}) {
     TwoViewGeometryOptions options;
     options.early_exit = early_exit;
-    std::vector<TwoViewPoints> points;
-    std::vector<EssentialPoints> essential;
-    std::vector<uint64_t> seeds;
-    for (size_t k = 0; k < scenes.size(); ++k) {
-      points.push_back(PrepareTwoViewPoints(scenes[k].points1, scenes[k].points2, scenes[k].matches));
-      essential.push_back(ScenePoints(scenes[k], options));
-      seeds.push_back(PairRandomSeed(9, ImagePair(1, static_cast<image_t>(k + 2))));
-    }
-    std::vector<const TwoViewPoints*> pointers;
-    std::vector<const EssentialPoints*> e_pointers;
-    for (size_t k = 0; k < scenes.size(); ++k) {
-      pointers.push_back(&points[k]);
-      e_pointers.push_back(&essential[k]);
-    }
-    cuda::GpuTwoViewRansac ransac(options, 0);
-    std::vector<TwoViewModelEstimate> F, H, E;
-    ransac.Estimate(pointers, seeds, e_pointers, &F, &H, &E);
+    const SceneBatch batch = EstimateScenesOnGpu(scene_pointers, options, 9);
+    const std::vector<TwoViewPoints>& points = batch.points;
+    const std::vector<uint64_t>& seeds = batch.seeds;
+    const std::vector<TwoViewModelEstimate>& F = batch.F, &H = batch.H, &E = batch.E;
     int stopped = 0;
     for (size_t k = 0; k < scenes.size(); ++k) {
       const int settled =
