@@ -169,7 +169,8 @@ std::vector<std::vector<uint8_t>> EncodeChunkInParts(const PairChunk& chunk, con
 std::vector<uint8_t> EncodeRankReport(const RankReport& report) {
   Writer w;
   const PipelineStats& s = report.stats;
-  for (size_t value : {s.pairs_total, s.pairs_done, s.raw_matches, s.verified_pairs, s.inlier_matches}) {
+  for (size_t value :
+       {s.pairs_total, s.pairs_done, s.raw_matches, s.verified_pairs, s.inlier_matches, s.verification_calls}) {
     w.Put<uint64_t>(value);
   }
   for (double value : {s.seconds_total, s.seconds_loading, s.seconds_hashing, s.seconds_matching,
@@ -185,7 +186,8 @@ RankReport DecodeRankReport(const std::vector<uint8_t>& bytes) {
   Reader r(bytes);
   RankReport report;
   PipelineStats& s = report.stats;
-  for (size_t* value : {&s.pairs_total, &s.pairs_done, &s.raw_matches, &s.verified_pairs, &s.inlier_matches}) {
+  for (size_t* value : {&s.pairs_total, &s.pairs_done, &s.raw_matches, &s.verified_pairs, &s.inlier_matches,
+                        &s.verification_calls}) {
     *value = r.Get<uint64_t>();
   }
   for (double* value : {&s.seconds_total, &s.seconds_loading, &s.seconds_hashing, &s.seconds_matching,

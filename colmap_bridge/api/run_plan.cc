@@ -80,6 +80,7 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
   stats->raw_matches += other.raw_matches;
   stats->verified_pairs += other.verified_pairs;
   stats->inlier_matches += other.inlier_matches;
+  stats->verification_calls += other.verification_calls;
   stats->seconds_total = std::max(stats->seconds_total, other.seconds_total);
   stats->seconds_loading = std::max(stats->seconds_loading, other.seconds_loading);
   stats->seconds_hashing = std::max(stats->seconds_hashing, other.seconds_hashing);
@@ -363,6 +364,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.skip_geometric_verification = plan.options.skip_geometric_verification;
   pipeline_options.two_view = plan.options.two_view;
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
+  pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
   MatchingPipeline pipeline(pipeline_options, plan.features, plan.matcher.get(), plan.sink);
 
   std::mutex progress_mutex;

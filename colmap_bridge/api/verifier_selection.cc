@@ -13,6 +13,17 @@
 namespace cashash {
 namespace colmap {
 
+size_t ChunksPerVerificationFromEnvironment() {
+  const char* text = std::getenv("CASHASH_CHUNKS_PER_VERIFICATION");
+  if (text == nullptr) return 0;
+  try {
+    return static_cast<size_t>(std::max(0, std::stoi(text)));
+  } catch (const std::exception&) {
+    throw std::invalid_argument(std::string("CASHASH_CHUNKS_PER_VERIFICATION: expected a number of chunks, got '") +
+                                text + "'");
+  }
+}
+
 std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
                                                              const std::function<void(const std::string&)>& warning) {
   // CASHASH_VERIFIER=cpu verifies on the CPU while matching on the GPU (to

@@ -102,8 +102,10 @@ int ReportSummary(const MatchingSummary& summary) {
   std::cout << std::setprecision(3) << "Time: loading " << stats.seconds_loading << " s, hashing "
             << stats.seconds_hashing << " s, matching " << stats.seconds_matching << " s, verification "
             << stats.seconds_verification << " s";
+  // Calls, not chunks: a call may verify several chunks that waited together.
+  if (stats.verification_calls > 0) std::cout << " in " << stats.verification_calls << " calls";
   if (stats.verification_threads > 1) {
-    std::cout << " (summed over up to " << stats.verification_threads << " chunks verified at once)";
+    std::cout << " (summed over up to " << stats.verification_threads << " calls at once)";
   }
   std::cout << ", writing " << stats.seconds_writing << " s" << std::endl;
   // What the user waited for beyond the pipeline: the summary's rate leaves

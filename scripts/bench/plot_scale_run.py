@@ -50,7 +50,7 @@ def phase_summary(log_path):
         out.update(pairs=int(m.group(1)), seconds=float(m.group(2)), matcher=m.group(3),
                    raw=int(m.group(4)), verified=int(m.group(5)))
     m = re.search(r"^Time: loading ([0-9.]+) s, hashing ([0-9.]+) s, matching ([0-9.]+) s, "
-                  r"verification ([0-9.]+) s, writing ([0-9.]+) s", text, re.M)
+                  r"verification ([0-9.]+) s[^,]*, writing ([0-9.]+) s", text, re.M)
     if m:
         out["stages"] = dict(zip(["loading", "hashing", "matching", "verification", "writing"],
                                  map(float, m.groups())))

@@ -102,6 +102,7 @@ TEST(MpiResultCodec, RankReportRoundTrips) {
   report.stats.raw_matches = 123456;
   report.stats.verified_pairs = 90;
   report.stats.inlier_matches = 65432;
+  report.stats.verification_calls = 7;
   report.stats.seconds_total = 12.5;
   report.stats.seconds_verification = 3.25;
   report.stats.stopped = true;
@@ -109,6 +110,7 @@ TEST(MpiResultCodec, RankReportRoundTrips) {
   const RankReport back = DecodeRankReport(EncodeRankReport(report));
   EXPECT_EQ(back.stats.pairs_done, 99u);
   EXPECT_EQ(back.stats.inlier_matches, 65432u);
+  EXPECT_EQ(back.stats.verification_calls, 7u);
   EXPECT_EQ(back.stats.seconds_total, 12.5);
   EXPECT_EQ(back.stats.seconds_verification, 3.25);
   EXPECT_TRUE(back.stats.stopped);

@@ -428,5 +428,84 @@ TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
   EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
 }
 
+// Chunks that wait together go to the verifier in one call: in matching
+// order, each pair once, each geometry back to its own pair. The extra
+// chunks of a call keep their room in the queue, so matching runs no
+// further ahead than with one chunk per call.
+TEST(BatchVerifierPipeline, ChunksThatWaitTogetherShareOneCall) {
+  const std::vector<PairChunk> chunks = Chunks(40, 4);  // 55 chunks
+  const size_t depth = 6;
+  ChoosingMatcher matcher(0);
+  Sink sink;
+  // The first call is held until matching has filled the queue, the second
+  // long enough to see how far matching then goes. A pair's configuration
+  // follows its seed, so a geometry handed to the wrong pair shows.
+  class HeldCallsVerifier : public BatchVerifier {
+   public:
+    explicit HeldCallsVerifier(ChoosingMatcher* m) : m_(m) {}
+    std::string Name() const override { return "held"; }
+    std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
+      const size_t call = batch_sizes.size();
+      batch_sizes.push_back(pairs.size());
+      if (call == 0) {
+        const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+        while (m_->calls.load() < static_cast<int>(depth) + 2 && std::chrono::steady_clock::now() < give_up) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      } else if (call == 1) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+        calls_during_second = m_->calls.load();
+      }
+      std::vector<TwoViewGeometry> out(pairs.size());
+      for (size_t k = 0; k < pairs.size(); ++k) {
+        out[k].config = pairs[k].random_seed % 2 ? kUncalibrated : kCalibrated;
+        out[k].inlier_matches.push_back(pairs[k].matches->front());
+      }
+      return out;
+    }
+    std::vector<size_t> batch_sizes;
+    int calls_during_second = 0;
+
+   private:
+    ChoosingMatcher* m_;
+  } verifier(&matcher);
+  PipelineOptions options;
+  options.chunks_in_queue = depth;
+  options.chunks_per_verification = 4;
+  options.two_view.random_seed = 3;
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+  EXPECT_EQ(stats.verified_pairs, NumPairs(chunks));
+  EXPECT_EQ(stats.verification_calls, verifier.batch_sizes.size());
+  // Each call's pairs are those of consecutive chunks, at most four.
+  std::vector<size_t> chunks_per_call;
+  size_t c = 0;
+  for (const size_t pairs : verifier.batch_sizes) {
+    size_t sum = 0, taken = 0;
+    while (sum < pairs && c < chunks.size()) {
+      sum += chunks[c++].pairs.size();
+      ++taken;
+    }
+    ASSERT_EQ(sum, pairs) << "a call that is not whole chunks";
+    EXPECT_LE(taken, 4u);
+    chunks_per_call.push_back(taken);
+  }
+  EXPECT_EQ(c, chunks.size());
+  ASSERT_GE(chunks_per_call.size(), 2u);
+  // When the first call ends at least three chunks wait: the second takes them.
+  EXPECT_GE(chunks_per_call[1], 3u);
+  // While a call is held matching fills the queue and stops: the chunks
+  // taken before, `depth` queued or held by the call, one matched and
+  // waiting. Had the call's extra chunks given their room back, matching
+  // would have gone chunks_per_call[1] - 1 further.
+  EXPECT_EQ(verifier.calls_during_second, static_cast<int>(chunks_per_call[0] + depth + 2));
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+  ASSERT_EQ(sink.configs.size(), NumPairs(chunks));
+  for (const auto& entry : sink.configs) {
+    EXPECT_EQ(entry.second, PairRandomSeed(3, entry.first) % 2 ? kUncalibrated : kCalibrated);
+  }
+}
+
 }  // namespace
 }  // namespace cashash

@@ -1,11 +1,13 @@
 // The queue between the pipeline's stages: order, back-pressure, closing,
-// and the helper consumer's pop that waits for a backlog.
+// the helper consumer's pop that waits for a backlog, and the batch pop
+// whose extra items keep their room until released.
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <future>
 #include <optional>
 #include <thread>
+#include <vector>
 
 #include "cashash/pipeline/blocking_queue.h"
 
@@ -62,6 +64,48 @@ TEST(BlockingQueue, APushReachesThePlainConsumerWhileAHelperWaits) {
   EXPECT_EQ(plain.get(), std::optional<int>(5));
   queue.Close();
   EXPECT_EQ(helper.get(), std::nullopt);
+}
+
+TEST(BlockingQueue, ABatchTakesWhatWaitsInOrderUpToItsSize) {
+  BlockingQueue<int> queue(8);
+  for (int k = 1; k <= 5; ++k) queue.Push(k);
+  EXPECT_EQ(queue.PopBatch(1, 3), (std::vector<int>{1, 2, 3}));
+  queue.Release(2);
+  EXPECT_EQ(queue.PopBatch(1, 3), (std::vector<int>{4, 5}));  // what waits, not more
+  queue.Release(1);
+  queue.Push(6);
+  EXPECT_EQ(queue.PopBatch(1, 0), (std::vector<int>{6}));  // at least one
+  queue.Close();
+  EXPECT_TRUE(queue.PopBatch(1, 3).empty());
+}
+
+// The items of a batch beyond its first stay counted against the capacity
+// until released: the producer cannot run further ahead than with one pop.
+TEST(BlockingQueue, ABatchKeepsTheRoomOfItsExtraItemsUntilReleased) {
+  BlockingQueue<int> queue(3);
+  for (int k = 1; k <= 3; ++k) queue.Push(k);
+  ASSERT_EQ(queue.PopBatch(1, 3).size(), 3u);  // the first frees its room
+  EXPECT_TRUE(queue.Push(4));
+  std::future<bool> producer = std::async(std::launch::async, [&] { return queue.Push(5); });
+  EXPECT_EQ(producer.wait_for(100ms), std::future_status::timeout);
+  queue.Release(2);
+  ASSERT_EQ(producer.wait_for(10s), std::future_status::ready);
+  EXPECT_TRUE(producer.get());
+  EXPECT_EQ(queue.PopBatch(1, 8), (std::vector<int>{4, 5}));
+}
+
+// The helper's backlog counts the held items too: it starts once the
+// producer would block, queued or held.
+TEST(BlockingQueue, TheHelpersBacklogCountsHeldItems) {
+  BlockingQueue<int> queue(3);
+  for (int k = 1; k <= 3; ++k) queue.Push(k);
+  ASSERT_EQ(queue.PopBatch(1, 2).size(), 2u);  // 3 waits, 2 held
+  std::future<std::optional<int>> helper =
+      std::async(std::launch::async, [&] { return queue.PopWhenBacklogged(queue.capacity()); });
+  EXPECT_EQ(helper.wait_for(100ms), std::future_status::timeout);  // 1 queued + 1 held
+  queue.Push(4);  // full: the producer would block next
+  ASSERT_EQ(helper.wait_for(10s), std::future_status::ready);
+  EXPECT_EQ(helper.get(), std::optional<int>(3));
 }
 
 }  // namespace

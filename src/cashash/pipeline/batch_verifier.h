@@ -5,6 +5,7 @@
 // DecideTwoViewGeometry so that both paths agree.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -41,6 +42,9 @@ class BatchVerifier {
   // the device, because one chunk's device time is set by its slowest pair
   // while most of the device idles.
   virtual int MaxConcurrentCalls() const { return 1; }
+  // How many matched chunks that wait together one call should take
+  // (PipelineOptions::chunks_per_verification when that is 0).
+  virtual size_t ChunksPerCall() const { return 1; }
   // One line on where the time went (device time, trials, early exits), for
   // the run's log; empty when there is nothing beyond the pipeline's times.
   virtual std::string StatsSummary() const { return {}; }

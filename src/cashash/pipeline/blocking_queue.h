@@ -3,11 +3,13 @@
 // back-pressure instead of letting results pile up in memory.
 #pragma once
 
+#include <algorithm>
 #include <condition_variable>
 #include <cstddef>
 #include <deque>
 #include <mutex>
 #include <optional>
+#include <vector>
 
 namespace cashash {
 
@@ -19,7 +21,7 @@ class BlockingQueue {
   // Blocks while full. Returns false if the queue was closed.
   bool Push(T item) {
     std::unique_lock<std::mutex> lock(mutex_);
-    not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
+    not_full_.wait(lock, [&] { return closed_ || items_.size() + held_ < capacity_; });
     if (closed_) return false;
     items_.push_back(std::move(item));
     // All: consumers may wait for different things (PopWhenBacklogged).
@@ -35,12 +37,41 @@ class BlockingQueue {
   // cannot keep up (the producer is about to block) or at the end.
   std::optional<T> PopWhenBacklogged(size_t backlog) {
     std::unique_lock<std::mutex> lock(mutex_);
-    not_empty_.wait(lock, [&] { return closed_ || (!items_.empty() && items_.size() >= backlog); });
+    WaitForBacklog(lock, backlog);
     if (items_.empty()) return std::nullopt;
     T item = std::move(items_.front());
     items_.pop_front();
     not_full_.notify_one();
     return item;
+  }
+
+  // As PopWhenBacklogged, then also takes what else waits, up to max_items
+  // in all, in order; empty once closed and drained. All but the first stay
+  // counted against the capacity until Release(size() - 1): what a consumer
+  // holds in one batch is bounded as if it still waited, so the memory the
+  // queue's capacity stands for (kPipelineBlocks) does not grow with it.
+  std::vector<T> PopBatch(size_t backlog, size_t max_items) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    WaitForBacklog(lock, backlog);
+    std::vector<T> batch;
+    const size_t n = std::min(items_.size(), std::max<size_t>(1, max_items));
+    for (size_t k = 0; k < n; ++k) {
+      batch.push_back(std::move(items_.front()));
+      items_.pop_front();
+    }
+    if (n > 0) {
+      held_ += n - 1;
+      not_full_.notify_one();
+    }
+    return batch;
+  }
+
+  // Gives back the room of `held` items a PopBatch kept counted.
+  void Release(size_t held) {
+    if (held == 0) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    held_ -= std::min(held, held_);
+    not_full_.notify_all();
   }
 
   size_t capacity() const { return capacity_; }
@@ -54,11 +85,18 @@ class BlockingQueue {
   }
 
  private:
+  // Until closed: `backlog` items count as waiting (queued or held in a
+  // batch, so that the producer is about to block) and one is queued.
+  void WaitForBacklog(std::unique_lock<std::mutex>& lock, size_t backlog) {
+    not_empty_.wait(lock, [&] { return closed_ || (!items_.empty() && items_.size() + held_ >= backlog); });
+  }
+
   const size_t capacity_;
   std::mutex mutex_;
   std::condition_variable not_empty_;
   std::condition_variable not_full_;
   std::deque<T> items_;
+  size_t held_ = 0;  // items of batches still counted (PopBatch)
   bool closed_ = false;
 };
 

@@ -67,49 +67,64 @@ class FirstError {
   std::atomic<bool> failed_{false};
 };
 
-// The verification of one matched chunk: what the matcher deferred first,
-// then results in the chunk's pair order, geometries left undefined when
-// verification is skipped. Releases the chunk's features.
-VerifiedChunk VerifyChunk(const PipelineOptions& options, FeatureSource* source, MatchedChunk* item,
-                          BatchVerifier* verifier) {
-  VerifiedChunk out;
-  out.chunk = item->chunk;
-  out.started = item->started;
-  if (item->deferred) {
-    item->deferred->Complete(
-        [&](image_t image_id) { return DescriptorsOf(item->features.at(image_id)); },
-        &item->matches);
-    item->deferred.reset();
-  }
-  const std::vector<ImagePair>& pairs = item->chunk->pairs;
-  out.results.resize(pairs.size());
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    out.results[k].pair = pairs[k];
-    out.results[k].matches = std::move(item->matches[k]);
+// The verification of matched chunks in one call of the verifier: for each
+// chunk what the matcher deferred first, then results in the chunk's pair
+// order, geometries left undefined when verification is skipped. One call
+// for several chunks because a GPU call lasts as long as its slowest pair:
+// chunks that wait together share that tail instead of paying it in turn.
+// Releases the chunks' features.
+std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
+                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier) {
+  std::vector<VerifiedChunk> out(items->size());
+  for (size_t c = 0; c < items->size(); ++c) {
+    MatchedChunk& item = (*items)[c];
+    out[c].chunk = item.chunk;
+    out[c].started = item.started;
+    if (item.deferred) {
+      item.deferred->Complete(
+          [&](image_t image_id) { return DescriptorsOf(item.features.at(image_id)); }, &item.matches);
+      item.deferred.reset();
+    }
+    const std::vector<ImagePair>& pairs = item.chunk->pairs;
+    out[c].results.resize(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      out[c].results[k].pair = pairs[k];
+      out[c].results[k].matches = std::move(item.matches[k]);
+    }
   }
   if (!options.skip_geometric_verification) {
-    // Keypoint positions once per image of the chunk, not once per pair.
+    // Keypoint positions once per image of the chunks, not once per pair.
     std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
-    for (const auto& entry : item->features) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
+    std::unordered_map<image_t, const ImageFeatures*> images;
+    for (const MatchedChunk& item : *items) {
+      for (const auto& entry : item.features) images.emplace(entry.first, entry.second.get());
+    }
+    for (const auto& entry : images) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
     std::vector<std::pair<const image_t, std::vector<Eigen::Vector2d>>*> slots;
     for (auto& entry : positions) slots.push_back(&entry);
     ParallelFor(slots.size(), options.num_threads, [&](size_t i) {
-      slots[i]->second = KeypointPositions(item->features.at(slots[i]->first)->keypoints);
+      slots[i]->second = KeypointPositions(images.at(slots[i]->first)->keypoints);
     });
-    std::vector<VerificationPair> tasks(pairs.size());
-    for (size_t k = 0; k < pairs.size(); ++k) {
-      VerificationPair& task = tasks[k];
-      task.camera1 = &source->CameraOfImage(pairs[k].first);
-      task.camera2 = &source->CameraOfImage(pairs[k].second);
-      task.points1 = &positions.at(pairs[k].first);
-      task.points2 = &positions.at(pairs[k].second);
-      task.matches = &out.results[k].matches;
-      task.random_seed = PairRandomSeed(options.two_view.random_seed, pairs[k]);
+    std::vector<VerificationPair> tasks;
+    for (VerifiedChunk& chunk : out) {
+      for (PairResult& result : chunk.results) {
+        VerificationPair task;
+        task.camera1 = &source->CameraOfImage(result.pair.first);
+        task.camera2 = &source->CameraOfImage(result.pair.second);
+        task.points1 = &positions.at(result.pair.first);
+        task.points2 = &positions.at(result.pair.second);
+        task.matches = &result.matches;
+        task.random_seed = PairRandomSeed(options.two_view.random_seed, result.pair);
+        tasks.push_back(task);
+      }
     }
     std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
-    for (size_t k = 0; k < pairs.size(); ++k) out.results[k].geometry = std::move(geometries[k]);
+    size_t next = 0;
+    for (VerifiedChunk& chunk : out) {
+      for (PairResult& result : chunk.results) result.geometry = std::move(geometries[next++]);
+    }
   }
-  item->features.clear();
+  for (MatchedChunk& item : *items) item.features.clear();
   return out;
 }
 
@@ -235,6 +250,9 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   InOrderTurnstile to_writer_in_order;
   VerificationGate gate;
   std::atomic<int> verifier_threads_left{num_verifier_threads};
+  size_t chunks_per_call = options_.chunks_per_verification;
+  if (chunks_per_call == 0) chunks_per_call = verifier != nullptr ? verifier->ChunksPerCall() : 1;
+  chunks_per_call = std::max<size_t>(1, chunks_per_call);
   auto verification_stage = [&](int thread) {
     // A helper (the second thread on) waits for a full queue or the end.
     const size_t backlog = thread > 0 && options_.extra_verifiers_on_backlog ? to_verify.capacity() : 1;
@@ -242,16 +260,30 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
         gate.Wait();
-        std::optional<MatchedChunk> item = to_verify.PopWhenBacklogged(backlog);
+        std::vector<MatchedChunk> items = to_verify.PopBatch(backlog, chunks_per_call);
         add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
-        if (!item) break;
+        if (items.empty()) break;
         const Clock::time_point t0 = Clock::now();
-        VerifiedChunk out = VerifyChunk(options_, source_, &*item, verifier);
-        add_seconds(&PipelineStats::seconds_verification, t0);
+        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier);
+        to_verify.Release(items.size() - 1);
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_verification += SecondsSince(t0);
+          if (!options_.skip_geometric_verification) ++stats.verification_calls;
+        }
+        // The batch's chunks are consecutive: the queue is one producer's,
+        // in order, and a batch is taken at once.
         const Clock::time_point t_push = Clock::now();
-        if (!to_writer_in_order.Wait(item->index)) break;
-        const bool pushed = to_write.Push(std::move(out));
-        to_writer_in_order.Pass(item->index);
+        bool pushed = true;
+        for (size_t c = 0; c < out.size() && pushed; ++c) {
+          const size_t index = items[c].index;
+          if (!to_writer_in_order.Wait(index)) {
+            pushed = false;
+            break;
+          }
+          pushed = to_write.Push(std::move(out[c]));
+          to_writer_in_order.Pass(index);
+        }
         add_seconds(&PipelineStats::seconds_verification_wait_writer, t_push);
         if (!pushed) break;
       }

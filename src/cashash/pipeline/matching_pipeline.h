@@ -77,6 +77,13 @@ struct PipelineOptions {
   // with one chunk's RANSAC instead of two; the backlog and the tail are
   // still verified two at a time. false: every thread takes chunks at once.
   bool extra_verifiers_on_backlog = true;
+  // Most matched chunks one verifier call takes: a verification thread takes
+  // the chunks that wait for it, up to this many, in one BatchVerifier call.
+  // A GPU call lasts as long as its slowest pair, so chunks verified
+  // together pay that tail once. The extra chunks keep their room in the
+  // queue until verified, so what the pipeline holds does not grow. 1: one
+  // chunk per call; 0: as the verifier prefers (BatchVerifier::ChunksPerCall).
+  size_t chunks_per_verification = 0;
 };
 
 struct PipelineProgress {
@@ -115,6 +122,7 @@ struct PipelineStats {
   double seconds_writing_wait_input = 0;
   bool stopped = false;  // the stop flag was raised before the end
   int verification_threads = 1;  // chunks verified at once (BatchVerifier::MaxConcurrentCalls)
+  size_t verification_calls = 0;  // BatchVerifier calls (several chunks each, chunks_per_verification)
 };
 
 class MatchingPipeline {
