@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <utility>
+#include <vector>
+
 #include "cashash/geometry/camera_projection.h"
 
 namespace cashash {
@@ -82,6 +86,35 @@ TEST(CameraModels, DistortionMovesPoints) {
   CameraWorldToImage(radial, 0.5, 0.0, &x, &y);
   EXPECT_NEAR(x, 800 + 1000 * 0.5 * (1 - 0.2 * 0.25), 1e-9);
   EXPECT_NEAR(y, 600, 1e-12);
+}
+
+// Polynomial lenses with every coefficient zero (feature_extractor's
+// SIMPLE_RADIAL) are pinholes to the bit; zero fisheye coefficients still
+// bend rays.
+TEST(CameraModels, ZeroPolynomialDistortionIsExactlyPinhole) {
+  const Camera simple_pinhole = MakeCamera(0, {1200, 800, 600});
+  const Camera pinhole = MakeCamera(1, {1200, 1150, 800, 600});
+  const std::vector<std::pair<Camera, const Camera*>> cases = {
+      {MakeCamera(2, {1200, 800, 600, 0}), &simple_pinhole},
+      {MakeCamera(3, {1200, 800, 600, 0, 0}), &simple_pinhole},
+      {MakeCamera(4, {1200, 1150, 800, 600, 0, 0, 0, 0}), &pinhole},
+      {MakeCamera(6, {1200, 1150, 800, 600, 0, 0, 0, 0, 0, 0, 0, 0}), &pinhole},
+  };
+  for (const auto& [camera, reference] : cases) {
+    for (double x = 3.5; x < 1600; x += 151.25) {
+      for (double y = 1.25; y < 1200; y += 97.5) {
+        double u, v, u_ref, v_ref;
+        CameraImageToWorld(camera, x, y, &u, &v);
+        CameraImageToWorld(*reference, x, y, &u_ref, &v_ref);
+        EXPECT_EQ(u, u_ref) << CameraModelIdToName(camera.model_id);
+        EXPECT_EQ(v, v_ref) << CameraModelIdToName(camera.model_id);
+      }
+    }
+  }
+  double u, v, u_ref, v_ref;
+  CameraImageToWorld(MakeCamera(8, {1200, 800, 600, 0}), 1500, 1100, &u, &v);
+  CameraImageToWorld(simple_pinhole, 1500, 1100, &u_ref, &v_ref);
+  EXPECT_GT(std::abs(u - u_ref), 1e-3);
 }
 
 }  // namespace

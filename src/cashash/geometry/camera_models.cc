@@ -82,6 +82,16 @@ Intrinsics Unpack(const Camera& camera) {
     in.num_extra = info->num_params - 4;
   }
   in.distortion = info->distortion;
+  // Polynomial models with every coefficient zero (SIMPLE_RADIAL as
+  // feature_extractor leaves it) displace nothing: skipping Undistort's
+  // Newton step then gives the same bits (its first step is exactly zero)
+  // without its five Distort calls per point. Fisheye models with zero
+  // coefficients still bend rays, so they keep theirs.
+  const bool polynomial = in.distortion == Distortion::kSimpleRadial || in.distortion == Distortion::kRadial ||
+                          in.distortion == Distortion::kOpenCV || in.distortion == Distortion::kFullOpenCV;
+  if (polynomial && std::all_of(in.extra, in.extra + in.num_extra, [](double k) { return k == 0.0; })) {
+    in.distortion = Distortion::kNone;
+  }
   return in;
 }
 

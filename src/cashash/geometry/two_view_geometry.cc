@@ -48,34 +48,43 @@ FeatureMatches ExtractInlierMatches(const FeatureMatches& matches, const std::ve
 
 // A point lies in the border band when it is outside the box shrunk by
 // border_size x diagonal on every side (the box edges count as inside).
-bool InBorder(const Camera& camera, double border_size, double x, double y) {
-  const double w = static_cast<double>(camera.width), h = static_cast<double>(camera.height);
-  const double band = border_size * std::sqrt(w * w + h * h);
-  return !(x >= band && x <= w - band && y >= band && y <= h - band);
-}
+class BorderBand {
+ public:
+  BorderBand(const Camera& camera, double border_size)
+      : w_(static_cast<double>(camera.width)), h_(static_cast<double>(camera.height)),
+        band_(border_size * std::sqrt(w_ * w_ + h_ * h_)) {}
+  bool Contains(double x, double y) const { return !(x >= band_ && x <= w_ - band_ && y >= band_ && y <= h_ - band_); }
+
+ private:
+  double w_, h_, band_;
+};
 
 // COLMAP's DetectWatermark: most inliers lie in the border band of both
-// images and a single 2-D translation explains them.
+// images and a single 2-D translation explains them. Every verified pair
+// takes the first test, so it counts before it copies anything.
 bool DetectWatermark(const Camera& camera1, const Camera& camera2, const PointPairs& pixels,
                      const std::vector<char>& inlier_mask, int num_inliers,
                      const TwoViewGeometryOptions& options) {
   if (num_inliers <= 0) return false;
-  PointPairs inliers;
-  inliers.resize(static_cast<size_t>(num_inliers));
-  size_t j = 0;
+  const BorderBand border1(camera1, options.watermark_border_size);
+  const BorderBand border2(camera2, options.watermark_border_size);
   int in_border = 0;
   for (size_t i = 0; i < inlier_mask.size(); ++i) {
-    if (!inlier_mask[i]) continue;
-    inliers.Set(j++, pixels.x1[i], pixels.y1[i], pixels.x2[i], pixels.y2[i]);
-    if (InBorder(camera1, options.watermark_border_size, pixels.x1[i], pixels.y1[i]) &&
-        InBorder(camera2, options.watermark_border_size, pixels.x2[i], pixels.y2[i])) {
+    if (inlier_mask[i] && border1.Contains(pixels.x1[i], pixels.y1[i]) &&
+        border2.Contains(pixels.x2[i], pixels.y2[i])) {
       ++in_border;
     }
   }
-  inliers.resize(j);
   if (static_cast<double>(in_border) / num_inliers < options.watermark_min_inlier_ratio) {
     return false;
   }
+  PointPairs inliers;
+  inliers.resize(static_cast<size_t>(num_inliers));
+  size_t j = 0;
+  for (size_t i = 0; i < inlier_mask.size(); ++i) {
+    if (inlier_mask[i]) inliers.Set(j++, pixels.x1[i], pixels.y1[i], pixels.x2[i], pixels.y2[i]);
+  }
+  inliers.resize(j);
   RansacOptions ransac = MakeRansacOptions(options, kSeedWatermark);
   ransac.min_inlier_ratio = options.watermark_min_inlier_ratio;
   const auto report = LoRansac(TranslationEstimator(inliers), ransac);
