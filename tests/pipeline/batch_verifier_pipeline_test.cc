@@ -221,23 +221,28 @@ TEST(BatchVerifierPipeline, ChunksVerifiedAtOnceAreWrittenInMatchingOrder) {
 }
 
 TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChunk) {
-  const std::vector<PairChunk> chunks = Chunks(16, 3);
-  IdentityMatcher matcher;
-  Sink sink;
-  ConcurrentVerifier verifier(/*fail_at=*/4);
-  try {
-    RunPipeline(chunks, &matcher, &verifier, &sink);
-    FAIL() << "the verifier's error was not rethrown";
-  } catch (const std::runtime_error& e) {
-    EXPECT_STREQ(e.what(), "verifier failed on purpose");
+  // One chunk per call, and calls of up to three chunks that wait together.
+  for (const size_t chunks_per_call : {size_t{1}, size_t{3}}) {
+    const std::vector<PairChunk> chunks = Chunks(16, 3);
+    IdentityMatcher matcher;
+    Sink sink;
+    ConcurrentVerifier verifier(/*fail_at=*/4);
+    PipelineOptions options;
+    options.chunks_per_verification = chunks_per_call;
+    try {
+      RunPipeline(chunks, &matcher, &verifier, &sink, options);
+      FAIL() << "the verifier's error was not rethrown";
+    } catch (const std::runtime_error& e) {
+      EXPECT_STREQ(e.what(), "verifier failed on purpose");
+    }
+    // Whole chunks only, in matching order, and none after the failed one.
+    const std::vector<ImagePair> all = FirstPairs(chunks);
+    ASSERT_LT(sink.first_pairs.size(), all.size()) << chunks_per_call;
+    EXPECT_TRUE(std::equal(sink.first_pairs.begin(), sink.first_pairs.end(), all.begin())) << chunks_per_call;
+    size_t written_pairs = 0;
+    for (size_t c = 0; c < sink.first_pairs.size(); ++c) written_pairs += chunks[c].pairs.size();
+    EXPECT_EQ(sink.configs.size(), written_pairs) << chunks_per_call;
   }
-  // Whole chunks only, in matching order, and none after the failed one.
-  const std::vector<ImagePair> all = FirstPairs(chunks);
-  ASSERT_LT(sink.first_pairs.size(), all.size());
-  EXPECT_TRUE(std::equal(sink.first_pairs.begin(), sink.first_pairs.end(), all.begin()));
-  size_t written_pairs = 0;
-  for (size_t c = 0; c < sink.first_pairs.size(); ++c) written_pairs += chunks[c].pairs.size();
-  EXPECT_EQ(sink.configs.size(), written_pairs);
 }
 
 // While the matcher times its backends nothing is verified: the probe has
