@@ -16,6 +16,7 @@
 #include "cashash/matchers/retaining_feature_matcher.h"
 #include "cashash/matching/guided_matching.h"
 #include "cashash/pipeline/feature_cache.h"
+#include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
 #include "colmap_bridge/api/matcher_factory.h"
@@ -355,6 +356,30 @@ bool ExtraVerifiersOnBacklogFromEnvironment() {
   return text == nullptr || std::string(text) != "eager";
 }
 
+// CASHASH_PIPELINE_TRACE=FILE records each chunk's stage intervals and
+// writes them to FILE as CSV (pipeline_trace.h; under MPI each rank writes
+// FILE.rankN), to read a run's critical path with
+// scripts/bench/pipeline_trace_summary.py. Empty when unset.
+std::string PipelineTracePathFromEnvironment(const RunShare& share) {
+  const char* text = std::getenv("CASHASH_PIPELINE_TRACE");
+  if (text == nullptr || *text == '\0') return {};
+  std::string path = text;
+  if (share.num_ranks > 1) path += ".rank" + std::to_string(share.rank);
+  return path;
+}
+
+// A trace is a diagnostic: failing to write it warns, after the run's
+// results are committed, instead of failing the run.
+void WriteTrace(const PipelineTrace& trace, const std::string& path, const MatchingCallbacks& callbacks) {
+  if (path.empty()) return;
+  try {
+    trace.WriteCsv(path);
+    Info(callbacks, "Pipeline trace: " + std::to_string(trace.Events().size()) + " stage intervals in " + path);
+  } catch (const std::exception& e) {
+    Warn(callbacks, e.what());
+  }
+}
+
 // Runs the pipeline over the plan and reports. Progress counts the pairs of
 // every rank written so far; rank 0 merges the other ranks' statistics.
 MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock, const MatchingCallbacks& callbacks) {
@@ -365,6 +390,9 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.two_view = plan.options.two_view;
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
+  PipelineTrace trace;
+  const std::string trace_path = PipelineTracePathFromEnvironment(share);
+  if (!trace_path.empty()) pipeline_options.trace = &trace;
   MatchingPipeline pipeline(pipeline_options, plan.features, plan.matcher.get(), plan.sink);
 
   std::mutex progress_mutex;
@@ -390,6 +418,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
     RankReport report;
     report.stats = pipeline.Run(share.my_chunks);
     clock.Restart();
+    WriteTrace(trace, trace_path, callbacks);
     report.matcher_name = plan.matcher->Name();
     MpiResultSender::SendReport(report);
     return MatchingSummary();  // rank 0 reports the run
@@ -411,6 +440,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
     for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
     clock.Restart();
   }
+  WriteTrace(trace, trace_path, callbacks);
   // The GPU matcher may have handed over to the CPU on running out of memory.
   summary.matcher_name = plan.matcher->Name();
   plan.gpu_memory->Sample();

@@ -6,14 +6,19 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <stdexcept>
+#include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "cashash/pipeline/pair_generation.h"
+#include "cashash/pipeline/pipeline_trace.h"
 
 namespace cashash {
 namespace {
@@ -509,6 +514,74 @@ TEST(BatchVerifierPipeline, ChunksThatWaitTogetherShareOneCall) {
   ASSERT_EQ(sink.configs.size(), NumPairs(chunks));
   for (const auto& entry : sink.configs) {
     EXPECT_EQ(entry.second, PairRandomSeed(3, entry.first) % 2 ? kUncalibrated : kCalibrated);
+  }
+}
+
+// A traced run records each chunk's stages once, in the order a chunk goes
+// through them, and a verifier call's chunks share its interval.
+TEST(BatchVerifierPipeline, TheTraceHasEachChunksStagesInOrder) {
+  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
+  IdentityMatcher matcher;
+  Sink sink;
+  RecordingVerifier verifier;
+  PipelineTrace trace;
+  PipelineOptions options;
+  options.trace = &trace;
+  options.chunks_per_verification = 2;
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+  ASSERT_EQ(stats.pairs_done, NumPairs(chunks));
+  std::map<std::pair<size_t, std::string>, PipelineTraceEvent> by_chunk;
+  std::map<size_t, std::pair<double, double>> calls;
+  const std::vector<PipelineTraceEvent> events = trace.Events();
+  for (const PipelineTraceEvent& e : events) {
+    EXPECT_LE(e.start, e.end) << e.stage;
+    EXPECT_TRUE(by_chunk.emplace(std::make_pair(e.chunk, e.stage), e).second) << e.stage << " twice";
+    EXPECT_NE(e.stage, "rematch") << "nothing was deferred";
+    if (e.stage == "verify") {
+      EXPECT_GE(e.call, 1u);
+      const auto [it, added] = calls.emplace(e.call, std::make_pair(e.start, e.end));
+      if (!added) {
+        EXPECT_EQ(it->second, std::make_pair(e.start, e.end)) << "call " << e.call;
+      }
+    }
+  }
+  EXPECT_EQ(calls.size(), stats.verification_calls);
+  EXPECT_EQ(events.size(), 4 * chunks.size());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    const PipelineTraceEvent& load = by_chunk.at({c, "load"});
+    const PipelineTraceEvent& match = by_chunk.at({c, "match"});
+    const PipelineTraceEvent& verify = by_chunk.at({c, "verify"});
+    const PipelineTraceEvent& write = by_chunk.at({c, "write"});
+    EXPECT_LE(load.end, match.start);
+    EXPECT_LE(match.end, verify.start);
+    EXPECT_LE(verify.end, write.start);
+    EXPECT_EQ(match.thread, 0);
+    EXPECT_GE(verify.thread, 1);
+    EXPECT_EQ(write.thread, -1);
+    EXPECT_EQ(write.pairs, chunks[c].pairs.size());
+  }
+}
+
+TEST(PipelineTrace, WritesOneLinePerEventAndNamesAPathItCannotWrite) {
+  PipelineTrace trace;
+  trace.Record({"write", 1, 0, -1, 0.5, 0.75, 6});
+  trace.Record({"match", 0, 0, 0, 0.25, 0.5, 6});
+  ASSERT_EQ(trace.Events().front().stage, "match");  // by start time
+  const std::string path = ::testing::TempDir() + "pipeline_trace_test.csv";
+  trace.WriteCsv(path);
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_EQ(lines[0], "stage,chunk,call,thread,start,end,pairs");
+  EXPECT_EQ(lines[1], "match,0,0,0,0.250000,0.500000,6");
+  EXPECT_EQ(lines[2], "write,1,0,-1,0.500000,0.750000,6");
+  std::remove(path.c_str());
+  try {
+    trace.WriteCsv("/nonexistent-folder/trace.csv");
+    FAIL() << "no error for a path that cannot be written";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent-folder/trace.csv"), std::string::npos);
   }
 }
 

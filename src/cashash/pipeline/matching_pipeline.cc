@@ -43,9 +43,14 @@ struct MatchedChunk {
 };
 
 struct VerifiedChunk {
+  size_t index = 0;
   const PairChunk* chunk = nullptr;
   std::vector<PairResult> results;
   Clock::time_point started;
+  // For the trace: the chunk's deferred matching, if it had any, and when
+  // its verifier call started.
+  bool rematched = false;
+  Clock::time_point rematch_started, rematch_ended, verify_started;
 };
 
 // Remembers the first exception thrown by any stage and makes all stages stop.
@@ -78,13 +83,17 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
   std::vector<VerifiedChunk> out(items->size());
   for (size_t c = 0; c < items->size(); ++c) {
     MatchedChunk& item = (*items)[c];
+    out[c].index = item.index;
     out[c].chunk = item.chunk;
     out[c].started = item.started;
+    out[c].rematch_started = Clock::now();
     if (item.deferred) {
       item.deferred->Complete(
           [&](image_t image_id) { return DescriptorsOf(item.features.at(image_id)); }, &item.matches);
       item.deferred.reset();
+      out[c].rematched = true;
     }
+    out[c].rematch_ended = Clock::now();
     const std::vector<ImagePair>& pairs = item.chunk->pairs;
     out[c].results.resize(pairs.size());
     for (size_t k = 0; k < pairs.size(); ++k) {
@@ -92,6 +101,8 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
       out[c].results[k].matches = std::move(item.matches[k]);
     }
   }
+  const Clock::time_point verify_started = Clock::now();
+  for (VerifiedChunk& chunk : out) chunk.verify_started = verify_started;
   if (!options.skip_geometric_verification) {
     // Keypoint positions once per image of the chunks, not once per pair.
     std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
@@ -198,6 +209,22 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     stats.*field += seconds;
   };
 
+  // Records one stage's interval of one chunk when the run is traced.
+  auto trace = [&](const char* stage, size_t chunk, size_t call, int thread, Clock::time_point start,
+                   Clock::time_point end, size_t pairs) {
+    if (options_.trace == nullptr) return;
+    PipelineTraceEvent event;
+    event.stage = stage;
+    event.chunk = chunk;
+    event.call = call;
+    event.thread = thread;
+    event.start = std::chrono::duration<double>(start - run_start).count();
+    event.end = std::chrono::duration<double>(end - run_start).count();
+    event.pairs = pairs;
+    options_.trace->Record(std::move(event));
+  };
+  std::atomic<size_t> calls_made{0};
+
   // Stage 3: the single writer.
   std::thread writer([&]() {
     try {
@@ -208,6 +235,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
         sink_->WriteChunk(item->results);
+        trace("write", item->index, 0, -1, t0, Clock::now(), item->results.size());
         PipelineProgress progress;
         {
           std::lock_guard<std::mutex> lock(stats_mutex);
@@ -266,6 +294,15 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         const Clock::time_point t0 = Clock::now();
         std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier);
         to_verify.Release(items.size() - 1);
+        const Clock::time_point t_verified = Clock::now();
+        const size_t call = ++calls_made;
+        for (const VerifiedChunk& chunk : out) {
+          if (chunk.rematched) {
+            trace("rematch", chunk.index, 0, thread + 1, chunk.rematch_started, chunk.rematch_ended,
+                  chunk.results.size());
+          }
+          trace("verify", chunk.index, call, thread + 1, chunk.verify_started, t_verified, chunk.results.size());
+        }
         {
           std::lock_guard<std::mutex> lock(stats_mutex);
           stats.seconds_verification += SecondsSince(t0);
@@ -343,12 +380,15 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       ChunkMatches matched = matcher_->MatchPairsDeferred(chunk.pairs);
       item.matches = std::move(matched.matches);
       item.deferred = std::move(matched.deferred);
+      const Clock::time_point t_matched = Clock::now();
       {
         std::lock_guard<std::mutex> lock(stats_mutex);
         stats.seconds_loading += load_seconds;
         stats.seconds_hashing += hash_seconds;
-        stats.seconds_matching += SecondsSince(t_match);
+        stats.seconds_matching += std::chrono::duration<double>(t_matched - t_match).count();
       }
+      trace("load", c, 0, 0, chunk_start, t_match, chunk.pairs.size());
+      trace("match", c, 0, 0, t_match, t_matched, chunk.pairs.size());
       for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
       if (!matcher_->ChoosingBackend() || pushed_while_gated >= chunks_in_queue) gate.Open();
       ++pushed_while_gated;

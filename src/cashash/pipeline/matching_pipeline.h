@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cashash/pipeline/batch_verifier.h"
+#include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/pipeline/pair_generation.h"
 #include "cashash/geometry/two_view_geometry.h"
@@ -84,6 +85,9 @@ struct PipelineOptions {
   // queue until verified, so what the pipeline holds does not grow. 1: one
   // chunk per call; 0: as the verifier prefers (BatchVerifier::ChunksPerCall).
   size_t chunks_per_verification = 0;
+  // Not owned; when set, every stage's interval per chunk is recorded in it
+  // (pipeline_trace.h).
+  PipelineTrace* trace = nullptr;
 };
 
 struct PipelineProgress {
