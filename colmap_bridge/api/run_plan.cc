@@ -373,8 +373,8 @@ std::string PipelineTracePathFromEnvironment(const RunShare& share) {
 void WriteTrace(const PipelineTrace& trace, const std::string& path, const MatchingCallbacks& callbacks) {
   if (path.empty()) return;
   try {
-    trace.WriteCsv(path);
-    Info(callbacks, "Pipeline trace: " + std::to_string(trace.Events().size()) + " stage intervals in " + path);
+    const size_t events = trace.WriteCsv(path);
+    Info(callbacks, "Pipeline trace: " + std::to_string(events) + " stage intervals in " + path);
   } catch (const std::exception& e) {
     Warn(callbacks, e.what());
   }

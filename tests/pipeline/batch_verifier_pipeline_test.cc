@@ -568,7 +568,7 @@ TEST(PipelineTrace, WritesOneLinePerEventAndNamesAPathItCannotWrite) {
   trace.Record({"match", 0, 0, 0, 0.25, 0.5, 6});
   ASSERT_EQ(trace.Events().front().stage, "match");  // by start time
   const std::string path = ::testing::TempDir() + "pipeline_trace_test.csv";
-  trace.WriteCsv(path);
+  EXPECT_EQ(trace.WriteCsv(path), 2u);
   std::ifstream in(path);
   std::vector<std::string> lines;
   for (std::string line; std::getline(in, line);) lines.push_back(line);

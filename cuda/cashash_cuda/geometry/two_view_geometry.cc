@@ -12,7 +12,6 @@
 #include <stdexcept>
 #include <string>
 
-#include "cashash/geometry/essential_matrix.h"
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/geometry/ransac.h"
 #include "cashash/pipeline/thread_pool.h"
@@ -236,7 +235,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     E_launch.reference_H = H_launch.outputs;
     E_launch.reference_E_F_ratio = d.options.min_E_F_inlier_ratio;
     E_launch.reference_max_H_ratio = d.options.max_H_inlier_ratio;
-    E_launch.reference_min_inliers = std::max(d.options.min_num_inliers, EssentialEstimator::kSampleSize);
+    E_launch.reference_min_inliers = TwoViewEssentialSettledMinInliers(d.options);
   } else if (num_E > 0) {
     // COLMAP's loop: E (the longest) starts first on its own stream; F and
     // H run beside it.

@@ -58,7 +58,7 @@ struct RansacOptions {
   // When > 0: stop (after min_num_trials) once the best model has this many
   // inliers, from which more inliers cannot change the decision, only which
   // inliers it keeps (E against F's and H's counts, two-view geometry;
-  // SettledInliers). 0 keeps COLMAP's loop.
+  // EssentialSettledInliers). 0 keeps COLMAP's loop.
   int settled_inliers = 0;
   // Reject wrong hypotheses by the sequential test before scoring them
   // (ransac_sprt.h) at this risk per model; 0 scores every one in full.

@@ -158,10 +158,14 @@ int TwoViewRelevantHomographyInliers(int num_F_inliers, const TwoViewGeometryOpt
 int TwoViewEssentialSettledInliers(int num_F_inliers, int num_H_inliers, int num_matches,
                                    const TwoViewGeometryOptions& options) {
   if (!options.early_exit) return 0;
-  // E succeeds only with a sample's worth of inliers (EssentialEstimator).
   return EssentialSettledInliers(options.min_E_F_inlier_ratio, options.max_H_inlier_ratio,
-                                 std::max(options.min_num_inliers, EssentialEstimator::kSampleSize), num_F_inliers,
-                                 num_H_inliers, num_matches);
+                                 TwoViewEssentialSettledMinInliers(options), num_F_inliers, num_H_inliers,
+                                 num_matches);
+}
+
+int TwoViewEssentialSettledMinInliers(const TwoViewGeometryOptions& options) {
+  // E succeeds only with a sample's worth of inliers (EssentialEstimator).
+  return std::max(options.min_num_inliers, EssentialEstimator::kSampleSize);
 }
 
 TwoViewGeometry TwoViewGeometry::Inverted() const {

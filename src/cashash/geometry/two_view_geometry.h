@@ -146,6 +146,10 @@ double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options);
 // UNCALIBRATED; docs/gpu_verification.md.)
 int TwoViewEssentialSettledInliers(int num_F_inliers, int num_H_inliers, int num_matches,
                                    const TwoViewGeometryOptions& options);
+// The fewest inliers EssentialSettledInliers may settle at for these
+// options: min_num_inliers, and E's sample (E fails with fewer). The GPU's E
+// takes it from here too, so both backends stop at the same count.
+int TwoViewEssentialSettledMinInliers(const TwoViewGeometryOptions& options);
 
 // One estimated model of a pair, as the decision reads it.
 struct TwoViewModelEstimate {

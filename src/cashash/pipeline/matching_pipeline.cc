@@ -223,7 +223,6 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     event.pairs = pairs;
     options_.trace->Record(std::move(event));
   };
-  std::atomic<size_t> calls_made{0};
 
   // Stage 3: the single writer.
   std::thread writer([&]() {
@@ -295,18 +294,18 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier);
         to_verify.Release(items.size() - 1);
         const Clock::time_point t_verified = Clock::now();
-        const size_t call = ++calls_made;
+        size_t call = 0;
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          stats.seconds_verification += std::chrono::duration<double>(t_verified - t0).count();
+          call = ++stats.verification_calls;
+        }
         for (const VerifiedChunk& chunk : out) {
           if (chunk.rematched) {
             trace("rematch", chunk.index, 0, thread + 1, chunk.rematch_started, chunk.rematch_ended,
                   chunk.results.size());
           }
           trace("verify", chunk.index, call, thread + 1, chunk.verify_started, t_verified, chunk.results.size());
-        }
-        {
-          std::lock_guard<std::mutex> lock(stats_mutex);
-          stats.seconds_verification += SecondsSince(t0);
-          if (!options_.skip_geometric_verification) ++stats.verification_calls;
         }
         // The batch's chunks are consecutive: the queue is one producer's,
         // in order, and a batch is taken at once.

@@ -126,7 +126,10 @@ struct PipelineStats {
   double seconds_writing_wait_input = 0;
   bool stopped = false;  // the stop flag was raised before the end
   int verification_threads = 1;  // chunks verified at once (BatchVerifier::MaxConcurrentCalls)
-  size_t verification_calls = 0;  // BatchVerifier calls (several chunks each, chunks_per_verification)
+  // Calls of the verification stage, each of one or more chunks
+  // (chunks_per_verification): one BatchVerifier call each unless
+  // verification is skipped.
+  size_t verification_calls = 0;
 };
 
 class MatchingPipeline {

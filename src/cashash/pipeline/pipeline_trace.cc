@@ -23,16 +23,18 @@ std::vector<PipelineTraceEvent> PipelineTrace::Events() const {
   return events;
 }
 
-void PipelineTrace::WriteCsv(const std::string& path) const {
+size_t PipelineTrace::WriteCsv(const std::string& path) const {
   std::ofstream out(path);
   if (!out) throw std::runtime_error("cannot write the pipeline trace to " + path);
   out << "stage,chunk,call,thread,start,end,pairs\n" << std::fixed << std::setprecision(6);
-  for (const PipelineTraceEvent& e : Events()) {
+  const std::vector<PipelineTraceEvent> events = Events();
+  for (const PipelineTraceEvent& e : events) {
     out << e.stage << ',' << e.chunk << ',' << e.call << ',' << e.thread << ',' << e.start << ',' << e.end << ','
         << e.pairs << '\n';
   }
   out.flush();
   if (!out) throw std::runtime_error("cannot write the pipeline trace to " + path);
+  return events.size();
 }
 
 }  // namespace cashash

@@ -34,9 +34,9 @@ class PipelineTrace {
   // Ordered by start time.
   std::vector<PipelineTraceEvent> Events() const;
   // One header line, then an event per line:
-  // stage,chunk,call,thread,start,end,pairs. Throws std::runtime_error
-  // naming the path when it cannot be written.
-  void WriteCsv(const std::string& path) const;
+  // stage,chunk,call,thread,start,end,pairs. Returns the number of events;
+  // throws std::runtime_error naming the path when it cannot be written.
+  size_t WriteCsv(const std::string& path) const;
 
  private:
   mutable std::mutex mutex_;
