@@ -367,6 +367,14 @@ class GpuBatchVerifier : public BatchVerifier {
 
   int MaxConcurrentCalls() const override { return max_calls_; }
 
+  // Two chunks that wait together share one call: each call lasts as long as
+  // its slowest pair, so two chunks pay one such tail instead of two. Four
+  // lose again, because the writer then waits for a call twice as long and
+  // matching stalls behind the held queue room (300 x 8,192 street on an
+  // H200: 1 -> 42.1k, 2 -> 47.5k, 4 -> 38.5k pairs/s, identical geometries;
+  // docs/BENCHMARKS.md).
+  size_t ChunksPerCall() const override { return 2; }
+
   std::string StatsSummary() const override {
     const GpuRansacStats st = SummedStats();
     if (st.pairs == 0) return {};
