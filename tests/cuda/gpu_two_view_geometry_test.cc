@@ -349,14 +349,10 @@ TEST(GpuBatchVerifier, SprtKeepsTheFullScansDecisions) {
   EXPECT_GE(close_inliers, 0.99 * verified);
 }
 
-// The pipeline verifies up to MaxConcurrentCalls() chunks at once on one
-// verifier: calls in flight together must give what each gives alone (each
-// call leases its own streams and buffers; the seeds alone decide).
-TEST(GpuBatchVerifier, ConcurrentCallsGiveWhatEachGivesAlone) {
-  SKIP_WITHOUT_CUDA_DEVICE();
-  const std::vector<Case> cases = SyntheticCases();
-  const Camera with_prior = cases[0].scene.MakeCamera(true), without = cases[0].scene.MakeCamera(false);
-  // Three different chunks: the cases in turn, with and without priors.
+// Three different chunks: the cases in turn, with and without priors, each
+// pair with its own seed.
+std::vector<std::vector<VerificationPair>> ThreeChunksOf(const std::vector<Case>& cases, const Camera& with_prior,
+                                                         const Camera& without) {
   std::vector<std::vector<VerificationPair>> chunks(3);
   for (size_t c = 0; c < chunks.size(); ++c) {
     for (size_t k = 0; k < cases.size(); ++k) {
@@ -369,6 +365,17 @@ TEST(GpuBatchVerifier, ConcurrentCallsGiveWhatEachGivesAlone) {
       chunks[c].push_back(p);
     }
   }
+  return chunks;
+}
+
+// The pipeline verifies up to MaxConcurrentCalls() chunks at once on one
+// verifier: calls in flight together must give what each gives alone (each
+// call leases its own streams and buffers; the seeds alone decide).
+TEST(GpuBatchVerifier, ConcurrentCallsGiveWhatEachGivesAlone) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const std::vector<Case> cases = SyntheticCases();
+  const Camera with_prior = cases[0].scene.MakeCamera(true), without = cases[0].scene.MakeCamera(false);
+  const std::vector<std::vector<VerificationPair>> chunks = ThreeChunksOf(cases, with_prior, without);
   const TwoViewGeometryOptions options;
   std::unique_ptr<BatchVerifier> verifier = cuda::CreateGpuBatchVerifier(options, 0, -1);
   ASSERT_GE(verifier->MaxConcurrentCalls(), 1);
@@ -389,6 +396,34 @@ TEST(GpuBatchVerifier, ConcurrentCallsGiveWhatEachGivesAlone) {
         EXPECT_TRUE(together[c][k].F.isApprox(alone[c][k].F));
       }
     }
+  }
+}
+
+// The pipeline hands one call the chunks that wait together (ChunksPerCall,
+// two by default on the GPU): every pair of such a call must get what its
+// own chunk's call gives it, since a call's pairs share streams and the
+// slowest pair's tail but nothing that decides a result.
+TEST(GpuBatchVerifier, OneCallOfSeveralChunksGivesWhatEachChunkGivesAlone) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  const std::vector<Case> cases = SyntheticCases();
+  const Camera with_prior = cases[0].scene.MakeCamera(true), without = cases[0].scene.MakeCamera(false);
+  const std::vector<std::vector<VerificationPair>> chunks = ThreeChunksOf(cases, with_prior, without);
+  std::unique_ptr<BatchVerifier> verifier = cuda::CreateGpuBatchVerifier(TwoViewGeometryOptions(), 0, -1);
+  EXPECT_EQ(verifier->ChunksPerCall(), 2u);
+  std::vector<VerificationPair> joined;
+  std::vector<TwoViewGeometry> alone;
+  for (const auto& chunk : chunks) {
+    joined.insert(joined.end(), chunk.begin(), chunk.end());
+    const std::vector<TwoViewGeometry> own = verifier->Verify(chunk);
+    alone.insert(alone.end(), own.begin(), own.end());
+  }
+  const std::vector<TwoViewGeometry> together = verifier->Verify(joined);
+  ASSERT_EQ(together.size(), alone.size());
+  for (size_t k = 0; k < alone.size(); ++k) {
+    SCOPED_TRACE("chunk " + std::to_string(k / cases.size()) + ", " + cases[k % cases.size()].name);
+    EXPECT_EQ(together[k].config, alone[k].config);
+    EXPECT_EQ(together[k].inlier_matches.size(), alone[k].inlier_matches.size());
+    EXPECT_TRUE(together[k].F.isApprox(alone[k].F));
   }
 }
 
