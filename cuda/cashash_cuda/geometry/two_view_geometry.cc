@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "cashash/geometry/launch_order.h"
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/geometry/ransac.h"
 #include "cashash/pipeline/thread_pool.h"
@@ -413,8 +414,16 @@ class GpuBatchVerifier : public BatchVerifier {
     std::vector<const EssentialPoints*> batch_essential;
     std::vector<uint64_t> batch_seeds;
     std::vector<size_t> calibrated_pairs;
+    // The pairs with most matches start first (launch_order.h); F[i], H[i]
+    // and E_batch[i] follow batch[i] whatever the order.
+    std::vector<size_t> to_estimate, num_matches;
     for (size_t k = 0; k < n; ++k) {
       if (!estimated[k]) continue;
+      to_estimate.push_back(k);
+      num_matches.push_back(points[k].pixels.size());
+    }
+    for (const size_t i : LargestFirst(num_matches)) {
+      const size_t k = to_estimate[i];
       batch.push_back(k);
       batch_points.push_back(&points[k]);
       batch_seeds.push_back(pairs[k].random_seed);
