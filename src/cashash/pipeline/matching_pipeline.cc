@@ -106,16 +106,15 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
   if (!options.skip_geometric_verification) {
     // Keypoint positions once per image of the chunks, not once per pair.
     std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
-    std::unordered_map<image_t, const ImageFeatures*> images;
+    std::vector<std::pair<std::vector<Eigen::Vector2d>*, const ImageFeatures*>> to_fill;
     for (const MatchedChunk& item : *items) {
-      for (const auto& entry : item.features) images.emplace(entry.first, entry.second.get());
+      for (const auto& entry : item.features) {
+        const auto slot = positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
+        if (slot.second) to_fill.emplace_back(&slot.first->second, entry.second.get());
+      }
     }
-    for (const auto& entry : images) positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
-    std::vector<std::pair<const image_t, std::vector<Eigen::Vector2d>>*> slots;
-    for (auto& entry : positions) slots.push_back(&entry);
-    ParallelFor(slots.size(), options.num_threads, [&](size_t i) {
-      slots[i]->second = KeypointPositions(images.at(slots[i]->first)->keypoints);
-    });
+    ParallelFor(to_fill.size(), options.num_threads,
+                [&](size_t i) { *to_fill[i].first = KeypointPositions(to_fill[i].second->keypoints); });
     std::vector<VerificationPair> tasks;
     for (VerifiedChunk& chunk : out) {
       for (PairResult& result : chunk.results) {
@@ -312,11 +311,9 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         const Clock::time_point t_push = Clock::now();
         bool pushed = true;
         for (size_t c = 0; c < out.size() && pushed; ++c) {
-          const size_t index = items[c].index;
-          if (!to_writer_in_order.Wait(index)) {
-            pushed = false;
-            break;
-          }
+          const size_t index = out[c].index;
+          pushed = to_writer_in_order.Wait(index);
+          if (!pushed) break;
           pushed = to_write.Push(std::move(out[c]));
           to_writer_in_order.Pass(index);
         }
