@@ -438,6 +438,71 @@ TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
   EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
 }
 
+// In the run's last chunks every verification thread takes chunks at once
+// (all_verifiers_for_last_chunks). Matching paces itself on verification
+// up to chunk 7, so the queue never fills; the call of chunk 7, the first of
+// the last three, is held until a second call starts, and chunk 9 is matched
+// only once one has. Only the second thread, taking chunk 8 from a queue
+// that is not full, can start that call; under the full-queue rule alone it
+// would wait for the end of matching, which waits for it (the waits give up).
+TEST(BatchVerifierPipeline, EveryVerifierTakesChunksAtOnceInTheLastChunks) {
+  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
+  ASSERT_EQ(chunks.size(), 10u);
+  class HeldSeventhVerifier : public TwoAtOnceVerifier {
+   public:
+    void Hold() override {
+      const int call = holds_++;
+      if (call == 7) {
+        holding_ = true;
+        const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+        while (!second_while_held.load() && std::chrono::steady_clock::now() < give_up) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+        holding_ = false;
+      } else if (holding_.load()) {
+        matched_when_second = matched.load();
+        second_while_held = true;
+      }
+    }
+    std::atomic<bool> second_while_held{false};
+    std::atomic<int> matched{0}, matched_when_second{-1};
+
+   private:
+    std::atomic<int> holds_{0};
+    std::atomic<bool> holding_{false};
+  } verifier;
+  class EndgameMatcher : public IdentityMatcher {
+   public:
+    explicit EndgameMatcher(HeldSeventhVerifier* v) : v_(v) {}
+    std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+      const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+      auto wait_for = [&](auto done) {
+        while (!done() && std::chrono::steady_clock::now() < give_up) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+      };
+      if (calls_ < 8) wait_for([&] { return v_->verified.load() >= calls_; });
+      if (calls_ == 9) wait_for([&] { return v_->second_while_held.load(); });
+      ++calls_;
+      ++v_->matched;
+      return IdentityMatcher::MatchPairs(pairs);
+    }
+
+   private:
+    HeldSeventhVerifier* v_;
+    int calls_ = 0;
+  } matcher(&verifier);
+  Sink sink;
+  PipelineOptions options;
+  options.all_verifiers_for_last_chunks = 3;
+  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+  EXPECT_TRUE(verifier.second_while_held.load());
+  EXPECT_EQ(verifier.matched_when_second.load(), 9);  // chunk 9 not yet matched
+  EXPECT_EQ(verifier.max_in_flight.load(), 2);
+  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+}
+
 // Chunks that wait together go to the verifier in one call: in matching
 // order, each pair once, each geometry back to its own pair. The extra
 // chunks of a call keep their room in the queue, so matching runs no
