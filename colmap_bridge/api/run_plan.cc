@@ -356,21 +356,6 @@ bool ExtraVerifiersOnBacklogFromEnvironment() {
   return text == nullptr || std::string(text) != "eager";
 }
 
-// CASHASH_ALL_VERIFIERS_LAST_CHUNKS=N: every verification thread takes
-// chunks at once from the run's last N chunks on
-// (PipelineOptions::all_verifiers_for_last_chunks), to compare; unset keeps
-// `fallback`.
-size_t AllVerifiersForLastChunksFromEnvironment(size_t fallback) {
-  const char* text = std::getenv("CASHASH_ALL_VERIFIERS_LAST_CHUNKS");
-  if (text == nullptr) return fallback;
-  try {
-    return static_cast<size_t>(std::max(0, std::stoi(text)));
-  } catch (const std::exception&) {
-    throw std::invalid_argument(std::string("CASHASH_ALL_VERIFIERS_LAST_CHUNKS: expected a number of chunks, got '") +
-                                text + "'");
-  }
-}
-
 // CASHASH_PIPELINE_TRACE=FILE records each chunk's stage intervals and
 // writes them to FILE as CSV (pipeline_trace.h; under MPI each rank writes
 // FILE.rankN), to read a run's critical path with
@@ -405,8 +390,6 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.two_view = plan.options.two_view;
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
-  pipeline_options.all_verifiers_for_last_chunks =
-      AllVerifiersForLastChunksFromEnvironment(pipeline_options.all_verifiers_for_last_chunks);
   PipelineTrace trace;
   const std::string trace_path = PipelineTracePathFromEnvironment(share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;

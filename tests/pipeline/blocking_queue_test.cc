@@ -1,7 +1,6 @@
 // The queue between the pipeline's stages: order, back-pressure, closing,
-// the helper consumer's pop that waits for a backlog (until helpers are
-// admitted), and the batch pop whose extra items keep their room until
-// released.
+// the helper consumer's pop that waits for a backlog, and the batch pop
+// whose extra items keep their room until released.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -39,18 +38,6 @@ TEST(BlockingQueue, HelperPopWaitsForTheBacklog) {
   queue.Push(2);  // the queue is full: the producer would block next
   EXPECT_EQ(helper.get(), std::optional<int>(1));
   EXPECT_EQ(queue.Pop(), std::optional<int>(2));
-}
-
-TEST(BlockingQueue, HelperPopTakesOneItemOnceHelpersAreAdmitted) {
-  BlockingQueue<int> queue(4);
-  queue.Push(5);
-  std::future<std::optional<int>> helper =
-      std::async(std::launch::async, [&] { return queue.PopWhenBacklogged(queue.capacity()); });
-  EXPECT_EQ(helper.wait_for(100ms), std::future_status::timeout);
-  queue.AdmitHelpers();  // wakes the waiting helper: one item is enough now
-  EXPECT_EQ(helper.get(), std::optional<int>(5));
-  queue.Push(6);
-  EXPECT_EQ(queue.PopWhenBacklogged(queue.capacity()), std::optional<int>(6));
 }
 
 TEST(BlockingQueue, HelperPopTakesWhatIsLeftOnceClosed) {

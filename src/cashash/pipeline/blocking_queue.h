@@ -76,14 +76,6 @@ class BlockingQueue {
 
   size_t capacity() const { return capacity_; }
 
-  // From now on a helper's backlog is one item, as for a plain consumer:
-  // for the end of a run, when nothing the helpers would slow is left.
-  void AdmitHelpers() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    helpers_admitted_ = true;
-    not_empty_.notify_all();
-  }
-
   // No more pushes; consumers drain what is left.
   void Close() {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -94,12 +86,9 @@ class BlockingQueue {
 
  private:
   // Until closed: `backlog` items count as waiting (queued or held in a
-  // batch, so that the producer is about to block) and one is queued; once
-  // helpers are admitted, one queued item is enough.
+  // batch, so that the producer is about to block) and one is queued.
   void WaitForBacklog(std::unique_lock<std::mutex>& lock, size_t backlog) {
-    not_empty_.wait(lock, [&] {
-      return closed_ || (!items_.empty() && (helpers_admitted_ || items_.size() + held_ >= backlog));
-    });
+    not_empty_.wait(lock, [&] { return closed_ || (!items_.empty() && items_.size() + held_ >= backlog); });
   }
 
   const size_t capacity_;
@@ -109,7 +98,6 @@ class BlockingQueue {
   std::deque<T> items_;
   size_t held_ = 0;  // items of batches still counted (PopBatch)
   bool closed_ = false;
-  bool helpers_admitted_ = false;
 };
 
 }  // namespace cashash

@@ -388,7 +388,6 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
       if (!matcher_->ChoosingBackend() || pushed_while_gated >= chunks_in_queue) gate.Open();
       ++pushed_while_gated;
-      if (chunks.size() - c <= options_.all_verifiers_for_last_chunks) to_verify.AdmitHelpers();
       const Clock::time_point t_push = Clock::now();
       const bool pushed = to_verify.Push(std::move(item));
       add_seconds(&PipelineStats::seconds_matching_wait_queue, t_push);

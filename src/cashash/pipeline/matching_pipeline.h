@@ -78,13 +78,6 @@ struct PipelineOptions {
   // with one chunk's RANSAC instead of two; the backlog and the tail are
   // still verified two at a time. false: every thread takes chunks at once.
   bool extra_verifiers_on_backlog = true;
-  // ...except in a run's last chunks: once at most this many chunks are left
-  // to match (the one being pushed among them), every verification thread
-  // takes chunks at once. Matching, which the rule above protects, is about
-  // to end, and a heavy chunk matched near the end otherwise waits for the
-  // one busy thread until matching ends; that wait is the run's tail.
-  // 0: the rule above holds to the end.
-  size_t all_verifiers_for_last_chunks = 0;
   // Most matched chunks one verifier call takes: a verification thread takes
   // the chunks that wait for it, up to this many, in one BatchVerifier call.
   // A GPU call lasts as long as its slowest pair, so chunks verified
