@@ -52,6 +52,18 @@ bool UseTiledKernels() {
   return value == nullptr || std::string(value) != "direct";
 }
 
+// Warps per bucket in the tile kernel (LaunchCascadeTiles' strips);
+// CASHASH_CASCADE_TILE_STRIPS=N sets it, to compare.
+int TileStrips() {
+  const char* value = std::getenv("CASHASH_CASCADE_TILE_STRIPS");
+  if (value == nullptr) return 1;
+  try {
+    return std::max(1, std::stoi(value));
+  } catch (const std::exception&) {
+    throw std::invalid_argument(std::string("CASHASH_CASCADE_TILE_STRIPS: expected a number, got '") + value + "'");
+  }
+}
+
 std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
   if (options.num_tables * options.bits_per_table > kMaxSignatureBits) {
     return "the GPU cascade matcher needs CasHash.num_tables * CasHash.bits_per_table <= " +
@@ -168,6 +180,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
         options_(options),
         device_(gpu_index),
         tiled_(UseTiledKernels()),
+        tile_strips_(TileStrips()),
         list_capacity_(kCandidateListCapacity) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
@@ -608,7 +621,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
       lists.counts = slot->list_counts.as<uint32_t>();
       lists.capacity = list_capacity_;
       CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * sizeof(uint32_t), slot->stream));
-      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream);
+      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream,
+                         tile_strips_);
       if (guided_) {
         LaunchCascadeSelectGuided(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
                                   slot->guides.as<EpipolarGuideDevice>(), points_.as<float2>(), max_distance_,
@@ -649,6 +663,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
   const CasHashOptions options_;
   const int device_;
   const bool tiled_;
+  const int tile_strips_;  // warps per bucket in the tile kernel (TileStrips)
   const int list_capacity_;
   size_t budget_ = 0;
   size_t used_ = 0;

@@ -19,6 +19,8 @@
 // fallback halved the rate (15.4k).
 #include "cashash_cuda/matching/cascade_matcher_tiles.cuh"
 
+#include <algorithm>
+
 #include "cashash_cuda/utils/bit_mma.cuh"
 #include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/warp_primitives.cuh"
@@ -62,12 +64,14 @@ __device__ __forceinline__ uint32_t Popc128(uint4 v) { return __popc(v.x) + __po
 // fragments and row limits in registers stay live across the whole B sweep,
 // and the queue passes are ordered by __syncwarp on those same arrays.
 __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
-                                                                  MatchParams params, CandidateLists lists) {
+                                                                  MatchParams params, CandidateLists lists,
+                                                                  uint32_t strip_shift) {
   __shared__ TileScratch s;
   const unsigned lane = LaneId();
   const unsigned g = lane >> 2, t = lane & 3u;  // MMA fragment coordinates
-  const uint32_t item = blockIdx.x;
-  if (item >= total_items) return;
+  if (blockIdx.x >= total_items) return;
+  const uint32_t strip = blockIdx.x & ((1u << strip_shift) - 1);
+  const uint32_t item = blockIdx.x >> strip_shift;
 
   const int bits = params.bits_per_table;
   const uint32_t buckets = 1u << bits;
@@ -82,7 +86,8 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
   const uint32_t* offsets_b = task.b.offsets + table * (buckets + 1) + bucket;
   const uint32_t a_begin = offsets_a[0], a_end = offsets_a[1];
   const uint32_t b_begin = offsets_b[0], b_end = offsets_b[1];
-  if (a_begin == a_end || b_begin == b_end) return;
+  const uint32_t a_first = a_begin + 32u * strip;  // this warp's A chunks: a_first, + 32 << strip_shift, ...
+  if (a_first >= a_end || b_begin == b_end) return;
 
   const BucketEntry* entries_a = task.a.entries + size_t(table) * task.a.num_features;
   const BucketEntry* entries_b = task.b.entries + size_t(table) * task.b.num_features;
@@ -97,7 +102,7 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
 
   s.kept_a[lane] = 0;
   s.kept_b[lane] = 0;
-  for (uint32_t a0 = a_begin; a0 < a_end; a0 += 32) {
+  for (uint32_t a0 = a_first; a0 < a_end; a0 += 32u << strip_shift) {
     __syncwarp();
     {
       const bool valid = a0 + lane < a_end;
@@ -238,11 +243,17 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
 }  // namespace
 
 void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
-                        cudaStream_t stream) {
+                        cudaStream_t stream, int strips) {
   if (num_tasks == 0) return;
   const uint64_t items = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
-  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, 0, stream>>>(
-      tasks, static_cast<uint32_t>(items), params, lists);
+  uint32_t strip_shift = 0;
+  while ((2u << strip_shift) <= static_cast<uint32_t>(std::max(strips, 1)) && strip_shift < 5 &&
+         (items << (strip_shift + 1)) <= uint64_t{0x7fffffff}) {
+    ++strip_shift;
+  }
+  const uint64_t blocks = items << strip_shift;
+  CascadeTileKernel<<<static_cast<unsigned>(blocks), kTileThreads, 0, stream>>>(
+      tasks, static_cast<uint32_t>(blocks), params, lists, strip_shift);
   CUDA_CHECK_LAUNCH();
 }
 

@@ -47,10 +47,15 @@ struct CandidateLists {
 // leaves the per-query fallback to the few features in very dense buckets.
 constexpr int kCandidateListCapacity = 256;
 
-// Fills `lists` for every task (one warp per (task, table, bucket)).
+// Fills `lists` for every task: one warp per (task, table, bucket) and A
+// strip, the bucket's A rows split over `strips` warps (a power of two; each
+// takes every strips-th chunk of 32 rows against all of B's bucket).
+// Buckets are far from equal: at 16,384 features and 6 x 10 bits the
+// largest hold 500-750 features, 24 x 24 tiles for one warp against one
+// for a bucket of 16, so a single warp could outlast the rest of the launch.
 // Asynchronous on `stream`.
 void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
-                        cudaStream_t stream);
+                        cudaStream_t stream, int strips = 1);
 
 }  // namespace cuda
 }  // namespace cashash
