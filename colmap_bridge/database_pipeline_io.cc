@@ -157,21 +157,12 @@ void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
   if (checkpointer_) {
     if (logged_pages_ >= options_.log_pages_before_catch_up) {
       checkpointer_->CatchUp();
-      ++catch_ups_;
     } else {
       checkpointer_->Nudge();
     }
   }
   rows_written_ += rows;
   empty_pairs_recorded_ += empty_pairs.size();
-}
-
-void DatabaseResultSink::Idle() {
-  if (!checkpointer_ || options_.log_pages_before_idle_catch_up <= 0) return;
-  if (logged_pages_ < options_.log_pages_before_idle_catch_up) return;
-  checkpointer_->CatchUp();
-  ++catch_ups_;
-  logged_pages_ = 0;  // folded; the next commit's hook reports the new log
 }
 
 }  // namespace colmap

@@ -83,11 +83,6 @@ class DatabaseResultSink : public ResultSink {
     // chunk starts it over. 16,384 pages are 64 MiB with COLMAP's 4 KiB
     // pages, 16 times SQLite's own bound, so that most chunks never wait.
     int log_pages_before_catch_up = 16384;
-    // The same wait, taken early when the writer is idle (Idle()) and the
-    // log holds at least this many pages: the log then starts over while
-    // nothing waits to be written, and a write late in a run, when the
-    // writer sets the pace, rarely has to wait. 0: off.
-    int log_pages_before_idle_catch_up = 0;
   };
 
   // Throws DatabaseError when another cashash process writes to the same
@@ -97,11 +92,6 @@ class DatabaseResultSink : public ResultSink {
   // One transaction per chunk, through prepared statements, from the one
   // writer thread of the pipeline.
   void WriteChunk(const std::vector<PairResult>& results) override;
-  // Waits for the log to be folded when it holds
-  // log_pages_before_idle_catch_up pages or more.
-  void Idle() override;
-  // Waits for the log to be folded so far (the writer's own and its idle ones).
-  size_t catch_ups() const { return catch_ups_; }
 
   // Rows written to matches and two_view_geometries so far.
   size_t rows_written() const { return rows_written_; }
@@ -116,7 +106,6 @@ class DatabaseResultSink : public ResultSink {
   std::unique_ptr<WalCheckpointer> checkpointer_;
   Options options_;
   int logged_pages_ = 0;  // in the log after the last commit
-  size_t catch_ups_ = 0;
   size_t rows_written_ = 0;
   size_t empty_pairs_recorded_ = 0;
 };

@@ -42,11 +42,6 @@ void LockedSink::WriteChunk(const std::vector<PairResult>& results) {
   pairs_written_ += results.size();
 }
 
-void LockedSink::Idle() {
-  std::lock_guard<std::mutex> lock(mutex_);
-  sink_->Idle();
-}
-
 MpiResultSender::MpiResultSender(const std::vector<PairChunk>& chunks) {
   for (const PairChunk& chunk : chunks) {
     if (!chunk.pairs.empty()) {

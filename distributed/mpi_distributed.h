@@ -33,7 +33,6 @@ class LockedSink : public ResultSink {
  public:
   explicit LockedSink(ResultSink* sink) : sink_(sink) {}
   void WriteChunk(const std::vector<PairResult>& results) override;
-  void Idle() override;
   size_t pairs_written() const { return pairs_written_; }
 
  private:

@@ -241,31 +241,14 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
   }
 }
 
-// CASHASH_WAL_CATCH_UP_PAGES / CASHASH_WAL_IDLE_CATCH_UP_PAGES=N set the
-// writer's log bounds (DatabaseResultSink::Options), to compare; unset keeps
-// `fallback`.
-int LogPagesFromEnvironment(const char* name, int fallback) {
-  const char* text = std::getenv(name);
-  if (text == nullptr) return fallback;
-  try {
-    return std::max(0, std::stoi(text));
-  } catch (const std::exception&) {
-    throw std::invalid_argument(std::string(name) + ": expected a number of pages, got '" + text + "'");
-  }
-}
-
 // Rank 0 alone opens the database for writing (and takes the writer lock);
 // the other ranks send their results to it.
 void OpenSink(RunPlan* plan) {
   const MatcherCommandOptions& options = plan->options;
   if (plan->share.rank == 0) {
-    DatabaseResultSink::Options sink_options{!options.skip_geometric_verification, options.write_empty_pairs,
-                                             options.overwrite};
-    sink_options.log_pages_before_catch_up =
-        LogPagesFromEnvironment("CASHASH_WAL_CATCH_UP_PAGES", sink_options.log_pages_before_catch_up);
-    sink_options.log_pages_before_idle_catch_up =
-        LogPagesFromEnvironment("CASHASH_WAL_IDLE_CATCH_UP_PAGES", sink_options.log_pages_before_idle_catch_up);
-    plan->database_sink = std::make_unique<DatabaseResultSink>(options.database_path, sink_options);
+    plan->database_sink = std::make_unique<DatabaseResultSink>(
+        options.database_path, DatabaseResultSink::Options{!options.skip_geometric_verification,
+                                                           options.write_empty_pairs, options.overwrite});
     plan->locked_sink = std::make_unique<LockedSink>(plan->database_sink.get());
     plan->sink = plan->locked_sink.get();
   } else {

@@ -12,13 +12,6 @@
 //
 // Usage: write_rows_bench DATABASE SCRATCH_DIR [--block_size 50]
 //        [--neighbours 10] [--far_with_matches 0.0] [--matches 2000]
-//        [--log_pages_before_catch_up N]   (default: the writer's own)
-//        [--idle_catch_up_pages N]   (the writer idles before each chunk,
-//        as while it waits for verification: "idle s" is the time
-//        DatabaseResultSink::Idle() takes there, not counted as writing)
-// "longest chunk ms" is the slowest WriteChunk: a chunk that waits for the
-// checkpointer to fold the log (DatabaseResultSink::Options) shows there.
-#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -42,8 +35,6 @@ struct BenchOptions {
   int neighbours = 10;
   double far_with_matches = 0.0;
   int matches = 2000;  // raw matches of the nearest pair
-  int log_pages_before_catch_up = 0;  // 0: DatabaseResultSink's default
-  int idle_catch_up_pages = 0;        // 0: never idle
 };
 
 FeatureMatches MakeMatches(size_t count, SplitMix64& rng) {
@@ -80,9 +71,6 @@ PairResult MakeResult(const ImagePair& pair, size_t distance, const BenchOptions
 struct Measurement {
   double write_seconds = 0;
   double close_seconds = 0;  // the writer's last checkpoint, when it closes
-  double longest_chunk_seconds = 0;
-  double idle_seconds = 0;
-  size_t catch_ups = 0;
   size_t pairs = 0;
   size_t rows = 0;
   size_t empty_recorded = 0;
@@ -109,10 +97,8 @@ Measurement Run(const std::string& source, const std::string& copy, bool write_e
   Measurement m;
   SplitMix64 rng(7);
   {
-    DatabaseResultSink::Options sink_options{true, write_empty_pairs, false};
-    if (o.log_pages_before_catch_up > 0) sink_options.log_pages_before_catch_up = o.log_pages_before_catch_up;
-    sink_options.log_pages_before_idle_catch_up = o.idle_catch_up_pages;
-    auto sink = std::make_unique<DatabaseResultSink>(copy, sink_options);
+    auto sink =
+        std::make_unique<DatabaseResultSink>(copy, DatabaseResultSink::Options{true, write_empty_pairs, false});
     for (const PairChunk& chunk : chunks) {
       std::vector<PairResult> results;
       results.reserve(chunk.pairs.size());
@@ -120,20 +106,12 @@ Measurement Run(const std::string& source, const std::string& copy, bool write_e
         const size_t a = position[pair.first], b = position[pair.second];
         results.push_back(MakeResult(pair, a > b ? a - b : b - a, o, rng));
       }
-      if (o.idle_catch_up_pages > 0) {
-        const auto t_idle = std::chrono::steady_clock::now();
-        sink->Idle();
-        m.idle_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t_idle).count();
-      }
       const auto t0 = std::chrono::steady_clock::now();
       sink->WriteChunk(results);
-      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      m.write_seconds += seconds;
-      m.longest_chunk_seconds = std::max(m.longest_chunk_seconds, seconds);
+      m.write_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       m.pairs += results.size();
     }
     m.rows = sink->rows_written();
-    m.catch_ups = sink->catch_ups();
     m.empty_recorded = sink->empty_pairs_recorded();
     std::error_code no_log;
     m.log_megabytes = static_cast<double>(std::filesystem::file_size(copy + "-wal", no_log)) / (1024.0 * 1024.0);
@@ -159,7 +137,7 @@ Measurement Run(const std::string& source, const std::string& copy, bool write_e
 int main(int argc, char** argv) {
   if (argc < 3) {
     std::cerr << "usage: " << argv[0]
-              << " DATABASE SCRATCH_DIR [--block_size 50] [--neighbours 10] [--far_with_matches 0.0] [--matches 2000] [--log_pages_before_catch_up N] [--idle_catch_up_pages N]\n";
+              << " DATABASE SCRATCH_DIR [--block_size 50] [--neighbours 10] [--far_with_matches 0.0] [--matches 2000]\n";
     return 2;
   }
   BenchOptions o;
@@ -169,23 +147,18 @@ int main(int argc, char** argv) {
     else if (name == "--neighbours") o.neighbours = std::atoi(argv[i + 1]);
     else if (name == "--far_with_matches") o.far_with_matches = std::atof(argv[i + 1]);
     else if (name == "--matches") o.matches = std::atoi(argv[i + 1]);
-    else if (name == "--log_pages_before_catch_up") o.log_pages_before_catch_up = std::atoi(argv[i + 1]);
-    else if (name == "--idle_catch_up_pages") o.idle_catch_up_pages = std::atoi(argv[i + 1]);
     else {
       std::cerr << "unknown option " << name << "\n";
       return 2;
     }
   }
   const std::string copy = (std::filesystem::path(argv[2]) / "write_rows_bench.db").string();
-  std::cout << "| write_empty_pairs | pairs | rows written | empty pairs recorded | write s | longest chunk ms | catch-ups | idle s | "
-               "close s | pairs/s | rows/s | MiB added | log MiB at most | resume read s |\n"
-               "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::cout << "| write_empty_pairs | pairs | rows written | empty pairs recorded | write s | close s | pairs/s | rows/s | "
+               "MiB added | log MiB at most | resume read s |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (bool write_empty : {true, false}) {
     const Measurement m = Run(argv[1], copy, write_empty, o);
     std::cout << std::fixed << "| " << (write_empty ? 1 : 0) << " | " << m.pairs << " | " << m.rows << " | "
-              << m.empty_recorded << " | " << std::setprecision(2) << m.write_seconds << " | " << std::setprecision(1)
-              << 1e3 * m.longest_chunk_seconds << " | " << m.catch_ups << " | " << std::setprecision(2) << m.idle_seconds
-              << " | " << m.close_seconds << " | "
+              << m.empty_recorded << " | " << std::setprecision(2) << m.write_seconds << " | " << m.close_seconds << " | "
               << std::setprecision(0) << m.pairs / (m.write_seconds + m.close_seconds) << " | "
               << m.rows / (m.write_seconds + m.close_seconds) << " | " << std::setprecision(1)
               << m.megabytes_added << " | " << m.log_megabytes << " | " << std::setprecision(3) << m.resume_read_seconds << " (" << m.resume_pairs

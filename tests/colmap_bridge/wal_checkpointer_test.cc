@@ -116,41 +116,6 @@ TEST_F(WalCheckpointerTest, TheLogStartsOverInsteadOfGrowing) {
   EXPECT_LT(largest, 4 * 32 * kPageWithHeader) << "the log was never started over";
 }
 
-// The writer's idle moments (DatabaseResultSink::Idle, called by the
-// pipeline while it waits for verification) start the log over once it
-// holds the idle bound, long before the writer's own bound.
-TEST_F(WalCheckpointerTest, IdleMomentsStartTheLogOver) {
-  DatabaseResultSink::Options options;
-  options.log_pages_before_catch_up = 1 << 30;  // the writer never waits itself
-  options.log_pages_before_idle_catch_up = 32;
-  DatabaseResultSink sink(path_, options);
-  sink.Idle();  // an empty log: nothing to wait for
-  EXPECT_EQ(sink.catch_ups(), 0u);
-  uintmax_t largest = 0;
-  for (int c = 0; c < 60; ++c) {
-    sink.Idle();
-    sink.WriteChunk(MakeChunk(static_cast<image_t>(1 + c * 9), 8, 800));
-    largest = std::max(largest, LogBytes());
-  }
-  constexpr uintmax_t kPageWithHeader = 4096 + 24;
-  EXPECT_GE(sink.catch_ups(), 20u) << "chunks of ~25 pages pass 32 about every second chunk";
-  EXPECT_LT(largest, 4 * 32 * kPageWithHeader) << "the log was never started over";
-  EXPECT_EQ(sink.rows_written(), 2u * 60 * 8);
-}
-
-// Below the idle bound an idle moment waits for nothing.
-TEST_F(WalCheckpointerTest, IdleMomentsBelowTheBoundDoNothing) {
-  DatabaseResultSink::Options options;
-  options.log_pages_before_idle_catch_up = 1 << 20;
-  DatabaseResultSink sink(path_, options);
-  for (int c = 0; c < 5; ++c) {
-    sink.WriteChunk(MakeChunk(static_cast<image_t>(1 + c * 9), 8, 800));
-    sink.Idle();
-  }
-  EXPECT_EQ(sink.catch_ups(), 0u);
-  EXPECT_GT(LogBytes(), 5u * 20 * 4096) << "the log kept every chunk";
-}
-
 TEST_F(WalCheckpointerTest, CatchUpLeavesNothingToFold) {
   Database writer(path_);
   int logged = -1;

@@ -438,34 +438,6 @@ TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
   EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
 }
 
-// The writer gives the sink its idle moments (ResultSink::Idle: the
-// database folds its log there) while it waits for verification, and
-// writes every chunk, in order, as before.
-TEST(BatchVerifierPipeline, TheWriterTellsTheSinkWhenItWaits) {
-  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
-  class IdleCountingSink : public Sink {
-   public:
-    void Idle() override {
-      std::lock_guard<std::mutex> lock(mutex);
-      ++idles;
-      idles_before_chunk.push_back(first_pairs.size());
-    }
-    int idles = 0;
-    std::vector<size_t> idles_before_chunk;  // chunks written at each Idle
-  } sink;
-  ConcurrentVerifier verifier;  // every third call sleeps 60 ms
-  IdentityMatcher matcher;
-  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
-  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
-  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
-  EXPECT_GE(sink.idles, 1);
-  // Idle comes between writes, never twice without a write between
-  // (nothing to fold has been added), and never once the last chunk is out.
-  for (size_t k = 1; k < sink.idles_before_chunk.size(); ++k) {
-    EXPECT_LT(sink.idles_before_chunk[k - 1], sink.idles_before_chunk[k]);
-  }
-}
-
 // Chunks that wait together go to the verifier in one call: in matching
 // order, each pair once, each geometry back to its own pair. The extra
 // chunks of a call keep their room in the queue, so matching runs no

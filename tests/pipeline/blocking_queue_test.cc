@@ -27,25 +27,6 @@ TEST(BlockingQueue, FirstInFirstOutAndDrainedAfterClose) {
   EXPECT_EQ(queue.Pop(), std::nullopt);
 }
 
-TEST(BlockingQueue, TryPopNeverWaitsAndDrainedMeansClosedAndEmpty) {
-  BlockingQueue<int> queue(2);
-  EXPECT_EQ(queue.TryPop(), std::nullopt);
-  EXPECT_FALSE(queue.Drained());
-  queue.Push(4);
-  queue.Push(5);
-  EXPECT_EQ(queue.TryPop(), std::optional<int>(4));
-  // TryPop made room: a push does not block.
-  std::future<bool> push = std::async(std::launch::async, [&] { return queue.Push(6); });
-  ASSERT_EQ(push.wait_for(2s), std::future_status::ready);
-  EXPECT_TRUE(push.get());
-  queue.Close();
-  EXPECT_FALSE(queue.Drained()) << "closed, but two items wait";
-  EXPECT_EQ(queue.TryPop(), std::optional<int>(5));
-  EXPECT_EQ(queue.Pop(), std::optional<int>(6));
-  EXPECT_TRUE(queue.Drained());
-  EXPECT_EQ(queue.TryPop(), std::nullopt);
-}
-
 TEST(BlockingQueue, HelperPopWaitsForTheBacklog) {
   BlockingQueue<int> queue(2);
   ASSERT_EQ(queue.capacity(), 2u);

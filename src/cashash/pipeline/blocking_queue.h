@@ -32,22 +32,6 @@ class BlockingQueue {
   // Blocks while empty; returns nullopt once closed and drained.
   std::optional<T> Pop() { return PopWhenBacklogged(1); }
 
-  // The first item if one waits, else nullopt at once.
-  std::optional<T> TryPop() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (items_.empty()) return std::nullopt;
-    T item = std::move(items_.front());
-    items_.pop_front();
-    not_full_.notify_one();
-    return item;
-  }
-
-  // Closed and empty: no item will come.
-  bool Drained() const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return closed_ && items_.empty();
-  }
-
   // As Pop, but waits until at least `backlog` items wait or the queue is
   // closed: for a helper consumer that should work only when the others
   // cannot keep up (the producer is about to block) or at the end.
@@ -108,7 +92,7 @@ class BlockingQueue {
   }
 
   const size_t capacity_;
-  mutable std::mutex mutex_;
+  std::mutex mutex_;
   std::condition_variable not_empty_;
   std::condition_variable not_full_;
   std::deque<T> items_;

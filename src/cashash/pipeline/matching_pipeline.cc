@@ -228,12 +228,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
-        std::optional<VerifiedChunk> item = to_write.TryPop();
-        if (!item) {
-          // About to wait: the sink's upkeep goes here, not into a write.
-          if (!to_write.Drained()) sink_->Idle();
-          item = to_write.Pop();
-        }
+        std::optional<VerifiedChunk> item = to_write.Pop();
         add_seconds(&PipelineStats::seconds_writing_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();

@@ -54,11 +54,6 @@ class ResultSink {
  public:
   virtual ~ResultSink() = default;
   virtual void WriteChunk(const std::vector<PairResult>& results) = 0;
-  // The writer has nothing to write and is about to wait for verification:
-  // a moment for upkeep that would otherwise hold up a later write (the
-  // database's log folding, DatabaseResultSink). Not called once the last
-  // chunk has been handed over.
-  virtual void Idle() {}
 };
 
 struct PipelineOptions {
