@@ -308,7 +308,9 @@ TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
 }
 
 // A bucket's A rows split over several warps (CASHASH_CASCADE_TILE_STRIPS,
-// LaunchCascadeTiles' strips) append the same candidates in another order:
+// LaunchCascadeTiles' strips), or its chunks past the first few shared out
+// in a second pass (CASHASH_CASCADE_BIG_BUCKETS), append the same
+// candidates in another order:
 // the lists are unordered, so the matches must be identical. The repeated
 // rows make buckets of 400 and more, 13 chunks of A for a single warp.
 TEST(GpuCascadeTest, BucketsSplitOverWarpsGiveIdenticalMatches) {
@@ -342,6 +344,17 @@ TEST(GpuCascadeTest, BucketsSplitOverWarpsGiveIdenticalMatches) {
     ScopedEnv env("CASHASH_CASCADE_TILE_STRIPS", strips);
     auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
     EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one) << strips << " warps per bucket";
+  }
+  // The chunks of large buckets past the first N shared out in a second
+  // pass (CASHASH_CASCADE_BIG_BUCKETS=N), alone and with strips.
+  for (const char* first_chunks : {"1", "4"}) {
+    for (const char* strips : {"1", "4"}) {
+      ScopedEnv env_big("CASHASH_CASCADE_BIG_BUCKETS", first_chunks);
+      ScopedEnv env_strips("CASHASH_CASCADE_TILE_STRIPS", strips);
+      auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+      EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one)
+          << "second pass after " << first_chunks << " chunks, " << strips << " warps per bucket";
+    }
   }
 }
 
