@@ -111,15 +111,13 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   }
 
   // Inputs: F's pairs first, then H's, over one shared point array, largest
-  // pairs first (blocks start roughly in order; big ones last would leave a
-  // long tail). Slot j holds pair order[j]. E's pairs (their own points, in
+  // pairs first (LargestFirst, launch_order.h: blocks start roughly in
+  // order; big ones last would leave a long tail). Slot j holds pair order[j]. E's pairs (their own points, in
   // normalised camera coordinates) follow, again largest first: slot
   // 2 num_pairs + j holds pair order_E[j].
-  std::vector<size_t> order(num_pairs);
-  for (size_t k = 0; k < num_pairs; ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return pairs[a]->normalized.size() > pairs[b]->normalized.size();
-  });
+  std::vector<size_t> matches_per_pair(num_pairs);
+  for (size_t k = 0; k < num_pairs; ++k) matches_per_pair[k] = pairs[k]->normalized.size();
+  const std::vector<size_t> order = LargestFirst(matches_per_pair);
   std::vector<size_t> order_E;
   std::vector<int> slot_E;  // F/H slot of each E pair
   for (size_t j = 0; j < essential.size(); ++j) {
@@ -414,16 +412,8 @@ class GpuBatchVerifier : public BatchVerifier {
     std::vector<const EssentialPoints*> batch_essential;
     std::vector<uint64_t> batch_seeds;
     std::vector<size_t> calibrated_pairs;
-    // The pairs with most matches start first (launch_order.h); F[i], H[i]
-    // and E_batch[i] follow batch[i] whatever the order.
-    std::vector<size_t> to_estimate, num_matches;
     for (size_t k = 0; k < n; ++k) {
       if (!estimated[k]) continue;
-      to_estimate.push_back(k);
-      num_matches.push_back(points[k].pixels.size());
-    }
-    for (const size_t i : LargestFirst(num_matches)) {
-      const size_t k = to_estimate[i];
       batch.push_back(k);
       batch_points.push_back(&points[k]);
       batch_seeds.push_back(pairs[k].random_seed);
