@@ -356,6 +356,14 @@ bool ExtraVerifiersOnBacklogFromEnvironment() {
   return text == nullptr || std::string(text) != "eager";
 }
 
+// CASHASH_WRITE_MATCHES_AHEAD=1 has the writer take a chunk's raw matches
+// while the chunk is verified (PipelineOptions::write_matches_ahead), to
+// compare; 0 or unset: one write per chunk after verification.
+bool WriteMatchesAheadFromEnvironment() {
+  const char* text = std::getenv("CASHASH_WRITE_MATCHES_AHEAD");
+  return text != nullptr && std::string(text) == "1";
+}
+
 // CASHASH_PIPELINE_TRACE=FILE records each chunk's stage intervals and
 // writes them to FILE as CSV (pipeline_trace.h; under MPI each rank writes
 // FILE.rankN), to read a run's critical path with
@@ -390,6 +398,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.two_view = plan.options.two_view;
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
+  pipeline_options.write_matches_ahead = WriteMatchesAheadFromEnvironment();
   PipelineTrace trace;
   const std::string trace_path = PipelineTracePathFromEnvironment(share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;

@@ -5,13 +5,14 @@
     pipeline_trace_summary.py trace.csv
 
 The run's summary line gives each stage's busy and waiting time; the trace
-(one line per chunk and stage: load, match, rematch, verify, write) says
+(one line per chunk and stage: load, match, rematch, verify, write_ahead,
+write) says
 what overlapped what. This prints, in Markdown:
 - per stage, the busy time summed over threads and the wall time during
   which at least one was busy;
 - how long 0, 1, 2, ... verifier calls were in flight;
-- the tail: from the end of the last match to the end of the run, and what
-  ran in it;
+- the tail: from the end of the last match to the end of the run, what ran
+  in it, and how much of it was writing alone (nothing left for the device);
 - verifier calls: how many, chunks per call, mean and longest duration.
 """
 import argparse
@@ -77,7 +78,7 @@ def main():
 
     print("| stage | busy s (summed over threads) | wall s with one or more busy |")
     print("|---|---:|---:|")
-    for stage in ["load", "match", "rematch", "verify", "write"]:
+    for stage in ["load", "match", "rematch", "verify", "write_ahead", "write"]:
         if stage == "verify":
             intervals = [(c["start"], c["end"]) for c in calls.values()]
         else:
@@ -105,13 +106,15 @@ def main():
         tail = [e for e in events if e["end"] > last_match and e["stage"] != "match"]
         print(f"\nTail: {end_of_run - last_match:.3f} s after the last match ended "
               f"({last_match:.3f} s into the run), in which:")
-        for stage in ["rematch", "verify", "write"]:
+        for stage in ["rematch", "verify", "write_ahead", "write"]:
             if stage == "verify":
                 intervals = [(max(c["start"], last_match), c["end"]) for c in calls.values() if c["end"] > last_match]
             else:
                 intervals = [(max(e["start"], last_match), e["end"]) for e in tail if e["stage"] == stage]
             if intervals:
                 print(f"- {stage}: {union_length(intervals):.3f} s of wall time, {len(intervals)} intervals")
+        device = [e["end"] for e in events if e["stage"] in ("match", "rematch", "verify")]
+        print(f"- writing alone, after the last match, rematch and verification: {end_of_run - max(device):.3f} s")
 
 
 if __name__ == "__main__":

@@ -250,6 +250,88 @@ TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChun
   }
 }
 
+// Takes each chunk's raw matches ahead of its geometries and logs the steps.
+class AheadSink : public Sink {
+ public:
+  bool WritesMatchesAhead() const override { return true; }
+  void WriteMatchesAhead(const std::vector<PairResult>& results) override {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (const PairResult& r : results) EXPECT_EQ(r.matches.size(), 20u);
+    ahead_first_pairs.push_back(results.front().pair);
+  }
+  void WriteGeometries(const std::vector<PairResult>& results) override {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      const bool ahead = std::find(ahead_first_pairs.begin(), ahead_first_pairs.end(), results.front().pair) !=
+                         ahead_first_pairs.end();
+      EXPECT_TRUE(ahead) << "geometries before the chunk's matches";
+    }
+    Sink::WriteChunk(results);
+  }
+  void WriteChunk(const std::vector<PairResult>& results) override {
+    ++whole_chunks;
+    Sink::WriteChunk(results);
+  }
+  std::vector<ImagePair> ahead_first_pairs;  // in the order written
+  std::atomic<int> whole_chunks{0};
+};
+
+// Verification calls that end out of order: every chunk's matches go out
+// ahead, in whatever order, and its geometries after, in matching order.
+TEST(BatchVerifierPipeline, MatchesAheadThenGeometriesInMatchingOrder) {
+  for (const size_t chunks_per_call : {size_t{1}, size_t{2}}) {
+    const std::vector<PairChunk> chunks = Chunks(16, 3);
+    const size_t num_pairs = NumPairs(chunks);
+    IdentityMatcher matcher;
+    AheadSink sink;
+    ConcurrentVerifier verifier;
+    PipelineOptions options;
+    options.write_matches_ahead = true;
+    options.chunks_per_verification = chunks_per_call;
+    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+    EXPECT_EQ(stats.pairs_done, num_pairs);
+    EXPECT_EQ(stats.verified_pairs, num_pairs);
+    EXPECT_EQ(sink.whole_chunks.load(), 0);
+    EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+    std::vector<ImagePair> ahead = sink.ahead_first_pairs;
+    std::vector<ImagePair> all = FirstPairs(chunks);
+    std::sort(ahead.begin(), ahead.end());
+    std::sort(all.begin(), all.end());
+    EXPECT_EQ(ahead, all);
+    ASSERT_EQ(sink.configs.size(), num_pairs);
+    for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUncalibrated);
+  }
+}
+
+// A sink that cannot take matches ahead gets whole chunks; a failed call
+// leaves the chunks written whole or, ahead, with their matches only.
+TEST(BatchVerifierPipeline, MatchesAheadOnlyWhereTheSinkTakesThem) {
+  {
+    const std::vector<PairChunk> chunks = Chunks(9, 3);
+    IdentityMatcher matcher;
+    Sink sink;
+    RecordingVerifier verifier;
+    PipelineOptions options;
+    options.write_matches_ahead = true;
+    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
+    EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
+    EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
+  }
+  {
+    const std::vector<PairChunk> chunks = Chunks(16, 3);
+    IdentityMatcher matcher;
+    AheadSink sink;
+    ConcurrentVerifier verifier(/*fail_at=*/4);
+    PipelineOptions options;
+    options.write_matches_ahead = true;
+    EXPECT_THROW(RunPipeline(chunks, &matcher, &verifier, &sink, options), std::runtime_error);
+    const std::vector<ImagePair> all = FirstPairs(chunks);
+    ASSERT_LT(sink.first_pairs.size(), all.size());
+    EXPECT_TRUE(std::equal(sink.first_pairs.begin(), sink.first_pairs.end(), all.begin()));
+    EXPECT_GE(sink.ahead_first_pairs.size(), sink.first_pairs.size());
+  }
+}
+
 // While the matcher times its backends nothing is verified: the probe has
 // the device to itself. Verification starts after the call that chose.
 TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {

@@ -156,6 +156,54 @@ TEST(MatchingPipeline, DeferredMatchingIsCompletedBeforeVerifyingAndWriting) {
   }
 }
 
+// Takes matches ahead: records, per pair, how many matches each step saw.
+class AheadSink : public CollectingSink {
+ public:
+  bool WritesMatchesAhead() const override { return true; }
+  void WriteMatchesAhead(const std::vector<PairResult>& results) override {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (const PairResult& r : results) ahead[ImagePairToPairId(r.pair.first, r.pair.second)] = r.matches.size();
+  }
+  void WriteGeometries(const std::vector<PairResult>& results) override {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      for (const PairResult& r : results) {
+        EXPECT_TRUE(ahead.count(ImagePairToPairId(r.pair.first, r.pair.second))) << "geometry before its matches";
+      }
+      ++geometry_steps;
+    }
+    WriteChunk(results);
+  }
+  std::map<pair_t, size_t> ahead;
+  int geometry_steps = 0;
+};
+
+// The matches written ahead are the final ones (after the deferred part),
+// each chunk's before its geometries; skipped verification writes at once.
+TEST(MatchingPipeline, MatchesWrittenAheadAreTheCompletedOnes) {
+  for (const bool skip_verification : {true, false}) {
+    FakeSource source;
+    DeferringMatcher matcher;
+    AheadSink sink;
+    PipelineOptions options = NoVerification();
+    options.skip_geometric_verification = skip_verification;
+    options.write_matches_ahead = true;
+    MatchingPipeline pipeline(options, &source, &matcher, &sink);
+    const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
+    const PipelineStats stats = pipeline.Run(chunks);
+    EXPECT_EQ(stats.pairs_done, 36u);
+    ASSERT_EQ(sink.written.size(), 36u);
+    for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first);
+    if (skip_verification) {
+      EXPECT_TRUE(sink.ahead.empty());
+      EXPECT_EQ(sink.geometry_steps, 0);
+    } else {
+      EXPECT_EQ(sink.ahead, sink.written);
+      EXPECT_EQ(sink.geometry_steps, static_cast<int>(chunks.size()));
+    }
+  }
+}
+
 TEST(MatchingPipeline, StopFlagEndsAfterCommittedChunks) {
   FakeSource source;
   FakeMatcher matcher;

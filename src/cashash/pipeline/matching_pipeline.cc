@@ -45,7 +45,14 @@ struct MatchedChunk {
 struct VerifiedChunk {
   size_t index = 0;
   const PairChunk* chunk = nullptr;
-  std::vector<PairResult> results;
+  // Shared with the chunk's matches-ahead item (write_matches_ahead), which
+  // the writer may write while the verifier fills in the geometries: the
+  // two read and write different members of each PairResult.
+  std::shared_ptr<std::vector<PairResult>> results = std::make_shared<std::vector<PairResult>>();
+  // A matches-ahead item: only the raw matches are written, and the chunk
+  // comes again, verified (with matches_written set), later in the queue.
+  bool matches_only = false;
+  bool matches_written = false;
   Clock::time_point started;
   // For the trace: the chunk's deferred matching, if it had any, and when
   // its verifier call started.
@@ -77,9 +84,12 @@ class FirstError {
 // order, geometries left undefined when verification is skipped. One call
 // for several chunks because a GPU call lasts as long as its slowest pair:
 // chunks that wait together share that tail instead of paying it in turn.
-// Releases the chunks' features.
+// Releases the chunks' features. `matches_final`, when set, is given each
+// chunk once its matches are final, before the verifier call, and says
+// whether it took them (to write them ahead).
 std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
-                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier) {
+                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier,
+                                        const std::function<bool(const VerifiedChunk&)>& matches_final) {
   std::vector<VerifiedChunk> out(items->size());
   for (size_t c = 0; c < items->size(); ++c) {
     MatchedChunk& item = (*items)[c];
@@ -95,11 +105,13 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
     }
     out[c].rematch_ended = Clock::now();
     const std::vector<ImagePair>& pairs = item.chunk->pairs;
-    out[c].results.resize(pairs.size());
+    std::vector<PairResult>& results = *out[c].results;
+    results.resize(pairs.size());
     for (size_t k = 0; k < pairs.size(); ++k) {
-      out[c].results[k].pair = pairs[k];
-      out[c].results[k].matches = std::move(item.matches[k]);
+      results[k].pair = pairs[k];
+      results[k].matches = std::move(item.matches[k]);
     }
+    if (matches_final && !options.skip_geometric_verification) out[c].matches_written = matches_final(out[c]);
   }
   const Clock::time_point verify_started = Clock::now();
   for (VerifiedChunk& chunk : out) chunk.verify_started = verify_started;
@@ -117,7 +129,7 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
                 [&](size_t i) { *to_fill[i].first = KeypointPositions(to_fill[i].second->keypoints); });
     std::vector<VerificationPair> tasks;
     for (VerifiedChunk& chunk : out) {
-      for (PairResult& result : chunk.results) {
+      for (PairResult& result : *chunk.results) {
         VerificationPair task;
         task.camera1 = &source->CameraOfImage(result.pair.first);
         task.camera2 = &source->CameraOfImage(result.pair.second);
@@ -131,7 +143,7 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
     std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
     size_t next = 0;
     for (VerifiedChunk& chunk : out) {
-      for (PairResult& result : chunk.results) result.geometry = std::move(geometries[next++]);
+      for (PairResult& result : *chunk.results) result.geometry = std::move(geometries[next++]);
     }
   }
   for (MatchedChunk& item : *items) item.features.clear();
@@ -232,14 +244,25 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         add_seconds(&PipelineStats::seconds_writing_wait_input, t_wait);
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
-        sink_->WriteChunk(item->results);
-        trace("write", item->index, 0, -1, t0, Clock::now(), item->results.size());
+        const std::vector<PairResult>& results = *item->results;
+        if (item->matches_only) {
+          sink_->WriteMatchesAhead(results);
+          trace("write_ahead", item->index, 0, -1, t0, Clock::now(), results.size());
+          add_seconds(&PipelineStats::seconds_writing, t0);
+          continue;
+        }
+        if (item->matches_written) {
+          sink_->WriteGeometries(results);
+        } else {
+          sink_->WriteChunk(results);
+        }
+        trace("write", item->index, 0, -1, t0, Clock::now(), results.size());
         PipelineProgress progress;
         {
           std::lock_guard<std::mutex> lock(stats_mutex);
           stats.seconds_writing += SecondsSince(t0);
-          stats.pairs_done += item->results.size();
-          for (const PairResult& r : item->results) {
+          stats.pairs_done += results.size();
+          for (const PairResult& r : results) {
             stats.raw_matches += r.matches.size();
             if (r.geometry.config >= kCalibrated) {
               ++stats.verified_pairs;
@@ -279,6 +302,21 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   size_t chunks_per_call = options_.chunks_per_verification;
   if (chunks_per_call == 0) chunks_per_call = verifier != nullptr ? verifier->ChunksPerCall() : 1;
   chunks_per_call = std::max<size_t>(1, chunks_per_call);
+  // The writer takes a chunk's raw matches ahead of its verified rows: the
+  // item goes before the chunk's own (same queue, pushed earlier) and never
+  // waits for room, so the verifier call is not held up by the writer.
+  const bool write_ahead = options_.write_matches_ahead && sink_->WritesMatchesAhead();
+  std::function<bool(const VerifiedChunk&)> matches_final;
+  if (write_ahead) {
+    matches_final = [&](const VerifiedChunk& chunk) {
+      VerifiedChunk ahead;
+      ahead.index = chunk.index;
+      ahead.chunk = chunk.chunk;
+      ahead.results = chunk.results;
+      ahead.matches_only = true;
+      return to_write.PushWithoutWaiting(std::move(ahead));
+    };
+  }
   auto verification_stage = [&](int thread) {
     // A helper (the second thread on) waits for a full queue or the end.
     const size_t backlog = thread > 0 && options_.extra_verifiers_on_backlog ? to_verify.capacity() : 1;
@@ -290,7 +328,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         add_seconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (items.empty()) break;
         const Clock::time_point t0 = Clock::now();
-        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier);
+        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier, matches_final);
         to_verify.Release(items.size() - 1);
         const Clock::time_point t_verified = Clock::now();
         size_t call = 0;
@@ -302,9 +340,9 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
         for (const VerifiedChunk& chunk : out) {
           if (chunk.rematched) {
             trace("rematch", chunk.index, 0, thread + 1, chunk.rematch_started, chunk.rematch_ended,
-                  chunk.results.size());
+                  chunk.results->size());
           }
-          trace("verify", chunk.index, call, thread + 1, chunk.verify_started, t_verified, chunk.results.size());
+          trace("verify", chunk.index, call, thread + 1, chunk.verify_started, t_verified, chunk.results->size());
         }
         // The batch's chunks are consecutive: the queue is one producer's,
         // in order, and a batch is taken at once.
