@@ -364,6 +364,14 @@ bool WriteMatchesAheadFromEnvironment() {
   return text != nullptr && std::string(text) == "1";
 }
 
+// CASHASH_REMATCH_THREAD=1 completes the matcher's deferred work (the GPU
+// exact rematch) on a thread of its own instead of the verification
+// threads (PipelineOptions::deferred_matching_thread), to compare.
+bool DeferredMatchingThreadFromEnvironment() {
+  const char* text = std::getenv("CASHASH_REMATCH_THREAD");
+  return text != nullptr && std::string(text) == "1";
+}
+
 // CASHASH_PIPELINE_TRACE=FILE records each chunk's stage intervals and
 // writes them to FILE as CSV (pipeline_trace.h; under MPI each rank writes
 // FILE.rankN), to read a run's critical path with
@@ -399,6 +407,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
   pipeline_options.write_matches_ahead = WriteMatchesAheadFromEnvironment();
+  pipeline_options.deferred_matching_thread = DeferredMatchingThreadFromEnvironment();
   PipelineTrace trace;
   const std::string trace_path = PipelineTracePathFromEnvironment(share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;

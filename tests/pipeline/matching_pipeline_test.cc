@@ -5,6 +5,7 @@
 #include <mutex>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -109,50 +110,99 @@ TEST(MatchingPipeline, EveryPairMatchedAndWrittenOnce) {
 // Leaves every pair's matches to DeferredMatching::Complete: MatchPairsDeferred
 // returns none, Complete gives each pair as many matches as the first
 // image's descriptors have rows (read through the pipeline's lookup).
+// Records the threads Complete ran on; the call numbered `fail_at` throws.
 class DeferringMatcher : public FakeMatcher {
  public:
+  explicit DeferringMatcher(int fail_at = -1) : fail_at_(fail_at) {}
   ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override {
     MatchPairs(pairs);  // checks the images were added
+    matching_thread = std::this_thread::get_id();
     ChunkMatches out;
     out.matches.resize(pairs.size());
-    out.deferred = std::make_unique<Deferred>(pairs, &completed);
+    out.deferred = std::make_unique<Deferred>(pairs, this);
     return out;
   }
   std::atomic<int> completed{0};
+  std::thread::id matching_thread;
+  std::mutex mutex;
+  std::set<std::thread::id> completing_threads;
 
  private:
   class Deferred : public DeferredMatching {
    public:
-    Deferred(std::vector<ImagePair> pairs, std::atomic<int>* completed) : pairs_(std::move(pairs)), completed_(completed) {}
+    Deferred(std::vector<ImagePair> pairs, DeferringMatcher* owner) : pairs_(std::move(pairs)), owner_(owner) {}
     void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
+      {
+        std::lock_guard<std::mutex> lock(owner_->mutex);
+        owner_->completing_threads.insert(std::this_thread::get_id());
+      }
+      if (owner_->calls_++ == owner_->fail_at_) throw std::runtime_error("rematch failed on purpose");
       for (size_t k = 0; k < pairs_.size(); ++k) {
         const size_t rows = descriptors(pairs_[k].first)->rows();
         for (point2D_t m = 0; m < rows; ++m) (*matches)[k].push_back({m, m});
       }
-      ++*completed_;
+      ++owner_->completed;
     }
 
    private:
     std::vector<ImagePair> pairs_;
-    std::atomic<int>* completed_;
+    DeferringMatcher* owner_;
   };
+  const int fail_at_;
+  std::atomic<int> calls_{0};
 };
 
 TEST(MatchingPipeline, DeferredMatchingIsCompletedBeforeVerifyingAndWriting) {
-  for (const bool skip_verification : {true, false}) {
+  for (const bool own_thread : {false, true}) {
+    for (const bool skip_verification : {true, false}) {
+      FakeSource source;
+      DeferringMatcher matcher;
+      CollectingSink sink;
+      PipelineOptions options = NoVerification();
+      options.skip_geometric_verification = skip_verification;
+      options.deferred_matching_thread = own_thread;
+      MatchingPipeline pipeline(options, &source, &matcher, &sink);
+      const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
+      const PipelineStats stats = pipeline.Run(chunks);
+      EXPECT_EQ(stats.pairs_done, 36u);
+      EXPECT_EQ(matcher.completed.load(), static_cast<int>(chunks.size()));
+      ASSERT_EQ(sink.written.size(), 36u);
+      // Pair (a, b) got a matches, from image a's descriptors, in every mode.
+      for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first) << skip_verification;
+      // On its own thread: one thread, neither matching's nor this one.
+      if (own_thread && !skip_verification) {
+        ASSERT_EQ(matcher.completing_threads.size(), 1u);
+        EXPECT_NE(*matcher.completing_threads.begin(), matcher.matching_thread);
+      }
+    }
+  }
+}
+
+// A failure in the deferred part, on its own thread or on verification's,
+// stops the run with that error; only whole chunks were written, in order.
+TEST(MatchingPipeline, DeferredMatchingErrorStopsTheRun) {
+  for (const bool own_thread : {false, true}) {
     FakeSource source;
-    DeferringMatcher matcher;
+    DeferringMatcher matcher(/*fail_at=*/3);
     CollectingSink sink;
     PipelineOptions options = NoVerification();
-    options.skip_geometric_verification = skip_verification;
+    options.skip_geometric_verification = false;
+    options.deferred_matching_thread = own_thread;
     MatchingPipeline pipeline(options, &source, &matcher, &sink);
-    const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
-    const PipelineStats stats = pipeline.Run(chunks);
-    EXPECT_EQ(stats.pairs_done, 36u);
-    EXPECT_EQ(matcher.completed.load(), static_cast<int>(chunks.size()));
-    ASSERT_EQ(sink.written.size(), 36u);
-    // Pair (a, b) got a matches, from image a's descriptors, in either mode.
-    for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first) << skip_verification;
+    const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(15), 3);
+    try {
+      pipeline.Run(chunks);
+      FAIL() << "the error was not rethrown";
+    } catch (const std::runtime_error& e) {
+      EXPECT_STREQ(e.what(), "rematch failed on purpose");
+    }
+    EXPECT_LE(sink.chunks, 3) << own_thread;
+    size_t pairs = 0;
+    for (int c = 0; c < sink.chunks; ++c) pairs += chunks[c].pairs.size();
+    EXPECT_EQ(sink.written.size(), pairs) << own_thread;
+    for (int c = 0; c < sink.chunks; ++c) {
+      for (const ImagePair& p : chunks[c].pairs) EXPECT_TRUE(sink.written.count(ImagePairToPairId(p.first, p.second)));
+    }
   }
 }
 

@@ -79,6 +79,16 @@ class FirstError {
   std::atomic<bool> failed_{false};
 };
 
+// Completes what the matcher deferred for `item` (the GPU's exact rematch),
+// if anything; returns whether there was something.
+bool CompleteDeferred(MatchedChunk* item) {
+  if (!item->deferred) return false;
+  item->deferred->Complete([&](image_t image_id) { return DescriptorsOf(item->features.at(image_id)); },
+                           &item->matches);
+  item->deferred.reset();
+  return true;
+}
+
 // The verification of matched chunks in one call of the verifier: for each
 // chunk what the matcher deferred first, then results in the chunk's pair
 // order, geometries left undefined when verification is skipped. One call
@@ -97,12 +107,7 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
     out[c].chunk = item.chunk;
     out[c].started = item.started;
     out[c].rematch_started = Clock::now();
-    if (item.deferred) {
-      item.deferred->Complete(
-          [&](image_t image_id) { return DescriptorsOf(item.features.at(image_id)); }, &item.matches);
-      item.deferred.reset();
-      out[c].rematched = true;
-    }
+    out[c].rematched = CompleteDeferred(&item);
     out[c].rematch_ended = Clock::now();
     const std::vector<ImagePair>& pairs = item.chunk->pairs;
     std::vector<PairResult>& results = *out[c].results;
@@ -209,7 +214,12 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   const Clock::time_point run_start = Clock::now();
 
   const size_t chunks_in_queue = std::max<size_t>(1, options_.chunks_in_queue);
-  BlockingQueue<MatchedChunk> to_verify(chunks_in_queue);
+  // With a thread for the deferred matching, one chunk waits for it and one
+  // is on it: the queue to verification gives up that room, so that as many
+  // chunks are held as without it (kPipelineBlocks).
+  const bool deferred_stage = options_.deferred_matching_thread && !options_.skip_geometric_verification;
+  BlockingQueue<MatchedChunk> to_complete(1);
+  BlockingQueue<MatchedChunk> to_verify(deferred_stage ? std::max<size_t>(1, chunks_in_queue - 1) : chunks_in_queue);
   BlockingQueue<VerifiedChunk> to_write(std::max<size_t>(1, options_.chunks_to_write));
   FirstError error;
   std::mutex stats_mutex;
@@ -279,6 +289,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       }
     } catch (...) {
       error.Set(std::current_exception());
+      to_complete.Close();
       to_verify.Close();
       to_write.Close();
     }
@@ -360,6 +371,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       }
     } catch (...) {
       error.Set(std::current_exception());
+      to_complete.Close();
       to_verify.Close();
       to_writer_in_order.Cancel();
     }
@@ -367,6 +379,30 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
   };
   std::vector<std::thread> verifier_threads;
   for (int t = 0; t < num_verifier_threads; ++t) verifier_threads.emplace_back(verification_stage, t);
+
+  // Stage 1b (deferred_matching_thread): what the matcher deferred, on a
+  // thread of its own, in matching order. Ends by closing the queue to
+  // verification; a failure closes both of its queues, so that matching
+  // stops instead of waiting for room.
+  std::thread completer;
+  if (deferred_stage) {
+    completer = std::thread([&]() {
+      try {
+        for (;;) {
+          std::optional<MatchedChunk> item = to_complete.Pop();
+          if (!item) break;
+          const Clock::time_point t0 = Clock::now();
+          if (CompleteDeferred(&*item)) trace("rematch", item->index, 0, -2, t0, Clock::now(), item->chunk->pairs.size());
+          if (!to_verify.Push(std::move(*item))) break;
+        }
+      } catch (...) {
+        error.Set(std::current_exception());
+      }
+      to_complete.Close();
+      to_verify.Close();
+    });
+  }
+  BlockingQueue<MatchedChunk>& after_matching = deferred_stage ? to_complete : to_verify;
 
   // Stage 1 (this thread): load what the chunk needs, match. The gate opens
   // once the matcher has chosen, or before a push that could wait for
@@ -427,7 +463,7 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
       if (!matcher_->ChoosingBackend() || pushed_while_gated >= chunks_in_queue) gate.Open();
       ++pushed_while_gated;
       const Clock::time_point t_push = Clock::now();
-      const bool pushed = to_verify.Push(std::move(item));
+      const bool pushed = after_matching.Push(std::move(item));
       add_seconds(&PipelineStats::seconds_matching_wait_queue, t_push);
       if (!pushed) break;
     }
@@ -435,7 +471,8 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
     error.Set(std::current_exception());
   }
   gate.Open();
-  to_verify.Close();
+  after_matching.Close();
+  if (completer.joinable()) completer.join();
   for (std::thread& thread : verifier_threads) thread.join();
   writer.join();
   error.RethrowIfAny();
