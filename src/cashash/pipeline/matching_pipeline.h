@@ -143,7 +143,8 @@ struct PipelineStats {
   double seconds_matching = 0;
   // Summed over the verification threads when chunks are verified
   // concurrently (verification_threads > 1), as are its waits below. It
-  // includes what the matcher deferred to them (the GPU's exact rematch).
+  // includes what the matcher deferred to them (the GPU's exact rematch),
+  // unless that has a thread of its own (deferred_matching_thread).
   double seconds_verification = 0;
   double seconds_writing = 0;
   // Waiting, apart from the busy times above: the matching thread for room
