@@ -215,11 +215,11 @@ PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
 
   const size_t chunks_in_queue = std::max<size_t>(1, options_.chunks_in_queue);
   // With a thread for the deferred matching, one chunk waits for it and one
-  // is on it: the queue to verification gives up that room, so that as many
-  // chunks are held as without it (kPipelineBlocks).
+  // is on it: the queue to verification gives up that room, so that no more
+  // chunks are held than without it (kPipelineBlocks counts them).
   const bool deferred_stage = options_.deferred_matching_thread && !options_.skip_geometric_verification;
   BlockingQueue<MatchedChunk> to_complete(1);
-  BlockingQueue<MatchedChunk> to_verify(deferred_stage ? std::max<size_t>(1, chunks_in_queue - 1) : chunks_in_queue);
+  BlockingQueue<MatchedChunk> to_verify(deferred_stage ? std::max<size_t>(1, chunks_in_queue - 2) : chunks_in_queue);
   BlockingQueue<VerifiedChunk> to_write(std::max<size_t>(1, options_.chunks_to_write));
   FirstError error;
   std::mutex stats_mutex;

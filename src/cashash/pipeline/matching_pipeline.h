@@ -112,8 +112,9 @@ struct PipelineOptions {
   // verification sets the pace (the GPU cascade at 300 images: rematch and
   // verification busy from their first start to the end of device work),
   // the rematch then stops adding to that stage: device run 121's traces
-  // have 0.22 s of rematch in a 0.70 s verification stage. Ignored when
-  // verification is skipped.
+  // have 0.22 s of rematch in a 0.70 s verification stage. The queue to
+  // verification is then two chunks shorter (one waits for that thread, one
+  // is on it). Ignored when verification is skipped.
   bool deferred_matching_thread = false;
   // Not owned; when set, every stage's interval per chunk is recorded in it
   // (pipeline_trace.h).
