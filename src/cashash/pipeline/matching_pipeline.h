@@ -1,8 +1,10 @@
 // The matching pipeline: load features of a chunk of pairs, match them with a
 // FeatureMatcher backend, verify each pair geometrically, hand the results to
-// a writer. The three stages run on their own threads with bounded queues, so
-// the GPU matches chunk k+1 while the CPU verifies chunk k and the database
-// commits chunk k-1.
+// a writer. The stages (matching; optionally what the matcher deferred;
+// verification; writing) run on their own threads with bounded queues, so
+// the GPU matches chunk k+1 while chunk k is verified and the database
+// commits chunk k-1. The stages themselves are in matching_pipeline.cc,
+// what travels between them in chunk_verification.h.
 #pragma once
 
 #include <atomic>

@@ -1,0 +1,82 @@
+#include "cashash/pipeline/chunk_verification.h"
+
+#include <utility>
+
+#include "cashash/base/pair_id.h"
+#include "cashash/pipeline/thread_pool.h"
+
+namespace cashash {
+namespace pipeline_internal {
+
+std::shared_ptr<const FeatureDescriptors> DescriptorsOf(const FeaturesPtr& features) {
+  return std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors);
+}
+
+bool CompleteDeferred(MatchedChunk* item) {
+  if (!item->deferred) return false;
+  item->deferred->Complete([&](image_t image_id) { return DescriptorsOf(item->features.at(image_id)); },
+                           &item->matches);
+  item->deferred.reset();
+  return true;
+}
+
+std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
+                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier,
+                                        const std::function<bool(const VerifiedChunk&)>& matches_final) {
+  std::vector<VerifiedChunk> out(items->size());
+  for (size_t c = 0; c < items->size(); ++c) {
+    MatchedChunk& item = (*items)[c];
+    out[c].index = item.index;
+    out[c].chunk = item.chunk;
+    out[c].started = item.started;
+    out[c].rematch_started = Clock::now();
+    out[c].rematched = CompleteDeferred(&item);
+    out[c].rematch_ended = Clock::now();
+    const std::vector<ImagePair>& pairs = item.chunk->pairs;
+    std::vector<PairResult>& results = *out[c].results;
+    results.resize(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      results[k].pair = pairs[k];
+      results[k].matches = std::move(item.matches[k]);
+    }
+    if (matches_final && !options.skip_geometric_verification) out[c].matches_written = matches_final(out[c]);
+  }
+  const Clock::time_point verify_started = Clock::now();
+  for (VerifiedChunk& chunk : out) chunk.verify_started = verify_started;
+  if (!options.skip_geometric_verification) {
+    // Keypoint positions once per image of the chunks, not once per pair.
+    std::unordered_map<image_t, std::vector<Eigen::Vector2d>> positions;
+    std::vector<std::pair<std::vector<Eigen::Vector2d>*, const ImageFeatures*>> to_fill;
+    for (const MatchedChunk& item : *items) {
+      for (const auto& entry : item.features) {
+        const auto slot = positions.emplace(entry.first, std::vector<Eigen::Vector2d>());
+        if (slot.second) to_fill.emplace_back(&slot.first->second, entry.second.get());
+      }
+    }
+    ParallelFor(to_fill.size(), options.num_threads,
+                [&](size_t i) { *to_fill[i].first = KeypointPositions(to_fill[i].second->keypoints); });
+    std::vector<VerificationPair> tasks;
+    for (VerifiedChunk& chunk : out) {
+      for (PairResult& result : *chunk.results) {
+        VerificationPair task;
+        task.camera1 = &source->CameraOfImage(result.pair.first);
+        task.camera2 = &source->CameraOfImage(result.pair.second);
+        task.points1 = &positions.at(result.pair.first);
+        task.points2 = &positions.at(result.pair.second);
+        task.matches = &result.matches;
+        task.random_seed = PairRandomSeed(options.two_view.random_seed, result.pair);
+        tasks.push_back(task);
+      }
+    }
+    std::vector<TwoViewGeometry> geometries = verifier->Verify(tasks);
+    size_t next = 0;
+    for (VerifiedChunk& chunk : out) {
+      for (PairResult& result : *chunk.results) result.geometry = std::move(geometries[next++]);
+    }
+  }
+  for (MatchedChunk& item : *items) item.features.clear();
+  return out;
+}
+
+}  // namespace pipeline_internal
+}  // namespace cashash
