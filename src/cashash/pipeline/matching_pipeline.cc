@@ -73,12 +73,12 @@ class VerificationGate {
 // One run of the pipeline: the queues, the turnstile, the gate, the first
 // error and the stats that its stages share, and the stages themselves, one
 // function each:
-//   Match             this thread: load what a chunk needs, match it;
-//   CompleteDeferred  (deferred_matching_thread) what the matcher deferred,
-//                     on a thread of its own;
-//   Verify            the batch verifier's calls, on as many threads as it
-//                     takes calls at once;
-//   Write             the single writer.
+//   Match                 this thread: load what a chunk needs, match it;
+//   CompleteDeferredWork  (deferred_matching_thread) what the matcher
+//                         deferred, on a thread of its own;
+//   Verify                the batch verifier's calls, on as many threads
+//                         as it takes calls at once;
+//   Write                 the single writer.
 // Execute keeps the object alive until every thread is joined, which is what
 // makes a failure on any stage safe to stop the others: a stage that fails
 // records the error and closes the queues it shares.
