@@ -356,19 +356,9 @@ bool ExtraVerifiersOnBacklogFromEnvironment() {
   return text == nullptr || std::string(text) != "eager";
 }
 
-// CASHASH_WRITE_MATCHES_AHEAD=1 has the writer take a chunk's raw matches
-// while the chunk is verified (PipelineOptions::write_matches_ahead), to
-// compare; 0 or unset: one write per chunk after verification.
-bool WriteMatchesAheadFromEnvironment() {
-  const char* text = std::getenv("CASHASH_WRITE_MATCHES_AHEAD");
-  return text != nullptr && std::string(text) == "1";
-}
-
-// CASHASH_REMATCH_THREAD=1 completes the matcher's deferred work (the GPU
-// exact rematch) on a thread of its own instead of the verification
-// threads (PipelineOptions::deferred_matching_thread), to compare.
-bool DeferredMatchingThreadFromEnvironment() {
-  const char* text = std::getenv("CASHASH_REMATCH_THREAD");
+// Whether environment variable `name` is set to "1" (the switches below).
+bool EnvironmentSwitchOn(const char* name) {
+  const char* text = std::getenv(name);
   return text != nullptr && std::string(text) == "1";
 }
 
@@ -406,8 +396,12 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.two_view = plan.options.two_view;
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
-  pipeline_options.write_matches_ahead = WriteMatchesAheadFromEnvironment();
-  pipeline_options.deferred_matching_thread = DeferredMatchingThreadFromEnvironment();
+  // To compare, until a device has measured them: CASHASH_WRITE_MATCHES_AHEAD=1
+  // has the writer take a chunk's raw matches while it is verified,
+  // CASHASH_REMATCH_THREAD=1 gives the deferred exact rematch a thread of
+  // its own (PipelineOptions).
+  pipeline_options.write_matches_ahead = EnvironmentSwitchOn("CASHASH_WRITE_MATCHES_AHEAD");
+  pipeline_options.deferred_matching_thread = EnvironmentSwitchOn("CASHASH_REMATCH_THREAD");
   PipelineTrace trace;
   const std::string trace_path = PipelineTracePathFromEnvironment(share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;

@@ -10,7 +10,6 @@
 // written in ExhaustiveMatching blocks, one transaction per block pair,
 // as the pipeline writes them.
 //
-//
 // With --two_steps 1 each chunk goes through the sink in the pipeline's two
 // steps instead (ResultSink::WriteMatchesAhead, then WriteGeometries, as
 // with CASHASH_WRITE_MATCHES_AHEAD=1), and a second table says what each
@@ -124,10 +123,10 @@ Measurement Run(const std::string& source, const std::string& copy, bool write_e
         sink->WriteMatchesAhead(results);
         const auto t1 = std::chrono::steady_clock::now();
         sink->WriteGeometries(results);
-        const double first = std::chrono::duration<double>(t1 - t0).count();
-        const double second = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
-        (chunk.block_i == chunk.block_j ? m.diagonal_first : m.other_first) += first;
-        (chunk.block_i == chunk.block_j ? m.diagonal_second : m.other_second) += second;
+        const bool diagonal = chunk.block_i == chunk.block_j;
+        (diagonal ? m.diagonal_first : m.other_first) += std::chrono::duration<double>(t1 - t0).count();
+        (diagonal ? m.diagonal_second : m.other_second) +=
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
       } else {
         sink->WriteChunk(results);
       }

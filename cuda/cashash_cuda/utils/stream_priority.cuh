@@ -36,14 +36,13 @@ inline bool DeferredRematchBelowVerification() {
 // greatest, and a smaller number is scheduled first); `rematch_low` as
 // CASHASH_REMATCH_PRIORITY=low asks.
 inline int StagePriority(StreamRole role, int least, int greatest, bool rematch_low) {
-  const bool low = rematch_low;
   switch (role) {
     case StreamRole::kMatching:
       return greatest;
     case StreamRole::kVerification:
-      return low && least > greatest ? least - 1 : least;
+      return rematch_low && least > greatest ? least - 1 : least;
     case StreamRole::kDeferredRematch:
-      return low ? least : greatest;
+      return rematch_low ? least : greatest;
   }
   return least;
 }

@@ -39,7 +39,7 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
       results[k].pair = pairs[k];
       results[k].matches = std::move(item.matches[k]);
     }
-    if (matches_final && !options.skip_geometric_verification) out[c].matches_written = matches_final(out[c]);
+    if (matches_final) out[c].matches_written = matches_final(out[c]);
   }
   const Clock::time_point verify_started = Clock::now();
   for (VerifiedChunk& chunk : out) chunk.verify_started = verify_started;

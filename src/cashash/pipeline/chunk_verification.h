@@ -64,7 +64,7 @@ bool CompleteDeferred(MatchedChunk* item);
 // tail instead of paying it in turn. Releases the chunks' features.
 // `matches_final`, when set, is given each chunk once its matches are
 // final, before the verifier call, and says whether it took them (to write
-// them ahead).
+// them ahead); the pipeline sets it only where chunks are verified.
 std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
                                         std::vector<MatchedChunk>* items, BatchVerifier* verifier,
                                         const std::function<bool(const VerifiedChunk&)>& matches_final);

@@ -103,7 +103,8 @@ class PipelineRun {
         to_verify_(deferred_stage_ ? std::max<size_t>(1, chunks_in_queue_ - 2) : chunks_in_queue_),
         to_write_(std::max<size_t>(1, options.chunks_to_write)),
         // The writer takes a chunk's raw matches ahead of its verified rows.
-        write_ahead_(options.write_matches_ahead && sink->WritesMatchesAhead()) {
+        write_ahead_(options.write_matches_ahead && !options.skip_geometric_verification &&
+                     sink->WritesMatchesAhead()) {
     verifier_ = verifier;
     if (verifier_ == nullptr && !options_.skip_geometric_verification) {
       default_verifier_ = CreateCpuBatchVerifier(options_.two_view, options_.num_threads);

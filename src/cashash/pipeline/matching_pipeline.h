@@ -104,8 +104,8 @@ struct PipelineOptions {
   // chunks are verified, writes them then, and after verification only the
   // geometries are left. A run ends with the writes of its last verified
   // chunks; on the 300-image street that was 0.05-0.10 s with the device
-  // idle (device run 121's traces), and two_view_geometries rows are about
-  // 40-60 % of a chunk's writing (write_rows_bench, split). Ignored when
+  // idle (device run 121's traces), and two_view_geometries rows are 44-75 %
+  // of a chunk's writing (write_rows_bench --two_steps 1). Ignored when
   // verification is skipped.
   bool write_matches_ahead = false;
   // Complete what the matcher deferred (the GPU cascade's exact rematch) on
