@@ -307,6 +307,57 @@ TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
   }
 }
 
+// A bucket's A rows split over several warps (CASHASH_CASCADE_TILE_STRIPS,
+// LaunchCascadeTiles' strips), or its chunks past the first few shared out
+// in a second pass (CASHASH_CASCADE_BIG_BUCKETS), append the same
+// candidates in another order:
+// the lists are unordered, so the matches must be identical. The repeated
+// rows make buckets of 400 and more, 13 chunks of A for a single warp.
+TEST(GpuCascadeTest, BucketsSplitOverWarpsGiveIdenticalMatches) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(9);
+  std::vector<FeatureDescriptors> images{source.Image(6000)};
+  for (int i = 1; i < 4; ++i) images.push_back(source.Related(images[i - 1], 5000 + 500 * i, 0.5));
+  std::vector<uint8_t> repeated(kDescriptorDim);
+  source.Row(repeated.data());
+  for (size_t i = 0; i < 400; ++i) {
+    std::copy(repeated.begin(), repeated.end(), images[2].data.begin() + 3 * i * kDescriptorDim);
+    std::copy(repeated.begin(), repeated.end(), images[3].data.begin() + 5 * i * kDescriptorDim);
+  }
+  const std::vector<ImagePair> pairs = AllPairs(images.size());
+  const MeanDescriptor mean = MeanOf(images);
+  SiftMatchingOptions sift;
+  CasHashOptions cas;
+  cas.num_tables = 6;
+  cas.bits_per_table = 9;
+  cas.tau = 32;
+  std::vector<FeatureMatches> one;
+  {
+    ScopedEnv env("CASHASH_CASCADE_TILE_STRIPS", "1");
+    auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+    one = AddAndMatch(gpu.get(), images, pairs);
+  }
+  size_t total = 0;
+  for (const FeatureMatches& m : one) total += m.size();
+  EXPECT_GT(total, 1000u);
+  for (const char* strips : {"2", "8", "32"}) {
+    ScopedEnv env("CASHASH_CASCADE_TILE_STRIPS", strips);
+    auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+    EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one) << strips << " warps per bucket";
+  }
+  // The chunks of large buckets past the first N shared out in a second
+  // pass (CASHASH_CASCADE_BIG_BUCKETS=N), alone and with strips.
+  for (const char* first_chunks : {"1", "4"}) {
+    for (const char* strips : {"1", "4"}) {
+      ScopedEnv env_big("CASHASH_CASCADE_BIG_BUCKETS", first_chunks);
+      ScopedEnv env_strips("CASHASH_CASCADE_TILE_STRIPS", strips);
+      auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+      EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one)
+          << "second pass after " << first_chunks << " chunks, " << strips << " warps per bucket";
+    }
+  }
+}
+
 TEST(GpuCascadeTest, DeviceOutOfMemoryIsAnError) {
   SKIP_WITHOUT_CUDA_DEVICE();
   cuda::DeviceBuffer buffer;

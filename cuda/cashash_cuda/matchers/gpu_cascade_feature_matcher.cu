@@ -52,6 +52,35 @@ bool UseTiledKernels() {
   return value == nullptr || std::string(value) != "direct";
 }
 
+// Warps per bucket in the tile kernel (LaunchCascadeTiles' strips);
+// CASHASH_CASCADE_TILE_STRIPS=N sets it, to compare.
+int TileStrips() {
+  const char* value = std::getenv("CASHASH_CASCADE_TILE_STRIPS");
+  if (value == nullptr) return 1;
+  try {
+    return std::max(1, std::stoi(value));
+  } catch (const std::exception&) {
+    throw std::invalid_argument(std::string("CASHASH_CASCADE_TILE_STRIPS: expected a number, got '") + value + "'");
+  }
+}
+
+// Chunks of 32 A rows a tile warp takes before the rest of its bucket is
+// shared out in a second pass (BigBucketQueue); 0: no second pass.
+// CASHASH_CASCADE_BIG_BUCKETS=N sets it, to compare.
+int BigBucketFirstChunks() {
+  const char* value = std::getenv("CASHASH_CASCADE_BIG_BUCKETS");
+  if (value == nullptr) return 0;
+  try {
+    return std::max(0, std::stoi(value));
+  } catch (const std::exception&) {
+    throw std::invalid_argument(std::string("CASHASH_CASCADE_BIG_BUCKETS: expected a number, got '") + value + "'");
+  }
+}
+
+// Queue entries per batch: far more than the buckets past a few chunks
+// (about one per table and pair at 16,384 features), 512 KiB.
+constexpr uint32_t kBigBucketCapacity = 65536;
+
 std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
   if (options.num_tables * options.bits_per_table > kMaxSignatureBits) {
     return "the GPU cascade matcher needs CasHash.num_tables * CasHash.bits_per_table <= " +
@@ -79,6 +108,7 @@ struct BatchSlot {
   DeviceBuffer list_keys;   // tiled kernels: kCandidateListCapacity uint32 per list row
   DeviceBuffer list_counts; // tiled kernels: uint32 per list row
   DeviceBuffer guides;      // guided matching: EpipolarGuideDevice per task
+  DeviceBuffer big_buckets; // tiled kernels with a second pass: BigBucketQueue's entries and counters
   PinnedBuffer host_tasks;  // staging of PairTask[]
   PinnedBuffer host_guides; // staging of EpipolarGuideDevice[]
   size_t guide_capacity = 0;
@@ -168,6 +198,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
         options_(options),
         device_(gpu_index),
         tiled_(UseTiledKernels()),
+        tile_strips_(TileStrips()),
+        big_bucket_chunks_(BigBucketFirstChunks()),
         list_capacity_(kCandidateListCapacity) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
@@ -185,6 +217,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
       CUDA_CHECK(cudaEventCreateWithFlags(&slot.done, cudaEventDisableTiming));
     }
     grid_size_ = CascadeMatchGridSize(device_);
+    CUDA_CHECK(cudaDeviceGetAttribute(&sm_count_, cudaDevAttrMultiProcessorCount, device_));
   }
 
   ~GpuCascadeMatcher() override {
@@ -608,7 +641,21 @@ class GpuCascadeMatcher : public FeatureMatcher {
       lists.counts = slot->list_counts.as<uint32_t>();
       lists.capacity = list_capacity_;
       CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * sizeof(uint32_t), slot->stream));
-      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream);
+      BigBucketQueue big;
+      if (big_bucket_chunks_ > 0) {
+        const size_t entry_bytes = size_t{kBigBucketCapacity} * sizeof(uint2);
+        if (slot->big_buckets.bytes() == 0) slot->big_buckets.Allocate(entry_bytes + 64, "big-bucket queue");
+        char* base = slot->big_buckets.as<char>();
+        big.entries = reinterpret_cast<uint2*>(base);
+        big.capacity = kBigBucketCapacity;
+        big.header = reinterpret_cast<unsigned long long*>(base + entry_bytes);
+        big.cursor = reinterpret_cast<uint32_t*>(base + entry_bytes + 8);
+        big.overflow_base = reinterpret_cast<uint32_t*>(base + entry_bytes + 12);
+        big.first_chunks = static_cast<uint32_t>(big_bucket_chunks_);
+        big.warps = static_cast<unsigned>(sm_count_) * 32u;
+      }
+      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream,
+                         tile_strips_, big);
       if (guided_) {
         LaunchCascadeSelectGuided(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
                                   slot->guides.as<EpipolarGuideDevice>(), points_.as<float2>(), max_distance_,
@@ -649,6 +696,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
   const CasHashOptions options_;
   const int device_;
   const bool tiled_;
+  const int tile_strips_;  // warps per bucket in the tile kernel (TileStrips)
+  const int big_bucket_chunks_;  // BigBucketFirstChunks
+  int sm_count_ = 1;
   const int list_capacity_;
   size_t budget_ = 0;
   size_t used_ = 0;

@@ -19,6 +19,8 @@
 // fallback halved the rate (15.4k).
 #include "cashash_cuda/matching/cascade_matcher_tiles.cuh"
 
+#include <algorithm>
+
 #include "cashash_cuda/utils/bit_mma.cuh"
 #include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/warp_primitives.cuh"
@@ -58,192 +60,284 @@ constexpr uint32_t kDropped = 0xffffffffu;
 
 __device__ __forceinline__ uint32_t Popc128(uint4 v) { return __popc(v.x) + __popc(v.y) + __popc(v.z) + __popc(v.w); }
 
-// One function because the warp's TileScratch in shared memory and its A
-// fragments and row limits in registers stay live across the whole B sweep,
-// and the queue passes are ordered by __syncwarp on those same arrays.
-__global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
-                                                                  MatchParams params, CandidateLists lists) {
-  __shared__ TileScratch s;
-  const unsigned lane = LaneId();
-  const unsigned g = lane >> 2, t = lane & 3u;  // MMA fragment coordinates
-  const uint32_t item = blockIdx.x;
-  if (item >= total_items) return;
+// One (task, table, bucket): where its two buckets lie and what the
+// duplicate test needs.
+struct BucketView {
+  const BucketEntry* entries_a;
+  const BucketEntry* entries_b;
+  uint32_t a_begin, a_end, b_begin, b_end;
+  size_t rows_a, rows_b;    // first list rows of the pair's sides
+  uint64_t below;           // signature bits of the tables before this one
+  uint64_t high_from_t;
+};
 
+__device__ __forceinline__ BucketView ViewBucket(const PairTask* tasks, const MatchParams& params, uint32_t item) {
   const int bits = params.bits_per_table;
   const uint32_t buckets = 1u << bits;
-  const uint32_t num_tables = static_cast<uint32_t>(params.num_tables);
-  const uint32_t per_task = num_tables * buckets;
+  const uint32_t per_task = static_cast<uint32_t>(params.num_tables) * buckets;
   const uint32_t task_index = item / per_task;
   const uint32_t table = (item - task_index * per_task) >> bits;
   const uint32_t bucket = item & (buckets - 1);
   const PairTask& task = tasks[task_index];
-
+  BucketView v;
   const uint32_t* offsets_a = task.a.offsets + table * (buckets + 1) + bucket;
   const uint32_t* offsets_b = task.b.offsets + table * (buckets + 1) + bucket;
-  const uint32_t a_begin = offsets_a[0], a_end = offsets_a[1];
-  const uint32_t b_begin = offsets_b[0], b_end = offsets_b[1];
-  if (a_begin == a_end || b_begin == b_end) return;
-
-  const BucketEntry* entries_a = task.a.entries + size_t(table) * task.a.num_features;
-  const BucketEntry* entries_b = task.b.entries + size_t(table) * task.b.num_features;
-  const size_t rows_a = task.list_offset;
-  const size_t rows_b = size_t(task.list_offset) + task.a.num_features;
-  const uint32_t capacity = static_cast<uint32_t>(lists.capacity);
-  const int tau = min(params.tau, 128);
+  v.a_begin = offsets_a[0];
+  v.a_end = offsets_a[1];
+  v.b_begin = offsets_b[0];
+  v.b_end = offsets_b[1];
+  v.entries_a = task.a.entries + size_t(table) * task.a.num_features;
+  v.entries_b = task.b.entries + size_t(table) * task.b.num_features;
+  v.rows_a = task.list_offset;
+  v.rows_b = size_t(task.list_offset) + task.a.num_features;
   // Duplicate test (see EntryKey in cascade_matcher.cu): fields of the
   // tables before this one must all differ.
-  const uint64_t below = (uint64_t{1} << (table * bits)) - 1;
-  const uint64_t high_from_t = params.field_high_bits & ~below;
+  v.below = (uint64_t{1} << (table * bits)) - 1;
+  v.high_from_t = params.field_high_bits & ~v.below;
+  return v;
+}
+
+// A's rows a0 .. a0 + 31 (those before a_end) against all of B's bucket. One
+// function because the warp's TileScratch in shared memory and its A
+// fragments and row limits in registers stay live across the whole B sweep,
+// and the queue passes are ordered by __syncwarp on those same arrays.
+// s.kept_a and s.kept_b are zero on entry and on return.
+__device__ __forceinline__ void TileChunk(TileScratch& s, const BucketView& v, uint32_t a0, const MatchParams& params,
+                                          const CandidateLists& lists) {
+  const unsigned lane = LaneId();
+  const unsigned g = lane >> 2, t = lane & 3u;  // MMA fragment coordinates
+  const uint32_t capacity = static_cast<uint32_t>(lists.capacity);
+  const int tau = min(params.tau, 128);
+  __syncwarp();
+  {
+    const bool valid = a0 + lane < v.a_end;
+    const uint4* entry = reinterpret_cast<const uint4*>(v.entries_a + min(a0 + lane, v.a_end - 1));
+    const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+    const uint4 meta = __ldg(entry + 1);
+    s.code_a[lane] = code;
+    s.signature_a[lane] = uint64_t(meta.y) << 32 | meta.x;
+    s.index_a[lane] = meta.z;
+    s.pop_a[lane] = valid ? Popc128(code) : 255u;
+  }
+  __syncwarp();
+  // This lane's A fragments (rows mi * 16 + g + 8h, word t) and the
+  // thresholds of its four rows: within tau <=> 2 c - pop_b >= pop_a - tau.
+  const uint32_t* words_a = reinterpret_cast<const uint32_t*>(s.code_a);
+  uint32_t frag_a[4];
+  int row_limit[4];
+#pragma unroll
+  for (int k = 0; k < 4; ++k) {
+    const unsigned row = (k >> 1) * 16 + g + (k & 1) * 8;
+    frag_a[k] = words_a[row * 4 + t];
+    row_limit[k] = static_cast<int>(s.pop_a[row]) - tau;
+  }
+
+  for (uint32_t b0 = v.b_begin; b0 < v.b_end; b0 += 32) {
+    {
+      const bool valid = b0 + lane < v.b_end;
+      const uint4* entry = reinterpret_cast<const uint4*>(v.entries_b + min(b0 + lane, v.b_end - 1));
+      const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+      const uint4 meta = __ldg(entry + 1);
+      __syncwarp();  // the previous chunk's queue passes are done with these
+      s.code_b[lane] = code;
+      s.signature_b[lane] = uint64_t(meta.y) << 32 | meta.x;
+      s.index_b[lane] = meta.z;
+      s.pop_b[lane] = valid ? Popc128(code) : 255u;
+    }
+    __syncwarp();
+
+    // Tau masks: bit c of mask[k] set when (row k of this lane, column c)
+    // is within tau, for this lane's columns 2t, 2t + 1 of each n-tile
+    // (shifted into place below).
+    const uint32_t* words_b = reinterpret_cast<const uint32_t*>(s.code_b);
+    uint32_t mask[4] = {0, 0, 0, 0};
+#pragma unroll
+    for (int ni = 0; ni < 4; ++ni) {
+      const uint32_t frag_b = words_b[(ni * 8 + g) * 4 + t];
+      const int pop0 = static_cast<int>(s.pop_b[ni * 8 + 2 * t]);
+      const int pop1 = static_cast<int>(s.pop_b[ni * 8 + 2 * t + 1]);
+#pragma unroll
+      for (int mi = 0; mi < 2; ++mi) {
+        int d[4];
+        BitAndPopcMma16x8x128(frag_a[mi * 2], frag_a[mi * 2 + 1], frag_b, d);
+        const uint32_t bit0 = 1u << (ni * 8), bit1 = 2u << (ni * 8);
+        mask[mi * 2] |= (2 * d[0] - pop0 >= row_limit[mi * 2] ? bit0 : 0u) |
+                        (2 * d[1] - pop1 >= row_limit[mi * 2] ? bit1 : 0u);
+        mask[mi * 2 + 1] |= (2 * d[2] - pop0 >= row_limit[mi * 2 + 1] ? bit0 : 0u) |
+                            (2 * d[3] - pop1 >= row_limit[mi * 2 + 1] ? bit1 : 0u);
+      }
+    }
+    // Whole rows: the four lanes of a group hold disjoint columns.
+#pragma unroll
+    for (int k = 0; k < 4; ++k) {
+      mask[k] <<= 2 * t;
+      mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 1);
+      mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 2);
+    }
+    // Lane r takes row r = 8k + g' from group g' (k = r / 8).
+    const unsigned source = (lane & 7u) << 2;
+    const uint32_t m0 = __shfl_sync(kFullWarpMask, mask[0], source);
+    const uint32_t m1 = __shfl_sync(kFullWarpMask, mask[1], source);
+    const uint32_t m2 = __shfl_sync(kFullWarpMask, mask[2], source);
+    const uint32_t m3 = __shfl_sync(kFullWarpMask, mask[3], source);
+    const unsigned k = lane >> 3;
+    const uint32_t row_mask = k == 0 ? m0 : k == 1 ? m1 : k == 2 ? m2 : m3;
+
+    // Queue positions in row order.
+    const uint32_t count = __popc(row_mask);
+    uint32_t first = count;
+#pragma unroll
+    for (int d = 1; d < 32; d <<= 1) {
+      const uint32_t o = __shfl_up_sync(kFullWarpMask, first, d);
+      if (lane >= static_cast<unsigned>(d)) first += o;
+    }
+    const uint32_t total = __shfl_sync(kFullWarpMask, first, 31);
+    first -= count;
+
+    for (uint32_t round = 0; round < total; round += kQueueCapacity) {
+      const uint32_t in_round = min(total - round, static_cast<uint32_t>(kQueueCapacity));
+      {
+        uint32_t position = first, m = row_mask;
+        while (m != 0 && position < round + in_round) {
+          const uint32_t col = __ffs(m) - 1;
+          m &= m - 1;
+          if (position >= round) s.queue[position - round] = lane | col << 5;
+          ++position;
+        }
+      }
+      __syncwarp();
+      // Duplicate test, distance and ranks, 32 survivors per step.
+      for (uint32_t p = lane; p < in_round; p += 32) {
+        const uint32_t e = s.queue[p];
+        const uint32_t row = e & 31u, col = (e >> 5) & 31u;
+        const uint64_t x_sig = ((s.signature_a[row] ^ s.signature_b[col]) & v.below) | v.high_from_t;
+        uint32_t out = kDropped;
+        if (((x_sig - params.field_low_bits) & ~x_sig & params.field_high_bits) == 0) {
+          const uint4 x = s.code_a[row], y = s.code_b[col];
+          const uint32_t distance = __popc(x.x ^ y.x) + __popc(x.y ^ y.y) + __popc(x.z ^ y.z) + __popc(x.w ^ y.w);
+          const uint32_t rank_a = atomicAdd(&s.kept_a[row], 1u);
+          const uint32_t rank_b = atomicAdd(&s.kept_b[col], 1u);
+          out = row | col << 5 | rank_a << 10 | rank_b << 15 | distance << 20;
+        }
+        s.queue[p] = out;
+      }
+      __syncwarp();
+      // One list reservation per row and per column of the round.
+      const uint32_t kept_a = s.kept_a[lane], kept_b = s.kept_b[lane];
+      if (kept_a > 0) s.kept_a[lane] = atomicAdd(lists.counts + v.rows_a + s.index_a[lane], kept_a);
+      if (kept_b > 0) s.kept_b[lane] = atomicAdd(lists.counts + v.rows_b + s.index_b[lane], kept_b);
+      __syncwarp();
+      for (uint32_t p = lane; p < in_round; p += 32) {
+        const uint32_t e = s.queue[p];
+        if (e == kDropped) continue;
+        const uint32_t row = e & 31u, col = (e >> 5) & 31u;
+        const uint32_t rank_a = (e >> 10) & 31u, rank_b = (e >> 15) & 31u, distance = e >> 20;
+        const uint32_t index_a = s.index_a[row], index_b = s.index_b[col];
+        const uint32_t slot_a = s.kept_a[row] + rank_a, slot_b = s.kept_b[col] + rank_b;
+        if (slot_a < capacity) lists.keys[(v.rows_a + index_a) * capacity + slot_a] = distance << 24 | index_b;
+        if (slot_b < capacity) lists.keys[(v.rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
+      }
+      __syncwarp();
+      s.kept_a[lane] = 0;
+      s.kept_b[lane] = 0;
+    }
+  }
+}
+
+// First pass: one warp per (task, table, bucket) and A strip (see
+// LaunchCascadeTiles). With a queue (big.entries), a warp takes at most
+// big.first_chunks chunks of A; the rest of a larger bucket goes to the
+// queue as (item, first flattened chunk) for the second pass, unless the
+// queue is full, in which case the warp takes it all.
+__global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
+                                                                  MatchParams params, CandidateLists lists,
+                                                                  uint32_t strip_shift, BigBucketQueue big) {
+  __shared__ TileScratch s;
+  const unsigned lane = LaneId();
+  if (blockIdx.x >= total_items) return;
+  const uint32_t strip = blockIdx.x & ((1u << strip_shift) - 1);
+  const uint32_t item = blockIdx.x >> strip_shift;
+  const BucketView v = ViewBucket(tasks, params, item);
+  const uint32_t a_first = v.a_begin + 32u * strip;  // this warp's A chunks: a_first, + 32 << strip_shift, ...
+  if (a_first >= v.a_end || v.b_begin == v.b_end) return;
+  uint32_t a_limit = v.a_end;
+  if (big.entries != nullptr && v.a_end - v.a_begin > 32u * big.first_chunks) {
+    a_limit = v.a_begin + 32u * big.first_chunks;
+    unsigned long long old = 0;
+    const uint32_t rest = (v.a_end - a_limit + 31) / 32;
+    if (lane == 0) {
+      old = atomicAdd(big.header, (1ull << 32) | rest);
+      const uint32_t index = static_cast<uint32_t>(old >> 32);
+      if (index < big.capacity) {
+        big.entries[index] = make_uint2(item, static_cast<uint32_t>(old));
+      } else if (index == big.capacity) {
+        *big.overflow_base = static_cast<uint32_t>(old);  // the second pass stops here
+      }
+    }
+    old = __shfl_sync(kFullWarpMask, old, 0);
+    if (static_cast<uint32_t>(old >> 32) >= big.capacity) a_limit = v.a_end;  // no room: all here
+  }
 
   s.kept_a[lane] = 0;
   s.kept_b[lane] = 0;
-  for (uint32_t a0 = a_begin; a0 < a_end; a0 += 32) {
-    __syncwarp();
-    {
-      const bool valid = a0 + lane < a_end;
-      const uint4* entry = reinterpret_cast<const uint4*>(entries_a + min(a0 + lane, a_end - 1));
-      const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
-      const uint4 meta = __ldg(entry + 1);
-      s.code_a[lane] = code;
-      s.signature_a[lane] = uint64_t(meta.y) << 32 | meta.x;
-      s.index_a[lane] = meta.z;
-      s.pop_a[lane] = valid ? Popc128(code) : 255u;
+  for (uint32_t a0 = a_first; a0 < a_limit; a0 += 32u << strip_shift) TileChunk(s, v, a0, params, lists);
+}
+
+// Second pass: every warp takes the queued chunks one at a time (a chunk of
+// 32 A rows against all of its B bucket) until none is left, so that a
+// bucket of hundreds of rows is spread over as many warps.
+__global__ void __launch_bounds__(kTileThreads) CascadeBigBucketKernel(const PairTask* tasks, MatchParams params,
+                                                                       CandidateLists lists, BigBucketQueue big) {
+  __shared__ TileScratch s;
+  const unsigned lane = LaneId();
+  const unsigned long long header = *big.header;
+  const uint32_t count = static_cast<uint32_t>(header >> 32);
+  const uint32_t n = min(count, big.capacity);
+  const uint32_t total = count > big.capacity ? *big.overflow_base : static_cast<uint32_t>(header);
+  s.kept_a[lane] = 0;
+  s.kept_b[lane] = 0;
+  for (;;) {
+    uint32_t k = 0;
+    if (lane == 0) k = atomicAdd(big.cursor, 1u);
+    k = __shfl_sync(kFullWarpMask, k, 0);
+    if (k >= total) return;
+    // The entry whose chunks hold k: the last with first chunk <= k.
+    uint32_t lo = 0, hi = n;
+    while (hi - lo > 1) {
+      const uint32_t mid = (lo + hi) / 2;
+      if (big.entries[mid].y <= k) lo = mid; else hi = mid;
     }
-    __syncwarp();
-    // This lane's A fragments (rows mi * 16 + g + 8h, word t) and the
-    // thresholds of its four rows: within tau <=> 2 c - pop_b >= pop_a - tau.
-    const uint32_t* words_a = reinterpret_cast<const uint32_t*>(s.code_a);
-    uint32_t frag_a[4];
-    int row_limit[4];
-#pragma unroll
-    for (int k = 0; k < 4; ++k) {
-      const unsigned row = (k >> 1) * 16 + g + (k & 1) * 8;
-      frag_a[k] = words_a[row * 4 + t];
-      row_limit[k] = static_cast<int>(s.pop_a[row]) - tau;
-    }
-
-    for (uint32_t b0 = b_begin; b0 < b_end; b0 += 32) {
-      {
-        const bool valid = b0 + lane < b_end;
-        const uint4* entry = reinterpret_cast<const uint4*>(entries_b + min(b0 + lane, b_end - 1));
-        const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
-        const uint4 meta = __ldg(entry + 1);
-        __syncwarp();  // the previous chunk's queue passes are done with these
-        s.code_b[lane] = code;
-        s.signature_b[lane] = uint64_t(meta.y) << 32 | meta.x;
-        s.index_b[lane] = meta.z;
-        s.pop_b[lane] = valid ? Popc128(code) : 255u;
-      }
-      __syncwarp();
-
-      // Tau masks: bit c of mask[k] set when (row k of this lane, column c)
-      // is within tau, for this lane's columns 2t, 2t + 1 of each n-tile
-      // (shifted into place below).
-      const uint32_t* words_b = reinterpret_cast<const uint32_t*>(s.code_b);
-      uint32_t mask[4] = {0, 0, 0, 0};
-#pragma unroll
-      for (int ni = 0; ni < 4; ++ni) {
-        const uint32_t frag_b = words_b[(ni * 8 + g) * 4 + t];
-        const int pop0 = static_cast<int>(s.pop_b[ni * 8 + 2 * t]);
-        const int pop1 = static_cast<int>(s.pop_b[ni * 8 + 2 * t + 1]);
-#pragma unroll
-        for (int mi = 0; mi < 2; ++mi) {
-          int d[4];
-          BitAndPopcMma16x8x128(frag_a[mi * 2], frag_a[mi * 2 + 1], frag_b, d);
-          const uint32_t bit0 = 1u << (ni * 8), bit1 = 2u << (ni * 8);
-          mask[mi * 2] |= (2 * d[0] - pop0 >= row_limit[mi * 2] ? bit0 : 0u) |
-                          (2 * d[1] - pop1 >= row_limit[mi * 2] ? bit1 : 0u);
-          mask[mi * 2 + 1] |= (2 * d[2] - pop0 >= row_limit[mi * 2 + 1] ? bit0 : 0u) |
-                              (2 * d[3] - pop1 >= row_limit[mi * 2 + 1] ? bit1 : 0u);
-        }
-      }
-      // Whole rows: the four lanes of a group hold disjoint columns.
-#pragma unroll
-      for (int k = 0; k < 4; ++k) {
-        mask[k] <<= 2 * t;
-        mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 1);
-        mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 2);
-      }
-      // Lane r takes row r = 8k + g' from group g' (k = r / 8).
-      const unsigned source = (lane & 7u) << 2;
-      const uint32_t m0 = __shfl_sync(kFullWarpMask, mask[0], source);
-      const uint32_t m1 = __shfl_sync(kFullWarpMask, mask[1], source);
-      const uint32_t m2 = __shfl_sync(kFullWarpMask, mask[2], source);
-      const uint32_t m3 = __shfl_sync(kFullWarpMask, mask[3], source);
-      const unsigned k = lane >> 3;
-      const uint32_t row_mask = k == 0 ? m0 : k == 1 ? m1 : k == 2 ? m2 : m3;
-
-      // Queue positions in row order.
-      const uint32_t count = __popc(row_mask);
-      uint32_t first = count;
-#pragma unroll
-      for (int d = 1; d < 32; d <<= 1) {
-        const uint32_t o = __shfl_up_sync(kFullWarpMask, first, d);
-        if (lane >= static_cast<unsigned>(d)) first += o;
-      }
-      const uint32_t total = __shfl_sync(kFullWarpMask, first, 31);
-      first -= count;
-
-      for (uint32_t round = 0; round < total; round += kQueueCapacity) {
-        const uint32_t in_round = min(total - round, static_cast<uint32_t>(kQueueCapacity));
-        {
-          uint32_t position = first, m = row_mask;
-          while (m != 0 && position < round + in_round) {
-            const uint32_t col = __ffs(m) - 1;
-            m &= m - 1;
-            if (position >= round) s.queue[position - round] = lane | col << 5;
-            ++position;
-          }
-        }
-        __syncwarp();
-        // Duplicate test, distance and ranks, 32 survivors per step.
-        for (uint32_t p = lane; p < in_round; p += 32) {
-          const uint32_t e = s.queue[p];
-          const uint32_t row = e & 31u, col = (e >> 5) & 31u;
-          const uint64_t v = ((s.signature_a[row] ^ s.signature_b[col]) & below) | high_from_t;
-          uint32_t out = kDropped;
-          if (((v - params.field_low_bits) & ~v & params.field_high_bits) == 0) {
-            const uint4 x = s.code_a[row], y = s.code_b[col];
-            const uint32_t distance = __popc(x.x ^ y.x) + __popc(x.y ^ y.y) + __popc(x.z ^ y.z) + __popc(x.w ^ y.w);
-            const uint32_t rank_a = atomicAdd(&s.kept_a[row], 1u);
-            const uint32_t rank_b = atomicAdd(&s.kept_b[col], 1u);
-            out = row | col << 5 | rank_a << 10 | rank_b << 15 | distance << 20;
-          }
-          s.queue[p] = out;
-        }
-        __syncwarp();
-        // One list reservation per row and per column of the round.
-        const uint32_t kept_a = s.kept_a[lane], kept_b = s.kept_b[lane];
-        if (kept_a > 0) s.kept_a[lane] = atomicAdd(lists.counts + rows_a + s.index_a[lane], kept_a);
-        if (kept_b > 0) s.kept_b[lane] = atomicAdd(lists.counts + rows_b + s.index_b[lane], kept_b);
-        __syncwarp();
-        for (uint32_t p = lane; p < in_round; p += 32) {
-          const uint32_t e = s.queue[p];
-          if (e == kDropped) continue;
-          const uint32_t row = e & 31u, col = (e >> 5) & 31u;
-          const uint32_t rank_a = (e >> 10) & 31u, rank_b = (e >> 15) & 31u, distance = e >> 20;
-          const uint32_t index_a = s.index_a[row], index_b = s.index_b[col];
-          const uint32_t slot_a = s.kept_a[row] + rank_a, slot_b = s.kept_b[col] + rank_b;
-          if (slot_a < capacity) lists.keys[(rows_a + index_a) * capacity + slot_a] = distance << 24 | index_b;
-          if (slot_b < capacity) lists.keys[(rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
-        }
-        __syncwarp();
-        s.kept_a[lane] = 0;
-        s.kept_b[lane] = 0;
-      }
-    }
+    const uint2 entry = big.entries[lo];
+    const BucketView v = ViewBucket(tasks, params, entry.x);
+    const uint32_t a0 = v.a_begin + 32u * (big.first_chunks + (k - entry.y));
+    TileChunk(s, v, a0, params, lists);
   }
 }
 
 }  // namespace
 
 void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
-                        cudaStream_t stream) {
+                        cudaStream_t stream, int strips, BigBucketQueue big) {
   if (num_tasks == 0) return;
   const uint64_t items = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
-  CascadeTileKernel<<<static_cast<unsigned>(items), kTileThreads, 0, stream>>>(
-      tasks, static_cast<uint32_t>(items), params, lists);
+  uint32_t strip_shift = 0;
+  while ((2u << strip_shift) <= static_cast<uint32_t>(std::max(strips, 1)) && strip_shift < 5 &&
+         (items << (strip_shift + 1)) <= uint64_t{0x7fffffff}) {
+    ++strip_shift;
+  }
+  const uint64_t blocks = items << strip_shift;
+  if (big.entries != nullptr) {
+    // header (count << 32 | chunks) and the second pass's cursor
+    CUDA_CHECK(cudaMemsetAsync(big.header, 0, sizeof(unsigned long long), stream));
+    CUDA_CHECK(cudaMemsetAsync(big.cursor, 0, sizeof(uint32_t), stream));
+  }
+  CascadeTileKernel<<<static_cast<unsigned>(blocks), kTileThreads, 0, stream>>>(
+      tasks, static_cast<uint32_t>(blocks), params, lists, strip_shift, big);
   CUDA_CHECK_LAUNCH();
+  if (big.entries != nullptr) {
+    CascadeBigBucketKernel<<<big.warps, kTileThreads, 0, stream>>>(tasks, params, lists, big);
+    CUDA_CHECK_LAUNCH();
+  }
 }
 
 }  // namespace cuda

@@ -47,10 +47,34 @@ struct CandidateLists {
 // leaves the per-query fallback to the few features in very dense buckets.
 constexpr int kCandidateListCapacity = 256;
 
-// Fills `lists` for every task (one warp per (task, table, bucket)).
+// Where the first tile pass leaves the rest of the buckets larger than
+// first_chunks chunks of 32 A rows, for a second pass of `warps` warps that
+// share those chunks out one at a time (all device memory, zeroed by
+// LaunchCascadeTiles). entries[i] = (item, its first flattened chunk);
+// header = entries << 32 | chunks queued; a bucket that finds the queue
+// full is done by its own warp, and overflow_base stops the second pass
+// there. entries == nullptr: no queue, every warp does its whole bucket.
+struct BigBucketQueue {
+  uint2* entries = nullptr;
+  uint32_t capacity = 0;
+  unsigned long long* header = nullptr;
+  uint32_t* cursor = nullptr;
+  uint32_t* overflow_base = nullptr;
+  uint32_t first_chunks = 4;
+  unsigned warps = 0;
+};
+
+// Fills `lists` for every task: one warp per (task, table, bucket) and A
+// strip, the bucket's A rows split over `strips` warps (a power of two; each
+// takes every strips-th chunk of 32 rows against all of B's bucket), and
+// with `big`, the chunks of large buckets past the first few shared out in a
+// second pass. Buckets are far from equal: at 16,384 features and 6 x 10
+// bits the largest hold 500-750 features, 24 x 24 tiles for one warp against
+// one for a bucket of 16, so a single warp could outlast the rest of the
+// launch. Either way the same candidates reach the same (unordered) lists.
 // Asynchronous on `stream`.
 void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
-                        cudaStream_t stream);
+                        cudaStream_t stream, int strips = 1, BigBucketQueue big = BigBucketQueue());
 
 }  // namespace cuda
 }  // namespace cashash
