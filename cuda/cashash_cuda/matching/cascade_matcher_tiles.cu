@@ -245,10 +245,10 @@ __device__ __forceinline__ void TileChunk(TileScratch& s, const BucketView& v, u
 }
 
 // First pass: one warp per (task, table, bucket) and A strip (see
-// LaunchCascadeTiles). With a queue (big.entries), a warp takes at most
-// big.first_chunks chunks of A; the rest of a larger bucket goes to the
-// queue as (item, first flattened chunk) for the second pass, unless the
-// queue is full, in which case the warp takes it all.
+// LaunchCascadeTiles). With a queue (big.entries), the strips of a bucket
+// take its first big.first_chunks chunks of A; strip 0 queues the rest of a
+// larger bucket as (item, first flattened chunk) for the second pass, or,
+// if the queue is full, does the rest itself.
 __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
                                                                   MatchParams params, CandidateLists lists,
                                                                   uint32_t strip_shift, BigBucketQueue big) {
@@ -261,26 +261,32 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
   const uint32_t a_first = v.a_begin + 32u * strip;  // this warp's A chunks: a_first, + 32 << strip_shift, ...
   if (a_first >= v.a_end || v.b_begin == v.b_end) return;
   uint32_t a_limit = v.a_end;
+  bool rest_here = false;  // the queue was full: strip 0 does the rest too
   if (big.entries != nullptr && v.a_end - v.a_begin > 32u * big.first_chunks) {
     a_limit = v.a_begin + 32u * big.first_chunks;
-    unsigned long long old = 0;
-    const uint32_t rest = (v.a_end - a_limit + 31) / 32;
-    if (lane == 0) {
-      old = atomicAdd(big.header, (1ull << 32) | rest);
-      const uint32_t index = static_cast<uint32_t>(old >> 32);
-      if (index < big.capacity) {
-        big.entries[index] = make_uint2(item, static_cast<uint32_t>(old));
-      } else if (index == big.capacity) {
-        *big.overflow_base = static_cast<uint32_t>(old);  // the second pass stops here
+    if (strip == 0) {  // one entry per bucket, whatever the strips
+      unsigned long long old = 0;
+      const uint32_t rest = (v.a_end - a_limit + 31) / 32;
+      if (lane == 0) {
+        old = atomicAdd(big.header, (1ull << 32) | rest);
+        const uint32_t index = static_cast<uint32_t>(old >> 32);
+        if (index < big.capacity) {
+          big.entries[index] = make_uint2(item, static_cast<uint32_t>(old));
+        } else if (index == big.capacity) {
+          *big.overflow_base = static_cast<uint32_t>(old);  // the second pass stops here
+        }
       }
+      old = __shfl_sync(kFullWarpMask, old, 0);
+      rest_here = static_cast<uint32_t>(old >> 32) >= big.capacity;
     }
-    old = __shfl_sync(kFullWarpMask, old, 0);
-    if (static_cast<uint32_t>(old >> 32) >= big.capacity) a_limit = v.a_end;  // no room: all here
   }
 
   s.kept_a[lane] = 0;
   s.kept_b[lane] = 0;
   for (uint32_t a0 = a_first; a0 < a_limit; a0 += 32u << strip_shift) TileChunk(s, v, a0, params, lists);
+  if (rest_here) {
+    for (uint32_t a0 = a_limit; a0 < v.a_end; a0 += 32) TileChunk(s, v, a0, params, lists);
+  }
 }
 
 // Second pass: every warp takes the queued chunks one at a time (a chunk of
