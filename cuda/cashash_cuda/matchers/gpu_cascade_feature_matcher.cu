@@ -66,10 +66,15 @@ int TileStrips() {
 
 // Chunks of 32 A rows a tile warp takes before the rest of its bucket is
 // shared out in a second pass (BigBucketQueue); 0: no second pass.
-// CASHASH_CASCADE_BIG_BUCKETS=N sets it, to compare.
+// Default 4: on one H100 (device run 126, docs/BENCHMARKS.md) it took the
+// 300 x 16,384 street from 2.25-2.36 s to 2.08 s, where a few buckets of
+// hundreds of features kept one warp busy past the rest of the launch, and
+// left 8,192 features within the runs' spread. Matches are identical.
+// CASHASH_CASCADE_BIG_BUCKETS=N sets it (0: one warp per bucket), to compare.
+constexpr int kDefaultBigBucketFirstChunks = 4;
 int BigBucketFirstChunks() {
   const char* value = std::getenv("CASHASH_CASCADE_BIG_BUCKETS");
-  if (value == nullptr) return 0;
+  if (value == nullptr) return kDefaultBigBucketFirstChunks;
   try {
     return std::max(0, std::stoi(value));
   } catch (const std::exception&) {
