@@ -106,7 +106,10 @@ struct PipelineOptions {
   // chunks; on the 300-image street that was 0.05-0.10 s with the device
   // idle (device run 121's traces), and two_view_geometries rows are 44-75 %
   // of a chunk's writing (write_rows_bench --two_steps 1). Ignored when
-  // verification is skipped.
+  // verification is skipped. Off: on one H100 (device run 125) it halved
+  // the writer's time alone at the end, but the run was no shorter (the
+  // cascade's run is bound by the device's total work), and it lets a
+  // reader see a chunk's matches before its geometries.
   bool write_matches_ahead = false;
   // Complete what the matcher deferred (the GPU cascade's exact rematch) on
   // a thread of its own between matching and verification, instead of on
@@ -116,7 +119,10 @@ struct PipelineOptions {
   // the rematch then stops adding to that stage: device run 121's traces
   // have 0.22 s of rematch in a 0.70 s verification stage. The queue to
   // verification is then two chunks shorter (one waits for that thread, one
-  // is on it). Ignored when verification is skipped.
+  // is on it). Ignored when verification is skipped. Off: on one H100
+  // (device run 125) the rematch then ran beside the matching kernels and
+  // both slowed (matching busy +0.15 s, rematch +0.09 s at 8,192 features),
+  // so the run was no shorter.
   bool deferred_matching_thread = false;
   // Not owned; when set, every stage's interval per chunk is recorded in it
   // (pipeline_trace.h).
