@@ -227,6 +227,26 @@ class ScopedEnv {
   const char* name_;
 };
 
+// A chain of `num_images` related images (the first of `first` features,
+// image i of base + step * i), and one descriptor repeated 400 times in the
+// last two (every third row of one, every fifth of the other): buckets of
+// 400 features and more, 13 chunks of A rows for a single tile warp.
+std::vector<FeatureDescriptors> ChainWithRepeatedRows(uint32_t seed, int num_images, size_t first, size_t base,
+                                                      size_t step) {
+  DescriptorSource source(seed);
+  std::vector<FeatureDescriptors> images{source.Image(first)};
+  for (int i = 1; i < num_images; ++i) images.push_back(source.Related(images[i - 1], base + step * i, 0.5));
+  std::vector<uint8_t> repeated(kDescriptorDim);
+  source.Row(repeated.data());
+  FeatureDescriptors& one = images[num_images - 2];
+  FeatureDescriptors& other = images[num_images - 1];
+  for (size_t i = 0; i < 400; ++i) {
+    std::copy(repeated.begin(), repeated.end(), one.data.begin() + 3 * i * kDescriptorDim);
+    std::copy(repeated.begin(), repeated.end(), other.data.begin() + 5 * i * kDescriptorDim);
+  }
+  return images;
+}
+
 TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
   SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(5);
@@ -269,15 +289,7 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
 // with and without cross-check and with full candidate lists (skewed).
 TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  DescriptorSource source(8);
-  std::vector<FeatureDescriptors> images{source.Image(5000)};
-  for (int i = 1; i < 5; ++i) images.push_back(source.Related(images[i - 1], 4000 + 700 * i, 0.5));
-  std::vector<uint8_t> repeated(kDescriptorDim);
-  source.Row(repeated.data());
-  for (size_t i = 0; i < 400; ++i) {
-    std::copy(repeated.begin(), repeated.end(), images[3].data.begin() + 3 * i * kDescriptorDim);
-    std::copy(repeated.begin(), repeated.end(), images[4].data.begin() + 5 * i * kDescriptorDim);
-  }
+  const std::vector<FeatureDescriptors> images = ChainWithRepeatedRows(8, 5, 5000, 4000, 700);
   std::vector<ImagePair> pairs = AllPairs(images.size());
   pairs.emplace_back(4, 3);
   const MeanDescriptor mean = MeanOf(images);
@@ -309,21 +321,12 @@ TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
 
 // A bucket's A rows split over several warps (CASHASH_CASCADE_TILE_STRIPS,
 // LaunchCascadeTiles' strips), or its chunks past the first few shared out
-// in a second pass (CASHASH_CASCADE_BIG_BUCKETS), append the same
-// candidates in another order:
-// the lists are unordered, so the matches must be identical. The repeated
-// rows make buckets of 400 and more, 13 chunks of A for a single warp.
+// in a second pass (CASHASH_CASCADE_BIG_BUCKETS, 4 by default), append the
+// same candidates in another order: the lists are unordered, so the
+// matches must be identical to one warp per bucket's.
 TEST(GpuCascadeTest, BucketsSplitOverWarpsGiveIdenticalMatches) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  DescriptorSource source(9);
-  std::vector<FeatureDescriptors> images{source.Image(6000)};
-  for (int i = 1; i < 4; ++i) images.push_back(source.Related(images[i - 1], 5000 + 500 * i, 0.5));
-  std::vector<uint8_t> repeated(kDescriptorDim);
-  source.Row(repeated.data());
-  for (size_t i = 0; i < 400; ++i) {
-    std::copy(repeated.begin(), repeated.end(), images[2].data.begin() + 3 * i * kDescriptorDim);
-    std::copy(repeated.begin(), repeated.end(), images[3].data.begin() + 5 * i * kDescriptorDim);
-  }
+  const std::vector<FeatureDescriptors> images = ChainWithRepeatedRows(9, 4, 6000, 5000, 500);
   const std::vector<ImagePair> pairs = AllPairs(images.size());
   const MeanDescriptor mean = MeanOf(images);
   SiftMatchingOptions sift;
@@ -331,31 +334,27 @@ TEST(GpuCascadeTest, BucketsSplitOverWarpsGiveIdenticalMatches) {
   cas.num_tables = 6;
   cas.bits_per_table = 9;
   cas.tau = 32;
-  std::vector<FeatureMatches> one;
-  {
-    ScopedEnv env("CASHASH_CASCADE_TILE_STRIPS", "1");
+  auto match = [&](const char* first_chunks, const char* strips) {
+    ScopedEnv env_big("CASHASH_CASCADE_BIG_BUCKETS", first_chunks);
+    ScopedEnv env_strips("CASHASH_CASCADE_TILE_STRIPS", strips);
     auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
-    one = AddAndMatch(gpu.get(), images, pairs);
-  }
+    return AddAndMatch(gpu.get(), images, pairs);
+  };
+  const std::vector<FeatureMatches> one = match("0", "1");  // one warp per bucket, no second pass
   size_t total = 0;
   for (const FeatureMatches& m : one) total += m.size();
   EXPECT_GT(total, 1000u);
-  for (const char* strips : {"2", "8", "32"}) {
-    ScopedEnv env("CASHASH_CASCADE_TILE_STRIPS", strips);
-    auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
-    EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one) << strips << " warps per bucket";
-  }
-  // The chunks of large buckets past the first N shared out in a second
-  // pass (CASHASH_CASCADE_BIG_BUCKETS=N), alone and with strips.
+  for (const char* strips : {"2", "8", "32"}) EXPECT_EQ(match("0", strips), one) << strips << " warps per bucket";
+  // The second pass after N chunks, alone and with strips.
   for (const char* first_chunks : {"1", "4"}) {
     for (const char* strips : {"1", "4"}) {
-      ScopedEnv env_big("CASHASH_CASCADE_BIG_BUCKETS", first_chunks);
-      ScopedEnv env_strips("CASHASH_CASCADE_TILE_STRIPS", strips);
-      auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
-      EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one)
+      EXPECT_EQ(match(first_chunks, strips), one)
           << "second pass after " << first_chunks << " chunks, " << strips << " warps per bucket";
     }
   }
+  // And the default, with no variable set.
+  auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+  EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), one) << "default";
 }
 
 TEST(GpuCascadeTest, DeviceOutOfMemoryIsAnError) {
