@@ -132,7 +132,7 @@ class ExactKernels {
  public:
   explicit ExactKernels(int device) : device_(device) {
     CUDA_CHECK(cudaSetDevice(device));
-    stream_ = CreateStageStream(StreamRole::kDeferredRematch);
+    stream_ = CreateStageStream(StreamRole::kMatching);
     try {
       kernels_ = std::make_unique<BruteForceKernels>(stream_);
     } catch (...) {
