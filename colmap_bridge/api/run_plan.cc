@@ -396,10 +396,10 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.two_view = plan.options.two_view;
   pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
   pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
-  // To compare, until a device has measured them: CASHASH_WRITE_MATCHES_AHEAD=1
-  // has the writer take a chunk's raw matches while it is verified,
-  // CASHASH_REMATCH_THREAD=1 gives the deferred exact rematch a thread of
-  // its own (PipelineOptions).
+  // Off by default, measured without gain (device run 125) and kept to
+  // compare: CASHASH_WRITE_MATCHES_AHEAD=1 has the writer take a chunk's raw
+  // matches while it is verified, CASHASH_REMATCH_THREAD=1 gives the
+  // deferred exact rematch a thread of its own (PipelineOptions).
   pipeline_options.write_matches_ahead = EnvironmentSwitchOn("CASHASH_WRITE_MATCHES_AHEAD");
   pipeline_options.deferred_matching_thread = EnvironmentSwitchOn("CASHASH_REMATCH_THREAD");
   PipelineTrace trace;

@@ -52,17 +52,22 @@ bool UseTiledKernels() {
   return value == nullptr || std::string(value) != "direct";
 }
 
-// Warps per bucket in the tile kernel (LaunchCascadeTiles' strips);
-// CASHASH_CASCADE_TILE_STRIPS=N sets it, to compare.
-int TileStrips() {
-  const char* value = std::getenv("CASHASH_CASCADE_TILE_STRIPS");
-  if (value == nullptr) return 1;
+// The integer in environment variable `name`, at least `least`; `fallback`
+// when unset. The tile kernel's switches below, kept to compare.
+int IntFromEnvironment(const char* name, int fallback, int least) {
+  const char* value = std::getenv(name);
+  if (value == nullptr) return fallback;
   try {
-    return std::max(1, std::stoi(value));
+    return std::max(least, std::stoi(value));
   } catch (const std::exception&) {
-    throw std::invalid_argument(std::string("CASHASH_CASCADE_TILE_STRIPS: expected a number, got '") + value + "'");
+    throw std::invalid_argument(std::string(name) + ": expected a number, got '" + value + "'");
   }
 }
+
+// Warps per bucket in the tile kernel (LaunchCascadeTiles' strips);
+// CASHASH_CASCADE_TILE_STRIPS=N sets it. 8 strips lost 0.4-0.6 s on every
+// street of device run 126, so 1.
+int TileStrips() { return IntFromEnvironment("CASHASH_CASCADE_TILE_STRIPS", 1, 1); }
 
 // Chunks of 32 A rows a tile warp takes before the rest of its bucket is
 // shared out in a second pass (BigBucketQueue); 0: no second pass.
@@ -71,16 +76,7 @@ int TileStrips() {
 // hundreds of features kept one warp busy past the rest of the launch, and
 // left 8,192 features within the runs' spread. Matches are identical.
 // CASHASH_CASCADE_BIG_BUCKETS=N sets it (0: one warp per bucket), to compare.
-constexpr int kDefaultBigBucketFirstChunks = 4;
-int BigBucketFirstChunks() {
-  const char* value = std::getenv("CASHASH_CASCADE_BIG_BUCKETS");
-  if (value == nullptr) return kDefaultBigBucketFirstChunks;
-  try {
-    return std::max(0, std::stoi(value));
-  } catch (const std::exception&) {
-    throw std::invalid_argument(std::string("CASHASH_CASCADE_BIG_BUCKETS: expected a number, got '") + value + "'");
-  }
-}
+int BigBucketFirstChunks() { return IntFromEnvironment("CASHASH_CASCADE_BIG_BUCKETS", 4, 0); }
 
 // Queue entries per batch: far more than the buckets past a few chunks
 // (about one per table and pair at 16,384 features), 512 KiB.
