@@ -128,7 +128,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "that may verify, 43 where the cascade's own matches are kept (no rematch, guided matching)");
   table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
   table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
-            "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's)");
+            "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
+            "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image");
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
@@ -170,6 +171,7 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
     return ParseOutcome::kError;
   }
   o.block_size_from_memory = vm.count("ExhaustiveMatching.block_size") == 0;
+  o.rematch_min_matches_from_shape = vm.count("CasHash.exact_rematch_min_matches") == 0;
   o.cashash.random_seed = o.random_seed;
   o.two_view.random_seed = o.random_seed;
   return ParseOutcome::kRun;

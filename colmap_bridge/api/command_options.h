@@ -14,6 +14,9 @@
 namespace cashash {
 namespace colmap {
 
+// The runs' exact rematch threshold (CasHashOptions::exact_rematch_min_matches).
+constexpr int kDefaultRematchMinMatches = 12;
+
 struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
@@ -23,10 +26,16 @@ struct MatcherCommandOptions {
   CasHashOptions cashash = [] {
     CasHashOptions options;
     options.matcher = MatcherType::kAuto;
-    options.exact_rematch_min_matches = 12;
+    options.exact_rematch_min_matches = kDefaultRematchMinMatches;
     options.tau = 0;
     return options;
   }();
+  // A rematch threshold left at kDefaultRematchMinMatches is replaced by
+  // kBucketScreeningRematchMinMatches where the bucket screening shape is
+  // chosen (ResolveOptionsForRun). The command line clears this when
+  // --CasHash.exact_rematch_min_matches is given, so a typed 12 stays 12;
+  // any other threshold is always kept.
+  bool rematch_min_matches_from_shape = true;
   TwoViewGeometryOptions two_view;
   // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
   // guided_matcher command sets enabled).

@@ -199,6 +199,12 @@ MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
           ? TableShapeGoal::kScreening
           : TableShapeGoal::kRecall;
   resolved.cashash = ResolveTableShape(resolved.cashash, features, goal);
+  // Fewer tables find fewer of a pair's true matches: the threshold the
+  // bucket screening shape was measured with (table_shape.h).
+  const bool rematch_from_shape =
+      options.rematch_min_matches_from_shape && options.cashash.exact_rematch_min_matches == kDefaultRematchMinMatches &&
+      IsBucketScreeningShape(features, options.cashash.num_tables, options.cashash.bits_per_table, goal);
+  if (rematch_from_shape) resolved.cashash.exact_rematch_min_matches = kBucketScreeningRematchMinMatches;
   resolved.cashash.tau = RunTau(resolved);
   if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {
     std::string text =
@@ -208,6 +214,10 @@ MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
       text += resolved.cashash.tau == kCascadeTauForScreening
                   ? " (chosen: the exact rematch decides the pairs that may verify)"
                   : " (chosen: the cascade's own matches are kept)";
+    }
+    if (rematch_from_shape) {
+      text += "; exact rematch from " + std::to_string(resolved.cashash.exact_rematch_min_matches) +
+              " cascade matches (chosen for these tables)";
     }
     info(text);
   }

@@ -1,5 +1,6 @@
 #include "colmap_bridge/api/command_options.h"
 #include "colmap_bridge/api/matching_api.h"
+#include "cashash/matching/table_shape.h"
 
 #include <gtest/gtest.h>
 
@@ -98,10 +99,10 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(run.cashash.num_tables, 8);
   EXPECT_EQ(run.cashash.bits_per_table, 7);
   // Left at 0, they follow the images: at 32,768 features 8 x 8 for
-  // recall, and 6 x 10 while the exact rematch decides (the default), since
+  // recall, and 3 x 10 while the exact rematch decides (the default), since
   // the cascade then only screens the pairs (TableShapeGoal).
   const MatcherCommandOptions chosen = ResolveOptionsForRun(defaults, {32768, 32768, 32768}, nullptr);
-  EXPECT_EQ(chosen.cashash.num_tables, 6);
+  EXPECT_EQ(chosen.cashash.num_tables, 3);
   EXPECT_EQ(chosen.cashash.bits_per_table, 10);
   MatcherCommandOptions kept;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "0"}, &kept), ParseOutcome::kRun);
@@ -111,7 +112,7 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
   EXPECT_EQ(ResolveOptionsForRun(guided, {8192, 8192}, nullptr).cashash.bits_per_table, 7);
-  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, nullptr).cashash.bits_per_table, 9);  // 6 x 9
+  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, nullptr).cashash.bits_per_table, 9);  // 3 x 9
   MatcherCommandOptions auto_named;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "auto"}, &auto_named), ParseOutcome::kRun);
   EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
@@ -145,6 +146,46 @@ TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
   EXPECT_EQ(ResolveOptionsForRun(set, {8192, 8192}, say).cashash.tau, 40);
   ASSERT_FALSE(said.empty());
   EXPECT_EQ(said.back().find("chosen: the exact"), std::string::npos) << said.back();
+}
+
+TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiven) {
+  const auto threshold = [](const MatcherCommandOptions& options, size_t features) {
+    return ResolveOptionsForRun(options, {features, features}, nullptr).cashash.exact_rematch_min_matches;
+  };
+  MatcherCommandOptions defaults;
+  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  EXPECT_EQ(defaults.cashash.exact_rematch_min_matches, kDefaultRematchMinMatches);
+  EXPECT_TRUE(defaults.rematch_min_matches_from_shape);
+  // Three screening tables from 8,192 features find fewer of a pair's true
+  // matches: the threshold measured for them. Below, the 8 x 8 screen keeps 12.
+  EXPECT_EQ(threshold(defaults, 8192), kBucketScreeningRematchMinMatches);
+  EXPECT_EQ(threshold(defaults, 16384), kBucketScreeningRematchMinMatches);
+  EXPECT_EQ(threshold(defaults, 4096), kDefaultRematchMinMatches);
+  std::vector<std::string> said;
+  ResolveOptionsForRun(defaults, {8192, 8192}, [&](const std::string& text) { said.push_back(text); });
+  ASSERT_FALSE(said.empty());
+  EXPECT_NE(said.back().find("exact rematch from 8 cascade matches (chosen for these tables)"), std::string::npos)
+      << said.back();
+  // Typed on the command line, even 12 is kept.
+  MatcherCommandOptions typed;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "12"}, &typed), ParseOutcome::kRun);
+  EXPECT_FALSE(typed.rematch_min_matches_from_shape);
+  EXPECT_EQ(threshold(typed, 8192), 12);
+  // Set through the library (the Python module's options), another value is kept.
+  MatcherCommandOptions api;
+  api.cashash.exact_rematch_min_matches = 10;
+  EXPECT_EQ(threshold(api, 8192), 10);
+  // Tables or bits given: the shape is the user's, so is the threshold.
+  MatcherCommandOptions tables;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "6"}, &tables), ParseOutcome::kRun);
+  EXPECT_EQ(threshold(tables, 8192), kDefaultRematchMinMatches);
+  MatcherCommandOptions bits;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.bits_per_table", "9"}, &bits), ParseOutcome::kRun);
+  EXPECT_EQ(threshold(bits, 8192), kDefaultRematchMinMatches);
+  // Guided matching keeps its cascade's matches for stage 1: no rematch.
+  MatcherCommandOptions guided = defaults;
+  guided.guided.enabled = true;
+  EXPECT_EQ(threshold(guided, 8192), kDefaultRematchMinMatches);
 }
 
 TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {

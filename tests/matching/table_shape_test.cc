@@ -126,18 +126,28 @@ TEST(TableShape, AScreeningCascadeTakesSmallerBuckets) {
     EXPECT_EQ(screening(features).num_tables, 8) << features;
     EXPECT_EQ(screening(features).bits_per_table, 8) << features;
   }
-  // From 8,192 on: 6 tables, buckets of about 16 features, at most 6 x 10
-  // (60 of the 64 signature bits).
+  // From 8,192 on: 3 tables, buckets of about 16 features, at most 3 x 10
+  // (kBucketScreeningMaxBits, the widest measured).
   const std::vector<std::pair<size_t, int>> bits_by_size = {
       {0, 9}, {8192, 9}, {12500, 9}, {16384, 10}, {32768, 10}, {size_t{1} << 20, 10}};
   for (const auto& [features, bits] : bits_by_size) {
-    EXPECT_EQ(screening(features).num_tables, 6) << features;
+    EXPECT_EQ(screening(features).num_tables, 3) << features;
     EXPECT_EQ(screening(features).bits_per_table, bits) << features;
+    EXPECT_TRUE(IsBucketScreeningShape(features, 0, 0, TableShapeGoal::kScreening)) << features;
   }
-  // About 96 candidates per query at 8,192 and 16,384 features, against
+  // About 48 candidates per query at 8,192 and 16,384 features, against
   // 8 x 8's 256 and 7 x 9's 224.
-  EXPECT_EQ(6 * 8192 / (1 << 9), 96);
-  EXPECT_EQ(6 * 16384 / (1 << 10), 96);
+  EXPECT_EQ(3 * 8192 / (1 << 9), 48);
+  EXPECT_EQ(3 * 16384 / (1 << 10), 48);
+  // The rematch threshold of this shape applies to it alone: not below
+  // 8,192 features, not for recall, not where tables or bits were set.
+  EXPECT_FALSE(IsBucketScreeningShape(8191, 0, 0, TableShapeGoal::kScreening));
+  EXPECT_FALSE(IsBucketScreeningShape(8192, 0, 0, TableShapeGoal::kRecall));
+  EXPECT_FALSE(IsBucketScreeningShape(8192, 3, 0, TableShapeGoal::kScreening));
+  EXPECT_FALSE(IsBucketScreeningShape(8192, 0, 9, TableShapeGoal::kScreening));
+  // 12 matches at six tables scale to about 8.7 at three; 8 was measured.
+  EXPECT_NEAR(12 * TableCollisionProbability(3, 9) / TableCollisionProbability(6, 9), 8.7, 0.1);
+  EXPECT_LE(kBucketScreeningRematchMinMatches, 9);
   // Explicit bits are kept; explicit tables get the extra bit only within
   // 64 signature bits and the floor, whatever the size.
   EXPECT_EQ(screening(8192, 0, 7).bits_per_table, 7);
@@ -147,10 +157,10 @@ TEST(TableShape, AScreeningCascadeTakesSmallerBuckets) {
   EXPECT_EQ(screening(8192, 4, 0).bits_per_table, 7);   // 4 x 8: 0.69
   EXPECT_EQ(screening(16384, 7, 0).bits_per_table, 8);  // recall 7 x 7, one bit more
   const CasHashOptions resolved = ResolveTableShape(CasHashOptions(), 8192, TableShapeGoal::kScreening);
-  EXPECT_EQ(resolved.num_tables, 6);
+  EXPECT_EQ(resolved.num_tables, 3);
   EXPECT_EQ(resolved.bits_per_table, 9);
   EXPECT_EQ(DescribeTableShape(CasHashOptions(), resolved, 8192, 300, TableShapeGoal::kScreening),
-            "Hash tables: 6 x 9 bits (chosen for 8192 features per image, the median of 300 images, buckets of "
+            "Hash tables: 3 x 9 bits (chosen for 8192 features per image, the median of 300 images, buckets of "
             "about 16 features: the exact rematch decides)");
   const CasHashOptions small = ResolveTableShape(CasHashOptions(), 2048, TableShapeGoal::kScreening);
   EXPECT_EQ(DescribeTableShape(CasHashOptions(), small, 2048, 300, TableShapeGoal::kScreening),

@@ -44,7 +44,7 @@ TableShape BucketScreeningShape(size_t features_per_image) {
   const int bits = FloorLog2(SizeOrReference(features_per_image) / kBucketScreeningBucket);
   TableShape shape;
   shape.num_tables = kBucketScreeningTables;
-  shape.bits_per_table = std::min(bits, kMaxSignatureBits / kBucketScreeningTables);
+  shape.bits_per_table = std::min({bits, kBucketScreeningMaxBits, kMaxSignatureBits / kBucketScreeningTables});
   return shape;
 }
 
@@ -93,7 +93,7 @@ TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_
     shape.num_tables = TablesForBits(bits_per_table);
     return shape;
   }
-  if (goal == TableShapeGoal::kScreening && BucketScreening(features_per_image, num_tables)) {
+  if (IsBucketScreeningShape(features_per_image, num_tables, bits_per_table, goal)) {
     return BucketScreeningShape(features_per_image);
   }
   shape = ChooseRecallShape(features_per_image, num_tables);
@@ -105,6 +105,10 @@ TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_
     shape.bits_per_table = bits;
   }
   return shape;
+}
+
+bool IsBucketScreeningShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal) {
+  return goal == TableShapeGoal::kScreening && bits_per_table == 0 && BucketScreening(features_per_image, num_tables);
 }
 
 size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches) {

@@ -61,11 +61,24 @@ constexpr int kMinShapeBits = kTableShapeReferenceBits;
 constexpr double kScreeningCollisionFloor = 0.89;
 // From this size on a screening shape is kBucketScreeningTables tables whose
 // buckets hold about kBucketScreeningBucket features (bits = log2(n / 16),
-// at most 64 / 6 = 10): 6 x 9 at 8,192 features, 6 x 10 from 16,384, about
-// 96 candidates per query.
+// at most kBucketScreeningMaxBits): 3 x 9 at 8,192 features, 3 x 10 from
+// 16,384, about 48 candidates per query up to 16,384 features.
 constexpr size_t kBucketScreeningFeatures = 8192;
-constexpr int kBucketScreeningTables = 6;
+constexpr int kBucketScreeningTables = 3;
 constexpr size_t kBucketScreeningBucket = 16;
+// The widest bucket screening tables: the largest width measured (16,384
+// features). Beyond it the buckets, and the candidates per query, grow with
+// n instead of the screen's collision probability falling further.
+constexpr int kBucketScreeningMaxBits = 10;
+// Cascade matches a pair needs for the exact rematch when the bucket
+// screening shape was chosen and the threshold was not set
+// (--CasHash.exact_rematch_min_matches; the runs' default is 12 for every
+// other shape). Three tables find about 0.62 / 0.86 of what six found
+// (TableCollisionProbability at 9 bits), so 12 scales to about 8.7; 8 is
+// the measured one: on both kinds of street it rematched the pairs that
+// verify with six tables at 12 (docs/cascade_parameters.md, "Fewer
+// screening tables").
+constexpr int kBucketScreeningRematchMinMatches = 8;
 
 // What the cascade's matches are for. kRecall: they are the run's matches
 // (guided matching, no exact rematch), so the shape holds the reference's
@@ -74,7 +87,7 @@ constexpr size_t kBucketScreeningBucket = 16;
 // threshold of matches on the pairs that verify. Below 8,192 features the
 // shape takes one bit more than kRecall's (half the candidates per query)
 // while its collision probability stays at kScreeningCollisionFloor or
-// above; from 8,192 on, 6 tables of buckets of about 16 features
+// above; from 8,192 on, 3 tables of buckets of about 16 features
 // (kBucketScreeningFeatures). CascadeOnlyScreens says which goal a run has.
 // Device runs 65-66, H200 streets: 8 x 8 at 8,192 features and 7 x 9 at
 // 16,384 verified the same pairs with the same inlier matches as 8 x 7 and
@@ -82,7 +95,8 @@ constexpr size_t kBucketScreeningBucket = 16;
 // 6 x 9 at 8,192 and 6 x 10 at 16,384 again the same pairs and inlier
 // matches, the cascade's matching time 15-20 % lower; at 2,048 features
 // smaller buckets were slower (more buckets per pair), so the rule starts at
-// 8,192.
+// 8,192. Device run 129: 3 tables with the rematch at 8 matches
+// (kBucketScreeningRematchMinMatches) in place of 6 at 12, ANSWER.
 enum class TableShapeGoal { kRecall, kScreening };
 
 // 1 - (1 - p^bits)^tables.
@@ -104,6 +118,12 @@ TableShape ChooseTableShape(size_t features_per_image, int num_tables = 0, int b
 // images of min(rows, max_num_matches) (the upper one of the two middle
 // values; 0 for no images).
 size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches);
+
+// Whether ChooseTableShape gives the bucket screening shape for these
+// options (goal kScreening, tables and bits both left at 0, at least
+// kBucketScreeningFeatures features): the shape whose rematch threshold is
+// kBucketScreeningRematchMinMatches.
+bool IsBucketScreeningShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal);
 
 // `options` with num_tables and bits_per_table chosen for the size where
 // they are 0 (the defaults), unchanged where set.
