@@ -119,8 +119,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"CasHash.matcher"}, &matcher_name,
             "auto (times both on the first pairs, keeps the faster) | cascade | bruteforce (exact reference)");
   table.Add({"CasHash.num_tables"}, &o.cashash.num_tables,
-            "First-level hash tables; 0 = chosen with the bits from the features per image (8 x 7 below 16384, "
-            "8 x 8 from there)");
+            "First-level hash tables; 0 = chosen with the bits from the features per image: while the exact "
+            "rematch decides 8 x 8 below 8192, 3 x 9 from there, 3 x 10 from 16384; where the cascade's matches "
+            "are kept 8 x 7 below 16384, 8 x 8 from there");
   table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table,
             "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
   table.Add({"CasHash.tau"}, &o.cashash.tau,
