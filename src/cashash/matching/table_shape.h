@@ -75,8 +75,8 @@ constexpr int kBucketScreeningMaxBits = 10;
 // (--CasHash.exact_rematch_min_matches; the runs' default is 12 for every
 // other shape). Three tables find about 0.62 / 0.86 of what six found
 // (TableCollisionProbability at 9 bits), so 12 scales to about 8.7; 8 is
-// the measured one: on both kinds of street it rematched the pairs that
-// verify with six tables at 12 (docs/cascade_parameters.md, "Fewer
+// the measured one: on both kinds of street, on the CPU and on the GPU, it
+// kept brute force's verified pairs (docs/cascade_parameters.md, "Fewer
 // screening tables").
 constexpr int kBucketScreeningRematchMinMatches = 8;
 
@@ -95,8 +95,12 @@ constexpr int kBucketScreeningRematchMinMatches = 8;
 // 6 x 9 at 8,192 and 6 x 10 at 16,384 again the same pairs and inlier
 // matches, the cascade's matching time 15-20 % lower; at 2,048 features
 // smaller buckets were slower (more buckets per pair), so the rule starts at
-// 8,192. Device run 129: 3 tables with the rematch at 8 matches
-// (kBucketScreeningRematchMinMatches) in place of 6 at 12, ANSWER.
+// 8,192. Device runs 129-130 (H100): 3 tables with the rematch from 8
+// matches (kBucketScreeningRematchMinMatches) in place of 6 from 12 wrote
+// brute force's two_view_geometries on both kinds of street at 8,192 and
+// 16,384 features (6 tables lost 1-2 pairs on the noisy kind), 3-14 %
+// faster, except 5 % slower on the 8,192 E street, where verification
+// sets the pace (docs/cascade_parameters.md, "Fewer screening tables").
 enum class TableShapeGoal { kRecall, kScreening };
 
 // 1 - (1 - p^bits)^tables.
