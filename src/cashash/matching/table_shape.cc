@@ -32,19 +32,13 @@ int BitsForSize(size_t features_per_image) {
   return std::max(kMinShapeBits, kTableShapeReferenceBits + log2_n - FloorLog2(kTableShapeReferenceFeatures));
 }
 
-// Whether a screening shape of this size takes buckets of a fixed size
-// (tables not set by the options).
-bool BucketScreening(size_t features_per_image, int num_tables) {
-  return num_tables == 0 && SizeOrReference(features_per_image) >= kBucketScreeningFeatures;
-}
-
 // kBucketScreeningTables tables whose buckets hold about
 // kBucketScreeningBucket features, within the signature's bits.
 TableShape BucketScreeningShape(size_t features_per_image) {
   const int bits = FloorLog2(SizeOrReference(features_per_image) / kBucketScreeningBucket);
   TableShape shape;
   shape.num_tables = kBucketScreeningTables;
-  shape.bits_per_table = std::min({bits, kBucketScreeningMaxBits, kMaxSignatureBits / kBucketScreeningTables});
+  shape.bits_per_table = std::min(bits, kBucketScreeningMaxBits);
   return shape;
 }
 
@@ -108,7 +102,8 @@ TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_
 }
 
 bool IsBucketScreeningShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal) {
-  return goal == TableShapeGoal::kScreening && bits_per_table == 0 && BucketScreening(features_per_image, num_tables);
+  return goal == TableShapeGoal::kScreening && num_tables == 0 && bits_per_table == 0 &&
+         SizeOrReference(features_per_image) >= kBucketScreeningFeatures;
 }
 
 size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches) {
@@ -142,7 +137,7 @@ std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOpt
   text << "chosen for " << features_per_image << " features per image, the median of " << num_images << " image"
        << (num_images == 1 ? "" : "s");
   if (goal == TableShapeGoal::kScreening && requested.bits_per_table == 0) {
-    if (BucketScreening(features_per_image, requested.num_tables)) {
+    if (IsBucketScreeningShape(features_per_image, requested.num_tables, requested.bits_per_table, goal)) {
       text << ", buckets of about " << kBucketScreeningBucket << " features: the exact rematch decides";
     } else {
       text << ", a bit more than for recall: the exact rematch decides";

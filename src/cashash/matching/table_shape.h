@@ -70,6 +70,8 @@ constexpr size_t kBucketScreeningBucket = 16;
 // features). Beyond it the buckets, and the candidates per query, grow with
 // n instead of the screen's collision probability falling further.
 constexpr int kBucketScreeningMaxBits = 10;
+static_assert(kBucketScreeningTables * kBucketScreeningMaxBits <= kMaxSignatureBits,
+              "the bucket screening tables must fit the GPU's 64-bit bucket signature");
 // Cascade matches a pair needs for the exact rematch when the bucket
 // screening shape was chosen and the threshold was not set
 // (--CasHash.exact_rematch_min_matches; the runs' default is 12 for every
