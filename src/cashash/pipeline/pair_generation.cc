@@ -163,6 +163,51 @@ std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids
   return chunks;
 }
 
+std::vector<PairChunk> NeighboursFirstPairChunks(const std::vector<image_t>& image_ids, int block_size) {
+  std::vector<PairChunk> chunks;
+  const size_t n = image_ids.size();
+  if (n < 2) return chunks;
+  const size_t bs = static_cast<size_t>(std::max(1, block_size));
+  const int m = static_cast<int>((n + bs - 1) / bs);
+  std::vector<std::pair<int, int>> order;
+  for (int b = 0; b < m; ++b) {
+    order.emplace_back(b, b);
+    if (b + 1 < m) order.emplace_back(b, b + 1);
+  }
+  // Far pairs: from the block the band ended on, always a pair that shares
+  // a block with the last one, the farthest apart first; else the first left.
+  std::vector<std::pair<int, int>> far;
+  for (int i = 0; i < m; ++i) {
+    for (int j = i + 2; j < m; ++j) far.emplace_back(i, j);
+  }
+  std::vector<char> used(far.size(), 0);
+  std::pair<int, int> last = order.back();
+  for (size_t placed = 0; placed < far.size(); ++placed) {
+    size_t pick = far.size();
+    for (size_t k = 0; k < far.size(); ++k) {
+      if (used[k]) continue;
+      const auto& [i, j] = far[k];
+      const bool shares = i == last.first || i == last.second || j == last.first || j == last.second;
+      if (!shares) continue;
+      if (pick == far.size() || j - i > far[pick].second - far[pick].first) pick = k;
+    }
+    if (pick == far.size()) {
+      for (pick = 0; used[pick]; ++pick) {
+      }
+    }
+    used[pick] = 1;
+    last = far[pick];
+    order.push_back(last);
+  }
+  for (const auto& [bi, bj] : order) {
+    PairChunk chunk = BlockPairChunk(image_ids, bs, bi, bj);
+    if (chunk.pairs.empty()) continue;
+    chunk.num_blocks = m;
+    chunks.push_back(std::move(chunk));
+  }
+  return chunks;
+}
+
 std::vector<PairChunk> ListPairChunks(const std::vector<ImagePair>& pairs, size_t max_pairs_per_chunk,
                                       size_t max_images_per_chunk) {
   std::vector<PairChunk> chunks;
