@@ -36,6 +36,14 @@ struct MatcherCommandOptions {
   // --CasHash.exact_rematch_min_matches is given, so a typed 12 stays 12;
   // any other threshold is always kept.
   bool rematch_min_matches_from_shape = true;
+  // Where a single GPU's exact rematch runs. false: deferred to the
+  // verification threads (exact_rematch_feature_matcher.h), which paid
+  // while the cascade's screen set the pace. ResolveOptionsForRun sets it
+  // with the bucket screening shape, whose screen leaves the matching
+  // thread room while verification sets the pace: the 300-image streets
+  // ran 8 % (8,192 features) and 3 % (16,384) faster with the rematch on
+  // the matching thread (H100, device runs 132-133, docs/BENCHMARKS.md).
+  bool rematch_on_matching_thread = false;
   TwoViewGeometryOptions two_view;
   // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
   // guided_matcher command sets enabled).

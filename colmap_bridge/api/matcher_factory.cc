@@ -113,12 +113,16 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 // Brute-force matchers on the run's GPU for the exact rematch deferred to the
 // verification threads (exact_rematch_feature_matcher.h); null where it
 // stays on the matching thread: with several GPUs (each chunk is split
-// between them), or when CASHASH_DEFERRED_REMATCH=0 (a diagnostic switch).
+// between them), or where options.rematch_on_matching_thread says so.
+// CASHASH_DEFERRED_REMATCH=0 or 1 overrides the latter, to compare.
 std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const MatcherCommandOptions& options,
                                                       const MeanDescriptor& mean) {
 #ifdef CASHASH_WITH_CUDA
   const char* setting = std::getenv("CASHASH_DEFERRED_REMATCH");
-  if (setting != nullptr && std::string(setting) == "0") return nullptr;
+  bool deferred = !options.rematch_on_matching_thread;
+  if (setting != nullptr && std::string(setting) == "0") deferred = false;
+  if (setting != nullptr && std::string(setting) == "1") deferred = true;
+  if (!deferred) return nullptr;
   if (GpuIndices(options.gpu_index).size() != 1) return nullptr;
   MatcherCommandOptions brute_force = options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;
@@ -201,10 +205,13 @@ MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
   resolved.cashash = ResolveTableShape(resolved.cashash, features, goal);
   // Fewer tables find fewer of a pair's true matches: the threshold the
   // bucket screening shape was measured with (table_shape.h).
-  const bool rematch_from_shape =
-      options.rematch_min_matches_from_shape && options.cashash.exact_rematch_min_matches == kDefaultRematchMinMatches &&
+  const bool bucket_screen =
       IsBucketScreeningShape(features, options.cashash.num_tables, options.cashash.bits_per_table, goal);
+  const bool rematch_from_shape = options.rematch_min_matches_from_shape &&
+                                  options.cashash.exact_rematch_min_matches == kDefaultRematchMinMatches && bucket_screen;
   if (rematch_from_shape) resolved.cashash.exact_rematch_min_matches = kBucketScreeningRematchMinMatches;
+  // Its screen is light: the matching thread has room for the rematch.
+  if (bucket_screen) resolved.rematch_on_matching_thread = true;
   resolved.cashash.tau = RunTau(resolved);
   if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {
     std::string text =

@@ -188,6 +188,31 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
   EXPECT_EQ(threshold(guided, 8192), kDefaultRematchMinMatches);
 }
 
+// The bucket screen leaves the matching thread room: a single GPU's exact
+// rematch stays there instead of going to the verification threads.
+TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
+  const auto on_matching_thread = [](const MatcherCommandOptions& options, size_t features) {
+    return ResolveOptionsForRun(options, {features, features}, nullptr).rematch_on_matching_thread;
+  };
+  MatcherCommandOptions defaults;
+  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  EXPECT_FALSE(defaults.rematch_on_matching_thread);
+  EXPECT_TRUE(on_matching_thread(defaults, 8192));
+  EXPECT_TRUE(on_matching_thread(defaults, 16384));
+  EXPECT_FALSE(on_matching_thread(defaults, 4096));  // 8 x 8 tables: deferred
+  // The bucket screen with a threshold of the user's: the screen decides.
+  MatcherCommandOptions typed;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "12"}, &typed), ParseOutcome::kRun);
+  EXPECT_TRUE(on_matching_thread(typed, 8192));
+  // Tables given, or guided matching: not the bucket screen, deferred.
+  MatcherCommandOptions tables;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "6"}, &tables), ParseOutcome::kRun);
+  EXPECT_FALSE(on_matching_thread(tables, 8192));
+  MatcherCommandOptions guided = defaults;
+  guided.guided.enabled = true;
+  EXPECT_FALSE(on_matching_thread(guided, 8192));
+}
+
 TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {
   const char* argv[] = {"guided_matcher", "--database_path", "x"};
   MatcherCommandOptions o;
