@@ -41,7 +41,7 @@ struct MatcherCommandOptions {
   // while the cascade's screen set the pace. ResolveOptionsForRun sets it
   // with the bucket screening shape, whose screen leaves the matching
   // thread room while verification sets the pace: the 300-image streets
-  // ran 8 % (8,192 features) and 3 % (16,384) faster with the rematch on
+  // ran 9 % (8,192 features) and 3.5 % (16,384) faster with the rematch on
   // the matching thread (H100, device runs 132-133, docs/BENCHMARKS.md).
   bool rematch_on_matching_thread = false;
   TwoViewGeometryOptions two_view;

@@ -161,7 +161,6 @@ TEST(PairSchedule, RunEndsOnBlocksTwoApart) {
   }
 }
 
-
 // Neighbours first: every pair once for odd sizes, the band of diagonal and
 // next-to-diagonal block pairs before any pair of blocks two apart, and the
 // far pairs chained by a shared block wherever one is left.

@@ -142,17 +142,16 @@ std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_id
   return chunks;
 }
 
-std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
-                                           int blocks_per_group) {
+namespace {
+
+// The chunks of block pairs `order` (bi <= bj), empty ones left out, with
+// their block and group numbers (groups of per_group blocks).
+std::vector<PairChunk> ChunksOfBlockPairs(const std::vector<image_t>& image_ids, size_t block_size, int num_blocks,
+                                          int per_group, const std::vector<std::pair<int, int>>& order) {
   std::vector<PairChunk> chunks;
-  const size_t n = image_ids.size();
-  if (n < 2) return chunks;
-  const size_t bs = static_cast<size_t>(std::max(1, block_size));
-  const int num_blocks = static_cast<int>((n + bs - 1) / bs);
-  const int per_group = std::min(num_blocks, std::max(1, blocks_per_group));
   const int num_groups = (num_blocks + per_group - 1) / per_group;
-  for (const auto& [bi, bj] : BlockPairOrder(num_blocks, per_group).Build()) {
-    PairChunk chunk = BlockPairChunk(image_ids, bs, bi, bj);
+  for (const auto& [bi, bj] : order) {
+    PairChunk chunk = BlockPairChunk(image_ids, block_size, bi, bj);
     if (chunk.pairs.empty()) continue;
     chunk.num_blocks = num_blocks;
     chunk.group_i = bi / per_group;
@@ -163,10 +162,65 @@ std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids
   return chunks;
 }
 
-std::vector<PairChunk> NeighboursFirstPairChunks(const std::vector<image_t>& image_ids, int block_size) {
-  std::vector<PairChunk> chunks;
+// The pairs of blocks two or more apart, after the band ended on `last`:
+// each time a pair that shares a block with the one before, the farthest
+// apart first (ties: the smaller pair); where none is left, the smallest
+// pair left. Each block keeps its unused partners, so a step costs O(m).
+std::vector<std::pair<int, int>> FarBlockPairs(int m, std::pair<int, int> last) {
+  std::vector<std::vector<char>> unused(m, std::vector<char>(m, 0));
+  size_t left = 0;
+  for (int i = 0; i < m; ++i) {
+    for (int j = i + 2; j < m; ++j) {
+      unused[i][j] = unused[j][i] = 1;
+      ++left;
+    }
+  }
+  std::vector<std::pair<int, int>> order;
+  std::pair<int, int> next_smallest(0, 2);  // no pair before it is unused
+  while (left > 0) {
+    std::pair<int, int> pick(-1, -1);
+    for (int b : {last.first, last.second}) {
+      for (int p = 0; p < m; ++p) {
+        if (!unused[b][p]) continue;
+        const std::pair<int, int> pair(std::min(b, p), std::max(b, p));
+        const int gap = pair.second - pair.first, best = pick.second - pick.first;
+        if (pick.first < 0 || gap > best || (gap == best && pair < pick)) pick = pair;
+      }
+    }
+    if (pick.first < 0) {
+      // Pairs before next_smallest are all used, and one after it is not.
+      while (next_smallest.second >= m || !unused[next_smallest.first][next_smallest.second]) {
+        if (next_smallest.second >= m) {
+          next_smallest = {next_smallest.first + 1, next_smallest.first + 3};
+        } else {
+          ++next_smallest.second;
+        }
+      }
+      pick = next_smallest;
+    }
+    unused[pick.first][pick.second] = unused[pick.second][pick.first] = 0;
+    --left;
+    order.push_back(pick);
+    last = pick;
+  }
+  return order;
+}
+
+}  // namespace
+
+std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
+                                           int blocks_per_group) {
   const size_t n = image_ids.size();
-  if (n < 2) return chunks;
+  if (n < 2) return {};
+  const size_t bs = static_cast<size_t>(std::max(1, block_size));
+  const int num_blocks = static_cast<int>((n + bs - 1) / bs);
+  const int per_group = std::min(num_blocks, std::max(1, blocks_per_group));
+  return ChunksOfBlockPairs(image_ids, bs, num_blocks, per_group, BlockPairOrder(num_blocks, per_group).Build());
+}
+
+std::vector<PairChunk> NeighboursFirstPairChunks(const std::vector<image_t>& image_ids, int block_size) {
+  const size_t n = image_ids.size();
+  if (n < 2) return {};
   const size_t bs = static_cast<size_t>(std::max(1, block_size));
   const int m = static_cast<int>((n + bs - 1) / bs);
   std::vector<std::pair<int, int>> order;
@@ -174,38 +228,8 @@ std::vector<PairChunk> NeighboursFirstPairChunks(const std::vector<image_t>& ima
     order.emplace_back(b, b);
     if (b + 1 < m) order.emplace_back(b, b + 1);
   }
-  // Far pairs: from the block the band ended on, always a pair that shares
-  // a block with the last one, the farthest apart first; else the first left.
-  std::vector<std::pair<int, int>> far;
-  for (int i = 0; i < m; ++i) {
-    for (int j = i + 2; j < m; ++j) far.emplace_back(i, j);
-  }
-  std::vector<char> used(far.size(), 0);
-  std::pair<int, int> last = order.back();
-  for (size_t placed = 0; placed < far.size(); ++placed) {
-    size_t pick = far.size();
-    for (size_t k = 0; k < far.size(); ++k) {
-      if (used[k]) continue;
-      const auto& [i, j] = far[k];
-      const bool shares = i == last.first || i == last.second || j == last.first || j == last.second;
-      if (!shares) continue;
-      if (pick == far.size() || j - i > far[pick].second - far[pick].first) pick = k;
-    }
-    if (pick == far.size()) {
-      for (pick = 0; used[pick]; ++pick) {
-      }
-    }
-    used[pick] = 1;
-    last = far[pick];
-    order.push_back(last);
-  }
-  for (const auto& [bi, bj] : order) {
-    PairChunk chunk = BlockPairChunk(image_ids, bs, bi, bj);
-    if (chunk.pairs.empty()) continue;
-    chunk.num_blocks = m;
-    chunks.push_back(std::move(chunk));
-  }
-  return chunks;
+  for (const auto& pair : FarBlockPairs(m, order.back())) order.push_back(pair);
+  return ChunksOfBlockPairs(image_ids, bs, m, m, order);
 }
 
 std::vector<PairChunk> ListPairChunks(const std::vector<ImagePair>& pairs, size_t max_pairs_per_chunk,
