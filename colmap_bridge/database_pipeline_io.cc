@@ -130,50 +130,25 @@ DatabaseResultSink::DatabaseResultSink(const std::string& database_path, const O
 }
 
 void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
-  Write(results, /*matches=*/true, /*geometries=*/true);
-}
-
-bool DatabaseResultSink::WritesMatchesAhead() const {
-  // --overwrite: a pair whose new matches were written but not yet its new
-  // geometry would still hold its old geometry row, and a rerun would take
-  // it for done.
-  return options_.write_two_view_geometries && !options_.replace_existing;
-}
-
-void DatabaseResultSink::WriteMatchesAhead(const std::vector<PairResult>& results) {
-  Write(results, /*matches=*/true, /*geometries=*/false);
-}
-
-void DatabaseResultSink::WriteGeometries(const std::vector<PairResult>& results) {
-  Write(results, /*matches=*/false, /*geometries=*/true);
-}
-
-// Both steps of a chunk, or one of them (WriteMatchesAhead, then
-// WriteGeometries, which also records the empty pairs: a pair counts as
-// done once its geometry is in).
-void DatabaseResultSink::Write(const std::vector<PairResult>& results, bool matches, bool geometries) {
   std::vector<pair_t> empty_pairs;
   size_t rows = 0;
   database_.BeginTransaction();
   try {
     for (const PairResult& result : results) {
       if (!options_.write_empty_pairs && result.matches.empty()) {
-        if (!geometries) continue;
         empty_pairs.push_back(ImagePairToPairId(result.pair.first, result.pair.second));
         if (options_.replace_existing) database_.DeleteMatchesAndGeometry(result.pair.first, result.pair.second);
         continue;
       }
-      if (matches) {
-        database_.WriteMatches(result.pair.first, result.pair.second, result.matches);
-        ++rows;
-      }
-      if (geometries && options_.write_two_view_geometries) {
+      database_.WriteMatches(result.pair.first, result.pair.second, result.matches);
+      ++rows;
+      if (options_.write_two_view_geometries) {
         database_.WriteTwoViewGeometry(result.pair.first, result.pair.second, result.geometry);
         ++rows;
       }
     }
     // In the chunk's transaction: recorded exactly when the chunk is.
-    if (geometries) database_.RecordEmptyPairs(empty_pairs);
+    database_.RecordEmptyPairs(empty_pairs);
     database_.Commit();
   } catch (...) {
     database_.Rollback();

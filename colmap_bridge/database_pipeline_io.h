@@ -92,11 +92,6 @@ class DatabaseResultSink : public ResultSink {
   // One transaction per chunk, through prepared statements, from the one
   // writer thread of the pipeline.
   void WriteChunk(const std::vector<PairResult>& results) override;
-  // Unless the geometries are not written, or old rows are replaced
-  // (replace_existing): see ResultSink.
-  bool WritesMatchesAhead() const override;
-  void WriteMatchesAhead(const std::vector<PairResult>& results) override;
-  void WriteGeometries(const std::vector<PairResult>& results) override;
 
   // Rows written to matches and two_view_geometries so far.
   size_t rows_written() const { return rows_written_; }
@@ -104,7 +99,6 @@ class DatabaseResultSink : public ResultSink {
   size_t empty_pairs_recorded() const { return empty_pairs_recorded_; }
 
  private:
-  void Write(const std::vector<PairResult>& results, bool matches, bool geometries);
 
   DatabaseWriterLock lock_;  // taken before opening, released after closing
   Database database_;

@@ -42,16 +42,6 @@ void LockedSink::WriteChunk(const std::vector<PairResult>& results) {
   pairs_written_ += results.size();
 }
 
-void LockedSink::WriteMatchesAhead(const std::vector<PairResult>& results) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  sink_->WriteMatchesAhead(results);
-}
-
-void LockedSink::WriteGeometries(const std::vector<PairResult>& results) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  sink_->WriteGeometries(results);
-  pairs_written_ += results.size();
-}
 
 MpiResultSender::MpiResultSender(const std::vector<PairChunk>& chunks) {
   for (const PairChunk& chunk : chunks) {

@@ -33,10 +33,6 @@ class LockedSink : public ResultSink {
  public:
   explicit LockedSink(ResultSink* sink) : sink_(sink) {}
   void WriteChunk(const std::vector<PairResult>& results) override;
-  bool WritesMatchesAhead() const override { return sink_->WritesMatchesAhead(); }
-  void WriteMatchesAhead(const std::vector<PairResult>& results) override;
-  // Counts the pairs, as WriteChunk: they are written once their geometry is.
-  void WriteGeometries(const std::vector<PairResult>& results) override;
   size_t pairs_written() const { return pairs_written_; }
 
  private:

@@ -114,15 +114,10 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 // verification threads (exact_rematch_feature_matcher.h); null where it
 // stays on the matching thread: with several GPUs (each chunk is split
 // between them), or where options.rematch_on_matching_thread says so.
-// CASHASH_DEFERRED_REMATCH=0 or 1 overrides the latter, to compare.
 std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const MatcherCommandOptions& options,
                                                       const MeanDescriptor& mean) {
 #ifdef CASHASH_WITH_CUDA
-  const char* setting = std::getenv("CASHASH_DEFERRED_REMATCH");
-  bool deferred = !options.rematch_on_matching_thread;
-  if (setting != nullptr && std::string(setting) == "0") deferred = false;
-  if (setting != nullptr && std::string(setting) == "1") deferred = true;
-  if (!deferred) return nullptr;
+  if (options.rematch_on_matching_thread) return nullptr;
   if (GpuIndices(options.gpu_index).size() != 1) return nullptr;
   MatcherCommandOptions brute_force = options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;

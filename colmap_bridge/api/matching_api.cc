@@ -206,19 +206,6 @@ MatchingSummary EndAllRanksOnError(Body body) {
   }
 }
 
-// The exhaustive run's chunk order. CASHASH_CHUNK_ORDER=neighbours_first
-// takes NeighboursFirstPairChunks where every image fits one group, to
-// compare with the scheduled order; anything else, or several groups, the
-// scheduled order (ScheduledPairChunks).
-std::vector<PairChunk> ExhaustiveChunks(const std::vector<image_t>& image_ids, const ScheduleSizes& sizes) {
-  const char* order = std::getenv("CASHASH_CHUNK_ORDER");
-  const bool one_group = static_cast<size_t>(sizes.blocks_per_group) * sizes.block_size >= image_ids.size();
-  if (one_group && order != nullptr && std::string(order) == "neighbours_first") {
-    return NeighboursFirstPairChunks(image_ids, sizes.block_size);
-  }
-  return ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
-}
-
 }  // namespace
 
 MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
@@ -242,7 +229,7 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     clock.Mark("reading the feature counts");
     const ScheduleSizes sizes = ChooseSizesForRun(resolved, source, image_ids, callbacks);
     clock.Mark("starting the GPU and sizing the run");
-    std::vector<PairChunk> chunks = ExhaustiveChunks(image_ids, sizes);
+    std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
     const size_t n = image_ids.size();
     RunRequest request;
     request.options = resolved;

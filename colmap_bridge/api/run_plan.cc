@@ -349,19 +349,6 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
                       " group steps, at most " + FormatMemorySize(stats.peak_bytes) + " cached");
 }
 
-// CASHASH_EXTRA_VERIFIERS=eager lets every verification thread take chunks
-// at once (PipelineOptions::extra_verifiers_on_backlog), to compare.
-bool ExtraVerifiersOnBacklogFromEnvironment() {
-  const char* text = std::getenv("CASHASH_EXTRA_VERIFIERS");
-  return text == nullptr || std::string(text) != "eager";
-}
-
-// Whether environment variable `name` is set to "1" (the switches below).
-bool EnvironmentSwitchOn(const char* name) {
-  const char* text = std::getenv(name);
-  return text != nullptr && std::string(text) == "1";
-}
-
 // CASHASH_PIPELINE_TRACE=FILE records each chunk's stage intervals and
 // writes them to FILE as CSV (pipeline_trace.h; under MPI each rank writes
 // FILE.rankN), to read a run's critical path with
@@ -394,14 +381,6 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.num_threads = plan.options.sift.num_threads;
   pipeline_options.skip_geometric_verification = plan.options.skip_geometric_verification;
   pipeline_options.two_view = plan.options.two_view;
-  pipeline_options.extra_verifiers_on_backlog = ExtraVerifiersOnBacklogFromEnvironment();
-  pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
-  // Off by default, measured without gain (device run 125) and kept to
-  // compare: CASHASH_WRITE_MATCHES_AHEAD=1 has the writer take a chunk's raw
-  // matches while it is verified, CASHASH_REMATCH_THREAD=1 gives the
-  // deferred exact rematch a thread of its own (PipelineOptions).
-  pipeline_options.write_matches_ahead = EnvironmentSwitchOn("CASHASH_WRITE_MATCHES_AHEAD");
-  pipeline_options.deferred_matching_thread = EnvironmentSwitchOn("CASHASH_REMATCH_THREAD");
   PipelineTrace trace;
   const std::string trace_path = PipelineTracePathFromEnvironment(share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;

@@ -1,7 +1,6 @@
 #include "colmap_bridge/api/verifier_selection.h"
 
 #include <algorithm>
-#include <cstdlib>
 #include <stdexcept>
 
 #ifdef CASHASH_WITH_CUDA
@@ -13,25 +12,8 @@
 namespace cashash {
 namespace colmap {
 
-size_t ChunksPerVerificationFromEnvironment() {
-  const char* text = std::getenv("CASHASH_CHUNKS_PER_VERIFICATION");
-  if (text == nullptr) return 0;
-  try {
-    return static_cast<size_t>(std::max(0, std::stoi(text)));
-  } catch (const std::exception&) {
-    throw std::invalid_argument(std::string("CASHASH_CHUNKS_PER_VERIFICATION: expected a number of chunks, got '") +
-                                text + "'");
-  }
-}
-
 std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
                                                              const std::function<void(const std::string&)>& warning) {
-  // CASHASH_VERIFIER=cpu verifies on the CPU while matching on the GPU (to
-  // compare the two verifiers within one run configuration).
-  const char* forced = std::getenv("CASHASH_VERIFIER");
-  if (forced != nullptr && std::string(forced) == "cpu") {
-    return CreateCpuBatchVerifier(options.two_view, options.sift.num_threads);
-  }
   if (options.use_gpu) {
 #ifdef CASHASH_WITH_CUDA
     int gpu_index = 0;

@@ -17,11 +17,6 @@ namespace colmap {
 std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
                                                              const std::function<void(const std::string&)>& warning);
 
-// CASHASH_CHUNKS_PER_VERIFICATION=N makes every verifier call take up to N
-// chunks that wait together (PipelineOptions::chunks_per_verification), to
-// compare; 0 (unset) leaves it to the verifier.
-size_t ChunksPerVerificationFromEnvironment();
-
 // The F estimator of guided matching's stage 1, chosen the same way.
 std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options);
 

@@ -182,7 +182,6 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
   PipelineOptions pipeline_options;
   pipeline_options.num_threads = checked.sift.num_threads;
   pipeline_options.two_view = checked.two_view;
-  pipeline_options.chunks_per_verification = ChunksPerVerificationFromEnvironment();
   MatchingPipeline pipeline(pipeline_options, &source, &stored, &sink);
   pipeline.SetBatchVerifier(verifier.get());
   if (callbacks.progress) pipeline.SetProgressCallback(callbacks.progress);

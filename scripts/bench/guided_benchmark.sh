@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Ga-CasHash against exhaustive matching on one feature database: the three
+# Ga-CasHash against exhaustive matching on one feature database: the
 # configurations of the GPU verification issue's benchmark, each on a fresh
 # copy of the database and REPEATS times (every run is a new process, so each
 # includes starting the GPU), then `colmap mapper` on each configuration's
@@ -7,14 +7,12 @@
 #   ex   cashash exhaustive_matcher --FeatureMatching.use_gpu 1
 #        (GPU cascade, GPU verification)
 #   ga   cashash guided_matcher --FeatureMatching.use_gpu 1
-#   cpu  CASHASH_VERIFIER=cpu cashash exhaustive_matcher --FeatureMatching.use_gpu 1
-#        (GPU cascade, verification on all cores)
 #   fb   cashash guided_matcher --GuidedMatching.unguided_fallback 1 (not run
 #        unless CONFIGS names it)
 #
 # Usage: guided_benchmark.sh CASHASH FEATURE_DB OUT_DIR [IMAGE_DIR]
 # Environment (defaults in brackets):
-#   REPEATS [2], CONFIGS ["ex ga cpu"], LIMIT_S [1800]: per run,
+#   REPEATS [2], CONFIGS ["ex ga"], LIMIT_S [1800]: per run,
 #   MAPPER [1]: run colmap mapper (needs colmap on PATH; IMAGE_DIR may be an
 #       empty folder for a generated database), MAPPER_THREADS [all cores],
 #   MATCH [1]: 0 skips matching and maps the databases already in OUT_DIR
@@ -27,7 +25,7 @@ set -u -o pipefail
 
 CASHASH="$1"; FEATURE_DB="$2"; OUT_DIR="$3"; IMAGE_DIR="${4:-}"
 REPEATS="${REPEATS:-2}"
-CONFIGS="${CONFIGS:-ex ga cpu}"
+CONFIGS="${CONFIGS:-ex ga}"
 LIMIT_S="${LIMIT_S:-1800}"
 MAPPER="${MAPPER:-1}"
 MAPPER_THREADS="${MAPPER_THREADS:--1}"
@@ -41,9 +39,8 @@ if [[ "$MATCH" == 1 ]]; then
     case $config in
       ex)  command=(env "$CASHASH" exhaustive_matcher) ;;
       ga)  command=(env "$CASHASH" guided_matcher) ;;
-      cpu) command=(env CASHASH_VERIFIER=cpu "$CASHASH" exhaustive_matcher) ;;
       fb)  command=(env "$CASHASH" guided_matcher --GuidedMatching.unguided_fallback 1) ;;
-      *)   echo "ERROR: unknown configuration '$config' in CONFIGS (ex, ga, cpu, fb)" >&2; exit 1 ;;
+      *)   echo "ERROR: unknown configuration '$config' in CONFIGS (ex, ga, fb)" >&2; exit 1 ;;
     esac
     for ((n = 1; n <= REPEATS; n++)); do
       cp "$FEATURE_DB" "$OUT_DIR/$config.db" || exit 1

@@ -15,7 +15,7 @@ import statistics
 import sys
 
 NAMES = {"ex": "exhaustive, GPU verification", "ga": "Ga (guided_matcher)",
-         "cpu": "exhaustive, CPU verification", "fb": "Ga with --GuidedMatching.unguided_fallback 1"}
+         "fb": "Ga with --GuidedMatching.unguided_fallback 1"}
 
 
 def parse_log(path):
@@ -50,7 +50,7 @@ def main():
     parser.add_argument("out_dir")
     args = parser.parse_args()
     rows, medians = [], {}
-    for config in ("ex", "ga", "fb", "cpu"):
+    for config in ("ex", "ga", "fb"):
         logs = sorted(glob.glob(os.path.join(args.out_dir, f"{config}_[0-9]*.log")))
         if not logs:
             continue

@@ -1,6 +1,5 @@
 // Geometric verification of the same matches by the CPU batch verifier (all
-// cores) and the GPU one (F, H and E on the device, the decision on the CPU;
-// also timed with E on the CPU, as CASHASH_GPU_ESSENTIAL=cpu runs it),
+// cores) and the GPU one (F, H and E on the device, the decision on the CPU),
 // printed as a table. Pairs come from a verification pairs file
 // (scripts/bench/dump_verification_pairs) or, without one, from synthetic
 // scenes; --replicate K verifies every pair K times under different seeds, to
@@ -126,20 +125,7 @@ int main(int argc, char** argv) {
 
   const cashash::TwoViewGeometryOptions options;
   auto cpu = cashash::CreateCpuBatchVerifier(options, threads);
-  if (!cashash::cuda::GpuEssentialFromEnvironment()) {
-    std::printf("CASHASH_GPU_ESSENTIAL=cpu is set: both GPU rows below run E on the CPU\n");
-  }
   auto gpu = cashash::cuda::CreateGpuBatchVerifier(options, 0, threads);
-  // The former split (E on the CPU while the GPU runs F and H), for comparison.
-  const char* previous = std::getenv("CASHASH_GPU_ESSENTIAL");
-  const std::string previous_value = previous != nullptr ? previous : "";
-  setenv("CASHASH_GPU_ESSENTIAL", "cpu", 1);
-  auto gpu_cpu_e = cashash::cuda::CreateGpuBatchVerifier(options, 0, threads);
-  if (previous != nullptr) {
-    setenv("CASHASH_GPU_ESSENTIAL", previous_value.c_str(), 1);
-  } else {
-    unsetenv("CASHASH_GPU_ESSENTIAL");
-  }
   // Every hypothesis scored in full (TwoViewGeometry.sprt 0): what the
   // sequential test saves, and whether it keeps the decisions.
   cashash::TwoViewGeometryOptions full_scan = options;
@@ -151,8 +137,8 @@ int main(int argc, char** argv) {
   const double cpu_scale = static_cast<double>(pairs.size()) / static_cast<double>(cpu_pairs.size());
 
   gpu->Verify(std::vector<cashash::VerificationPair>(pairs.begin(), pairs.begin() + std::min<size_t>(pairs.size(), 8)));
-  std::vector<cashash::TwoViewGeometry> cpu_result, gpu_result, gpu_cpu_e_result, gpu_full_scan_result;
-  double cpu_best = gpu_only ? 0 : 1e30, gpu_best = 1e30, gpu_cpu_e_best = 1e30, gpu_full_scan_best = 1e30;
+  std::vector<cashash::TwoViewGeometry> cpu_result, gpu_result, gpu_full_scan_result;
+  double cpu_best = gpu_only ? 0 : 1e30, gpu_best = 1e30, gpu_full_scan_best = 1e30;
   for (int r = 0; r < repeats; ++r) {
     auto t0 = Clock::now();
     if (!gpu_only) {
@@ -165,11 +151,6 @@ int main(int argc, char** argv) {
     t0 = Clock::now();
     gpu_full_scan_result = gpu_full_scan->Verify(pairs);
     gpu_full_scan_best = std::min(gpu_full_scan_best, Seconds(t0));
-    if (calibrated > 0 && r == 0 && !gpu_only) {  // once: E on the CPU is slow
-      t0 = Clock::now();
-      gpu_cpu_e_result = gpu_cpu_e->Verify(pairs);
-      gpu_cpu_e_best = std::min(gpu_cpu_e_best, Seconds(t0));
-    }
   }
   // The GPU's F and H alone (no E, no decision), and E alone on the CPU.
   std::vector<cashash::TwoViewPoints> points(pairs.size());
@@ -251,10 +232,6 @@ int main(int argc, char** argv) {
   std::printf("| F and H only | %.3f | %.3f | %.1fx | %.0f |\n", cpu_fh, gpu_fh, cpu_fh / gpu_fh,
               pairs.size() / gpu_fh);
   if (calibrated > 0) {
-    if (!gpu_only) {
-      std::printf("| whole verification, E on the CPU beside the GPU's F and H | %.3f | %.3f | %.1fx | %.0f |\n",
-                  cpu_best, gpu_cpu_e_best, cpu_best / gpu_cpu_e_best, pairs.size() / gpu_cpu_e_best);
-    }
     std::printf("| F, H and E (E of the %zu calibrated pairs) | %.3f | %.3f | %.1fx | %.0f |\n", calibrated,
                 cpu_fh + cpu_e, gpu_fhe, (cpu_fh + cpu_e) / gpu_fhe, pairs.size() / gpu_fhe);
   }
@@ -329,12 +306,6 @@ int main(int argc, char** argv) {
     const double fewest_matches_first = time_in_order(order);
     std::printf("F, H and E by launch order: as given %.3f s, longest E first %.3f s, fewest matches first %.3f s\n",
                 as_given, longest_first, fewest_matches_first);
-  }
-  if (!gpu_cpu_e_result.empty()) {
-    const Agreement b = Compare(cpu_result, std::vector<cashash::TwoViewGeometry>(
-                                                gpu_cpu_e_result.begin(), gpu_cpu_e_result.begin() + cpu_result.size()));
-    std::printf("agreement with E on the CPU: same config %d, verified with inlier counts within 5%%: %d/%d\n",
-                b.same_config, b.close_inliers, b.verified);
   }
   const Agreement full = Compare(gpu_full_scan_result, gpu_result);
   auto totals = [](const std::vector<cashash::TwoViewGeometry>& r, size_t* verified, size_t* inliers) {

@@ -10,15 +10,8 @@
 // written in ExhaustiveMatching blocks, one transaction per block pair,
 // as the pipeline writes them.
 //
-// With --two_steps 1 each chunk goes through the sink in the pipeline's two
-// steps instead (ResultSink::WriteMatchesAhead, then WriteGeometries, as
-// with CASHASH_WRITE_MATCHES_AHEAD=1), and a second table says what each
-// step took, for block pairs on the diagonal (neighbouring images) and off
-// it: the second step is what is left for the writer after verification.
-//
 // Usage: write_rows_bench DATABASE SCRATCH_DIR [--block_size 50]
 //        [--neighbours 10] [--far_with_matches 0.0] [--matches 2000]
-//        [--two_steps 0]
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
@@ -44,7 +37,6 @@ struct BenchOptions {
   int neighbours = 10;
   double far_with_matches = 0.0;
   int matches = 2000;  // raw matches of the nearest pair
-  bool two_steps = false;
 };
 
 FeatureMatches MakeMatches(size_t count, SplitMix64& rng) {
@@ -88,8 +80,6 @@ struct Measurement {
   size_t resume_pairs = 0;
   double megabytes_added = 0;
   double log_megabytes = 0;  // the -wal file at its largest (SQLite never shrinks it)
-  // --two_steps: seconds of each step, for diagonal and other block pairs.
-  double diagonal_first = 0, diagonal_second = 0, other_first = 0, other_second = 0;
 };
 
 Measurement Run(const std::string& source, const std::string& copy, bool write_empty_pairs, const BenchOptions& o) {
@@ -119,17 +109,7 @@ Measurement Run(const std::string& source, const std::string& copy, bool write_e
         results.push_back(MakeResult(pair, a > b ? a - b : b - a, o, rng));
       }
       const auto t0 = std::chrono::steady_clock::now();
-      if (o.two_steps && sink->WritesMatchesAhead()) {
-        sink->WriteMatchesAhead(results);
-        const auto t1 = std::chrono::steady_clock::now();
-        sink->WriteGeometries(results);
-        const bool diagonal = chunk.block_i == chunk.block_j;
-        (diagonal ? m.diagonal_first : m.other_first) += std::chrono::duration<double>(t1 - t0).count();
-        (diagonal ? m.diagonal_second : m.other_second) +=
-            std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
-      } else {
-        sink->WriteChunk(results);
-      }
+      sink->WriteChunk(results);
       m.write_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       m.pairs += results.size();
     }
@@ -159,7 +139,7 @@ Measurement Run(const std::string& source, const std::string& copy, bool write_e
 int main(int argc, char** argv) {
   if (argc < 3) {
     std::cerr << "usage: " << argv[0]
-              << " DATABASE SCRATCH_DIR [--block_size 50] [--neighbours 10] [--far_with_matches 0.0] [--matches 2000] [--two_steps 0]\n";
+              << " DATABASE SCRATCH_DIR [--block_size 50] [--neighbours 10] [--far_with_matches 0.0] [--matches 2000]\n";
     return 2;
   }
   BenchOptions o;
@@ -169,7 +149,6 @@ int main(int argc, char** argv) {
     else if (name == "--neighbours") o.neighbours = std::atoi(argv[i + 1]);
     else if (name == "--far_with_matches") o.far_with_matches = std::atof(argv[i + 1]);
     else if (name == "--matches") o.matches = std::atoi(argv[i + 1]);
-    else if (name == "--two_steps") o.two_steps = std::atoi(argv[i + 1]) != 0;
     else {
       std::cerr << "unknown option " << name << "\n";
       return 2;
@@ -178,28 +157,14 @@ int main(int argc, char** argv) {
   const std::string copy = (std::filesystem::path(argv[2]) / "write_rows_bench.db").string();
   std::cout << "| write_empty_pairs | pairs | rows written | empty pairs recorded | write s | close s | pairs/s | rows/s | "
                "MiB added | log MiB at most | resume read s |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
-  std::vector<Measurement> runs;
   for (bool write_empty : {true, false}) {
     const Measurement m = Run(argv[1], copy, write_empty, o);
-    runs.push_back(m);
     std::cout << std::fixed << "| " << (write_empty ? 1 : 0) << " | " << m.pairs << " | " << m.rows << " | "
               << m.empty_recorded << " | " << std::setprecision(2) << m.write_seconds << " | " << m.close_seconds << " | "
               << std::setprecision(0) << m.pairs / (m.write_seconds + m.close_seconds) << " | "
               << m.rows / (m.write_seconds + m.close_seconds) << " | " << std::setprecision(1)
               << m.megabytes_added << " | " << m.log_megabytes << " | " << std::setprecision(3) << m.resume_read_seconds << " (" << m.resume_pairs
               << " pairs) |" << std::endl;
-  }
-  if (o.two_steps) {
-    std::cout << "\n| write_empty_pairs | diagonal block pairs: matches s | geometries s | geometries' share | "
-                 "other block pairs: matches s | geometries s | geometries' share |\n|---|---|---|---|---|---|---|\n";
-    for (size_t k = 0; k < runs.size(); ++k) {
-      const Measurement& m = runs[k];
-      std::cout << std::fixed << std::setprecision(3) << "| " << (k == 0 ? 1 : 0) << " | " << m.diagonal_first << " | "
-                << m.diagonal_second << " | " << std::setprecision(2)
-                << m.diagonal_second / std::max(1e-9, m.diagonal_first + m.diagonal_second) << " | "
-                << std::setprecision(3) << m.other_first << " | " << m.other_second << " | " << std::setprecision(2)
-                << m.other_second / std::max(1e-9, m.other_first + m.other_second) << " |" << std::endl;
-    }
   }
   return 0;
 }

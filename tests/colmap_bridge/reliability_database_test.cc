@@ -526,55 +526,6 @@ TEST(ReliabilityFaultTest, LockedDatabaseTimesOut) {
   EXPECT_EQ(IntegrityOf(path), "ok");
 }
 
-// A chunk written in two steps (raw matches while it is verified, then its
-// geometries): stopped between them, its pairs are not done for a rerun,
-// which matches them again; finished, the rows are those of one step.
-TEST(ReliabilityFaultTest, ChunkStoppedBetweenItsTwoStepsIsMatchedAgain) {
-  TempDir dir;
-  const std::string two_steps = MakeDatabase(dir, "two.db", 4, 5);
-  const std::string one_step = MakeDatabase(dir, "one.db", 4, 5);
-  std::vector<PairResult> chunk = {ResultWithMatches(1, 2, 4), ResultWithMatches(1, 3, 0), ResultWithMatches(2, 4, 3)};
-  chunk[0].geometry.config = kUncalibrated;
-  chunk[0].geometry.F = Eigen::Matrix3d::Identity();
-  chunk[0].geometry.inlier_matches = {chunk[0].matches[0], chunk[0].matches[2]};
-  chunk[2].geometry.config = kDegenerate;
-  for (const bool write_empty_pairs : {true, false}) {
-    const std::string suffix = write_empty_pairs ? ".full" : ".compact";
-    fs::copy_file(two_steps, two_steps + suffix, fs::copy_options::overwrite_existing);
-    fs::copy_file(one_step, one_step + suffix, fs::copy_options::overwrite_existing);
-    const DatabaseResultSink::Options options{true, write_empty_pairs, false};
-    {
-      DatabaseResultSink sink(two_steps + suffix, options);
-      ASSERT_TRUE(sink.WritesMatchesAhead());
-      sink.WriteMatchesAhead(chunk);
-    }
-    EXPECT_EQ(CountRows(two_steps + suffix, "matches"), write_empty_pairs ? 3u : 2u);
-    EXPECT_EQ(CountRows(two_steps + suffix, "two_view_geometries"), 0u);
-    EXPECT_TRUE(Database(two_steps + suffix, true).ReadCompletedPairIds().empty());
-    {
-      DatabaseResultSink sink(two_steps + suffix, options);
-      sink.WriteGeometries(chunk);
-    }
-    {
-      DatabaseResultSink sink(one_step + suffix, options);
-      sink.WriteChunk(chunk);
-    }
-    EXPECT_EQ(Database(two_steps + suffix, true).ReadCompletedPairIds().size(), 3u);
-    for (const std::string table : {"matches", "two_view_geometries"}) {
-      const std::string rows = "SELECT group_concat(pair_id || ':' || rows || ':' || hex(data), ';') FROM (SELECT * FROM " +
-                               table + " ORDER BY pair_id)";
-      EXPECT_EQ(RawDb(two_steps + suffix).QueryText(rows), RawDb(one_step + suffix).QueryText(rows)) << table;
-    }
-    const std::string geometries =
-        "SELECT group_concat(config || ':' || hex(F), ';') FROM (SELECT * FROM two_view_geometries ORDER BY pair_id)";
-    EXPECT_EQ(RawDb(two_steps + suffix).QueryText(geometries), RawDb(one_step + suffix).QueryText(geometries));
-    EXPECT_EQ(IntegrityOf(two_steps + suffix), "ok");
-  }
-  // Without geometries, or replacing old rows, a chunk is one step.
-  EXPECT_FALSE(DatabaseResultSink(two_steps, DatabaseResultSink::Options{false, true, false}).WritesMatchesAhead());
-  EXPECT_FALSE(DatabaseResultSink(two_steps, DatabaseResultSink::Options{true, true, true}).WritesMatchesAhead());
-}
-
 // The file may not grow (RLIMIT_FSIZE stands in for a full disk): the chunk
 // fails as a whole, committed chunks stay, and the file stays valid.
 TEST(ReliabilityFaultTest, DiskFullWhileWriting) {

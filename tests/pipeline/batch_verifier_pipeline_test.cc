@@ -76,7 +76,9 @@ class ChoosingMatcher : public IdentityMatcher {
 // records the batch sizes and what it was shown.
 class RecordingVerifier : public BatchVerifier {
  public:
+  explicit RecordingVerifier(size_t chunks_per_call = 1) : chunks_per_call_(chunks_per_call) {}
   std::string Name() const override { return "recording"; }
+  size_t ChunksPerCall() const override { return chunks_per_call_; }
   std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
     batch_sizes.push_back(pairs.size());
     std::vector<TwoViewGeometry> out(pairs.size());
@@ -91,15 +93,20 @@ class RecordingVerifier : public BatchVerifier {
   }
   std::vector<size_t> batch_sizes;
   std::vector<uint64_t> seeds;
+
+ private:
+  size_t chunks_per_call_;
 };
 
 // Verifies up to three chunks at once. Every third call is slow, so calls
 // finish out of order; call `fail_at` (if any) throws.
 class ConcurrentVerifier : public BatchVerifier {
  public:
-  explicit ConcurrentVerifier(int fail_at = -1) : fail_at_(fail_at) {}
+  explicit ConcurrentVerifier(int fail_at = -1, size_t chunks_per_call = 1)
+      : fail_at_(fail_at), chunks_per_call_(chunks_per_call) {}
   std::string Name() const override { return "concurrent"; }
   int MaxConcurrentCalls() const override { return 3; }
+  size_t ChunksPerCall() const override { return chunks_per_call_; }
   std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
     const int now = ++in_flight_;
     int seen = max_in_flight.load();
@@ -120,6 +127,7 @@ class ConcurrentVerifier : public BatchVerifier {
 
  private:
   const int fail_at_;
+  const size_t chunks_per_call_;
   std::atomic<int> calls_{0};
   std::atomic<int> in_flight_{0};
 };
@@ -231,9 +239,8 @@ TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChun
     const std::vector<PairChunk> chunks = Chunks(16, 3);
     IdentityMatcher matcher;
     Sink sink;
-    ConcurrentVerifier verifier(/*fail_at=*/4);
+    ConcurrentVerifier verifier(/*fail_at=*/4, chunks_per_call);
     PipelineOptions options;
-    options.chunks_per_verification = chunks_per_call;
     try {
       RunPipeline(chunks, &matcher, &verifier, &sink, options);
       FAIL() << "the verifier's error was not rethrown";
@@ -247,88 +254,6 @@ TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChun
     size_t written_pairs = 0;
     for (size_t c = 0; c < sink.first_pairs.size(); ++c) written_pairs += chunks[c].pairs.size();
     EXPECT_EQ(sink.configs.size(), written_pairs) << chunks_per_call;
-  }
-}
-
-// Takes each chunk's raw matches ahead of its geometries and logs the steps.
-class AheadSink : public Sink {
- public:
-  bool WritesMatchesAhead() const override { return true; }
-  void WriteMatchesAhead(const std::vector<PairResult>& results) override {
-    std::lock_guard<std::mutex> lock(mutex);
-    for (const PairResult& r : results) EXPECT_EQ(r.matches.size(), 20u);
-    ahead_first_pairs.push_back(results.front().pair);
-  }
-  void WriteGeometries(const std::vector<PairResult>& results) override {
-    {
-      std::lock_guard<std::mutex> lock(mutex);
-      const bool ahead = std::find(ahead_first_pairs.begin(), ahead_first_pairs.end(), results.front().pair) !=
-                         ahead_first_pairs.end();
-      EXPECT_TRUE(ahead) << "geometries before the chunk's matches";
-    }
-    Sink::WriteChunk(results);
-  }
-  void WriteChunk(const std::vector<PairResult>& results) override {
-    ++whole_chunks;
-    Sink::WriteChunk(results);
-  }
-  std::vector<ImagePair> ahead_first_pairs;  // in the order written
-  std::atomic<int> whole_chunks{0};
-};
-
-// Verification calls that end out of order: every chunk's matches go out
-// ahead, in whatever order, and its geometries after, in matching order.
-TEST(BatchVerifierPipeline, MatchesAheadThenGeometriesInMatchingOrder) {
-  for (const size_t chunks_per_call : {size_t{1}, size_t{2}}) {
-    const std::vector<PairChunk> chunks = Chunks(16, 3);
-    const size_t num_pairs = NumPairs(chunks);
-    IdentityMatcher matcher;
-    AheadSink sink;
-    ConcurrentVerifier verifier;
-    PipelineOptions options;
-    options.write_matches_ahead = true;
-    options.chunks_per_verification = chunks_per_call;
-    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
-    EXPECT_EQ(stats.pairs_done, num_pairs);
-    EXPECT_EQ(stats.verified_pairs, num_pairs);
-    EXPECT_EQ(sink.whole_chunks.load(), 0);
-    EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
-    std::vector<ImagePair> ahead = sink.ahead_first_pairs;
-    std::vector<ImagePair> all = FirstPairs(chunks);
-    std::sort(ahead.begin(), ahead.end());
-    std::sort(all.begin(), all.end());
-    EXPECT_EQ(ahead, all);
-    ASSERT_EQ(sink.configs.size(), num_pairs);
-    for (const auto& entry : sink.configs) EXPECT_EQ(entry.second, kUncalibrated);
-  }
-}
-
-// A sink that cannot take matches ahead gets whole chunks; a failed call
-// leaves the chunks written whole or, ahead, with their matches only.
-TEST(BatchVerifierPipeline, MatchesAheadOnlyWhereTheSinkTakesThem) {
-  {
-    const std::vector<PairChunk> chunks = Chunks(9, 3);
-    IdentityMatcher matcher;
-    Sink sink;
-    RecordingVerifier verifier;
-    PipelineOptions options;
-    options.write_matches_ahead = true;
-    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
-    EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
-    EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
-  }
-  {
-    const std::vector<PairChunk> chunks = Chunks(16, 3);
-    IdentityMatcher matcher;
-    AheadSink sink;
-    ConcurrentVerifier verifier(/*fail_at=*/4);
-    PipelineOptions options;
-    options.write_matches_ahead = true;
-    EXPECT_THROW(RunPipeline(chunks, &matcher, &verifier, &sink, options), std::runtime_error);
-    const std::vector<ImagePair> all = FirstPairs(chunks);
-    ASSERT_LT(sink.first_pairs.size(), all.size());
-    EXPECT_TRUE(std::equal(sink.first_pairs.begin(), sink.first_pairs.end(), all.begin()));
-    EXPECT_GE(sink.ahead_first_pairs.size(), sink.first_pairs.size());
   }
 }
 
@@ -536,6 +461,7 @@ TEST(BatchVerifierPipeline, ChunksThatWaitTogetherShareOneCall) {
    public:
     explicit HeldCallsVerifier(ChoosingMatcher* m) : m_(m) {}
     std::string Name() const override { return "held"; }
+    size_t ChunksPerCall() const override { return 4; }
     std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
       const size_t call = batch_sizes.size();
       batch_sizes.push_back(pairs.size());
@@ -564,7 +490,6 @@ TEST(BatchVerifierPipeline, ChunksThatWaitTogetherShareOneCall) {
   } verifier(&matcher);
   PipelineOptions options;
   options.chunks_in_queue = depth;
-  options.chunks_per_verification = 4;
   options.two_view.random_seed = 3;
   const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
   EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
@@ -605,11 +530,10 @@ TEST(BatchVerifierPipeline, TheTraceHasEachChunksStagesInOrder) {
   const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
   IdentityMatcher matcher;
   Sink sink;
-  RecordingVerifier verifier;
+  RecordingVerifier verifier(/*chunks_per_call=*/2);
   PipelineTrace trace;
   PipelineOptions options;
   options.trace = &trace;
-  options.chunks_per_verification = 2;
   const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink, options);
   ASSERT_EQ(stats.pairs_done, NumPairs(chunks));
   std::map<std::pair<size_t, std::string>, PipelineTraceEvent> by_chunk;

@@ -27,23 +27,6 @@ TEST(BlockingQueue, FirstInFirstOutAndDrainedAfterClose) {
   EXPECT_EQ(queue.Pop(), std::nullopt);
 }
 
-TEST(BlockingQueue, PushWithoutWaitingPassesAFullQueueInOrderAndTakesRoom) {
-  BlockingQueue<int> queue(1);
-  EXPECT_TRUE(queue.Push(1));  // full
-  EXPECT_TRUE(queue.PushWithoutWaiting(2));
-  // A bounded push waits until both are taken.
-  std::future<bool> bounded = std::async(std::launch::async, [&] { return queue.Push(3); });
-  EXPECT_EQ(bounded.wait_for(100ms), std::future_status::timeout);
-  EXPECT_EQ(queue.Pop(), std::optional<int>(1));
-  EXPECT_EQ(bounded.wait_for(100ms), std::future_status::timeout);
-  EXPECT_EQ(queue.Pop(), std::optional<int>(2));
-  EXPECT_TRUE(bounded.get());
-  EXPECT_EQ(queue.Pop(), std::optional<int>(3));
-  queue.Close();
-  EXPECT_FALSE(queue.PushWithoutWaiting(4));
-  EXPECT_EQ(queue.Pop(), std::nullopt);
-}
-
 TEST(BlockingQueue, HelperPopWaitsForTheBacklog) {
   BlockingQueue<int> queue(2);
   ASSERT_EQ(queue.capacity(), 2u);

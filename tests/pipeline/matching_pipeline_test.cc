@@ -152,80 +152,36 @@ class DeferringMatcher : public FakeMatcher {
   std::atomic<int> calls_{0};
 };
 
-// Takes matches ahead: records, per pair, how many matches each step saw.
-class AheadSink : public CollectingSink {
- public:
-  bool WritesMatchesAhead() const override { return true; }
-  void WriteMatchesAhead(const std::vector<PairResult>& results) override {
-    std::lock_guard<std::mutex> lock(mutex);
-    for (const PairResult& r : results) ahead[ImagePairToPairId(r.pair.first, r.pair.second)] = r.matches.size();
-  }
-  void WriteGeometries(const std::vector<PairResult>& results) override {
-    {
-      std::lock_guard<std::mutex> lock(mutex);
-      for (const PairResult& r : results) {
-        EXPECT_TRUE(ahead.count(ImagePairToPairId(r.pair.first, r.pair.second))) << "geometry before its matches";
-      }
-      ++geometry_steps;
-    }
-    WriteChunk(results);
-  }
-  std::map<pair_t, size_t> ahead;
-  int geometry_steps = 0;
-};
-
 // The deferred part is complete before verification and writing, on the
-// verification threads or on a thread of its own, and the matches written
-// ahead are those final ones, each chunk's before its geometries; skipped
-// verification writes chunks at once.
+// verification threads; skipped verification writes chunks at once.
 TEST(MatchingPipeline, DeferredMatchingIsCompletedBeforeVerifyingAndWriting) {
-  for (const bool own_thread : {false, true}) {
-    for (const bool write_ahead : {false, true}) {
-      for (const bool skip_verification : {true, false}) {
-        SCOPED_TRACE(testing::Message() << "own thread " << own_thread << ", ahead " << write_ahead << ", skip "
-                                        << skip_verification);
-        FakeSource source;
-        DeferringMatcher matcher;
-        AheadSink sink;
-        PipelineOptions options = NoVerification();
-        options.skip_geometric_verification = skip_verification;
-        options.deferred_matching_thread = own_thread;
-        options.write_matches_ahead = write_ahead;
-        MatchingPipeline pipeline(options, &source, &matcher, &sink);
-        const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
-        const PipelineStats stats = pipeline.Run(chunks);
-        EXPECT_EQ(stats.pairs_done, 36u);
-        EXPECT_EQ(matcher.completed.load(), static_cast<int>(chunks.size()));
-        ASSERT_EQ(sink.written.size(), 36u);
-        // Pair (a, b) got a matches, from image a's descriptors, in every mode.
-        for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first);
-        if (write_ahead && !skip_verification) {
-          EXPECT_EQ(sink.ahead, sink.written);
-          EXPECT_EQ(sink.geometry_steps, static_cast<int>(chunks.size()));
-        } else {
-          EXPECT_TRUE(sink.ahead.empty());
-          EXPECT_EQ(sink.geometry_steps, 0);
-        }
-        // On its own thread: one thread, not matching's.
-        if (own_thread && !skip_verification) {
-          ASSERT_EQ(matcher.completing_threads.size(), 1u);
-          EXPECT_NE(*matcher.completing_threads.begin(), matcher.matching_thread);
-        }
-      }
-    }
+  for (const bool skip_verification : {true, false}) {
+    SCOPED_TRACE(testing::Message() << "skip " << skip_verification);
+    FakeSource source;
+    DeferringMatcher matcher;
+    CollectingSink sink;
+    PipelineOptions options = NoVerification();
+    options.skip_geometric_verification = skip_verification;
+    MatchingPipeline pipeline(options, &source, &matcher, &sink);
+    const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
+    const PipelineStats stats = pipeline.Run(chunks);
+    EXPECT_EQ(stats.pairs_done, 36u);
+    EXPECT_EQ(matcher.completed.load(), static_cast<int>(chunks.size()));
+    ASSERT_EQ(sink.written.size(), 36u);
+    // Pair (a, b) got a matches, from image a's descriptors.
+    for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first);
   }
 }
 
-// A failure in the deferred part, on its own thread or on verification's,
-// stops the run with that error; only whole chunks were written, in order.
+// A failure in the deferred part, on a verification thread, stops the run
+// with that error; only whole chunks were written, in order.
 TEST(MatchingPipeline, DeferredMatchingErrorStopsTheRun) {
-  for (const bool own_thread : {false, true}) {
+  {
     FakeSource source;
     DeferringMatcher matcher(/*fail_at=*/3);
     CollectingSink sink;
     PipelineOptions options = NoVerification();
     options.skip_geometric_verification = false;
-    options.deferred_matching_thread = own_thread;
     MatchingPipeline pipeline(options, &source, &matcher, &sink);
     const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(15), 3);
     try {
@@ -234,10 +190,10 @@ TEST(MatchingPipeline, DeferredMatchingErrorStopsTheRun) {
     } catch (const std::runtime_error& e) {
       EXPECT_STREQ(e.what(), "rematch failed on purpose");
     }
-    EXPECT_LE(sink.chunks, 3) << own_thread;
+    EXPECT_LE(sink.chunks, 3);
     size_t pairs = 0;
     for (int c = 0; c < sink.chunks; ++c) pairs += chunks[c].pairs.size();
-    EXPECT_EQ(sink.written.size(), pairs) << own_thread;
+    EXPECT_EQ(sink.written.size(), pairs);
     for (int c = 0; c < sink.chunks; ++c) {
       for (const ImagePair& p : chunks[c].pairs) EXPECT_TRUE(sink.written.count(ImagePairToPairId(p.first, p.second)));
     }

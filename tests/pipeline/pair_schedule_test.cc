@@ -161,48 +161,5 @@ TEST(PairSchedule, RunEndsOnBlocksTwoApart) {
   }
 }
 
-// Neighbours first: every pair once for odd sizes, the band of diagonal and
-// next-to-diagonal block pairs before any pair of blocks two apart, and the
-// far pairs chained by a shared block wherever one is left.
-TEST(PairSchedule, NeighboursFirstVisitsEveryPairOnceWithTheBandFirst) {
-  for (const Case& c : OddCases()) {
-    SCOPED_TRACE("n=" + std::to_string(c.n) + " block_size=" + std::to_string(c.block_size));
-    const std::vector<PairChunk> chunks = NeighboursFirstPairChunks(Ids(c.n), c.block_size);
-    std::set<pair_t> seen;
-    bool far_seen = false;
-    for (const PairChunk& chunk : chunks) {
-      ASSERT_FALSE(chunk.pairs.empty());
-      EXPECT_LE(chunk.block_i, chunk.block_j);
-      const bool far = chunk.block_j - chunk.block_i >= 2;
-      EXPECT_TRUE(far || !far_seen) << "a neighbouring block pair after a far one";
-      far_seen = far_seen || far;
-      for (const ImagePair& pair : chunk.pairs) {
-        EXPECT_TRUE(seen.insert(ImagePairToPairId(pair.first, pair.second)).second) << "pair visited twice";
-      }
-    }
-    EXPECT_EQ(seen.size(), c.n * (c.n - 1) / 2);
-  }
-}
-
-TEST(PairSchedule, NeighboursFirstSmallExampleOrder) {
-  // 12 images, blocks of 2: b0..b5.
-  const std::vector<PairChunk> chunks = NeighboursFirstPairChunks(Ids(12), 2);
-  std::vector<std::pair<int, int>> order;
-  for (const PairChunk& chunk : chunks) order.emplace_back(chunk.block_i, chunk.block_j);
-  const std::vector<std::pair<int, int>> band = {{0, 0}, {0, 1}, {1, 1}, {1, 2}, {2, 2}, {2, 3},
-                                                 {3, 3}, {3, 4}, {4, 4}, {4, 5}, {5, 5}};
-  ASSERT_EQ(order.size(), 21u);
-  const std::vector<std::pair<int, int>> head(order.begin(), order.begin() + 11);
-  EXPECT_EQ(head, band);
-  EXPECT_EQ(order[11], (std::pair<int, int>(0, 5)));  // shares b5, the farthest apart
-  size_t unchained = 0;
-  for (size_t k = 12; k < order.size(); ++k) {
-    const std::set<int> now = {order[k].first, order[k].second};
-    const std::set<int> before = {order[k - 1].first, order[k - 1].second};
-    unchained += CountNew(now, before) == 2 ? 1 : 0;
-  }
-  EXPECT_LE(unchained, 2u);
-}
-
 }  // namespace
 }  // namespace cashash

@@ -569,9 +569,9 @@ __global__ void __launch_bounds__(kRansacThreads) TwoViewRansacKernel(RansacLaun
 // E blocks: a kernel of their own, so the 5-point solver's registers and
 // stack do not weigh on the F/H kernel's occupancy. It takes 255 registers,
 // so an SM holds 256 of its threads either way: two blocks of 128 or one of
-// 256 (E.block_threads). The larger block runs twice the trials per round,
-// so a pair that needs thousands of trials takes half as many rounds: those
-// pairs are what a chunk waits for once the others are done.
+// 256. The larger block runs twice the trials per round, so a pair that
+// needs thousands of trials takes half as many rounds: those pairs are what
+// a chunk waits for once the others are done.
 template <int Threads>
 __global__ void __launch_bounds__(Threads) EssentialRansacKernel(RansacLaunch E) {
   extern __shared__ float4 cached_points[];
@@ -686,11 +686,7 @@ void EssentialSolveFromBasisOnDevice(const double* bases, int num_bases, double*
 void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
   if (E.num_pairs == 0) return;
   const size_t shared_bytes = static_cast<size_t>(E.shared_points) * sizeof(float4);
-  if (E.block_threads == kEssentialLargeBlockThreads) {
-    LaunchEssentialKernel<kEssentialLargeBlockThreads>(E, shared_bytes, stream);
-  } else {
-    LaunchEssentialKernel<kRansacThreads>(E, shared_bytes, stream);
-  }
+  LaunchEssentialKernel<kEssentialLargeBlockThreads>(E, shared_bytes, stream);
 }
 
 float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {

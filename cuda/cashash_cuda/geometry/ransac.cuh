@@ -61,11 +61,12 @@ struct RansacLaunch {
   double reference_E_F_ratio = 0;    // min_E_F_inlier_ratio
   double reference_max_H_ratio = 0;  // max_H_inlier_ratio
   int reference_min_inliers = 0;     // max(min_num_inliers, E's sample size)
-  // Threads per block (trials per round): kRansacThreads, or for E also
-  // kEssentialLargeBlockThreads.
-  int block_threads = 128;
 };
 
+// Threads per block (trials per round) of the F/H kernel and of the E
+// kernel. E blocks of 256, not 128: a pair needing thousands of trials takes
+// half the rounds, and such pairs set a chunk's device time (H200: 0.96 s of
+// device time against 1.48 s with 128 at 300 images).
 constexpr int kRansacThreads = 128;
 constexpr int kEssentialLargeBlockThreads = 256;
 
@@ -76,9 +77,7 @@ constexpr int kRansacMaxSharedPoints = 3072;
 // alone anyway (255 registers). The scan of each model over the pair's
 // points is most of an E block's time (ncu, device run 53), and the large
 // pairs' points now come from shared memory too: verification's device time
-// on the 300-image street 0.98 s against 1.04 s (device runs 50-55). E
-// blocks of 128 (CASHASH_ESSENTIAL_BLOCK_THREADS) then fit one per SM
-// instead of two when a launch holds such a pair.
+// on the 300-image street 0.98 s against 1.04 s.
 constexpr int kEssentialMaxSharedPoints = 10240;
 
 // F of F.num_pairs pairs and H of H.num_pairs pairs in one grid (F blocks

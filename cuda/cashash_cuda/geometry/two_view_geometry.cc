@@ -223,7 +223,6 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   E_launch.outputs = d.outputs.as<RansacPairOutput>() + 2 * num_pairs;
   E_launch.masks = d.masks.as<uint8_t>() + total;
   E_launch.max_trials = RansacMaxTrials(ransac, 5);
-  E_launch.block_threads = EssentialBlockThreadsFromEnvironment();
   E_launch.shared_points = std::min(max_count_E, kEssentialMaxSharedPoints);
   const bool E_after_F_and_H = d.options.early_exit;
   if (E_after_F_and_H) {
@@ -323,16 +322,6 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-int EssentialBlockThreadsFromEnvironment() {
-  static const int threads = [] {
-    const char* text = std::getenv("CASHASH_ESSENTIAL_BLOCK_THREADS");
-    if (text == nullptr) return kDefaultEssentialBlockThreads;
-    return std::string(text) == std::to_string(kEssentialLargeBlockThreads) ? kEssentialLargeBlockThreads
-                                                                              : kRansacThreads;
-  }();
-  return threads;
-}
-
 int GpuVerificationsInFlightFromEnvironment() {
   static const int calls = [] {
     const char* text = std::getenv("CASHASH_GPU_VERIFICATIONS_IN_FLIGHT");
@@ -340,11 +329,6 @@ int GpuVerificationsInFlightFromEnvironment() {
     return std::min(std::max(value, 1), 8);
   }();
   return calls;
-}
-
-bool GpuEssentialFromEnvironment() {
-  const char* where = std::getenv("CASHASH_GPU_ESSENTIAL");
-  return where == nullptr || std::string(where) != "cpu";
 }
 
 namespace {
@@ -355,8 +339,7 @@ class GpuBatchVerifier : public BatchVerifier {
       : options_(options),
         num_threads_(num_threads),
         gpu_index_(gpu_index),
-        max_calls_(GpuVerificationsInFlightFromEnvironment()),
-        essential_on_gpu_(GpuEssentialFromEnvironment()) {
+        max_calls_(GpuVerificationsInFlightFromEnvironment()) {
     // The first estimator now, so that an unusable device fails here.
     estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index));
     free_.push_back(estimators_.back().get());
@@ -385,7 +368,7 @@ class GpuBatchVerifier : public BatchVerifier {
                   "H %.0f, E %.0f; stopped early (chance, or unable to change the decision) F %lld, "
                   "H %lld, E %lld",
                   st.pairs, st.pairs_E, st.seconds_gpu, st.seconds_total, max_calls_,
-                  EssentialBlockThreadsFromEnvironment(), per_pair(st.trials_F, st.pairs),
+                  kEssentialLargeBlockThreads, per_pair(st.trials_F, st.pairs),
                   per_pair(st.trials_H, st.pairs), per_pair(st.trials_E, st.pairs_E), st.early_exits_F,
                   st.early_exits_H, st.early_exits_E);
     return line;
@@ -395,7 +378,7 @@ class GpuBatchVerifier : public BatchVerifier {
     const size_t n = pairs.size();
     std::vector<TwoViewGeometry> geometries(n);
     std::vector<TwoViewPoints> points(n);
-    std::vector<EssentialPoints> essential_points(essential_on_gpu_ ? n : 0);
+    std::vector<EssentialPoints> essential_points(n);
     std::vector<char> estimated(n, 0), calibrated(n, 0);
     ParallelFor(n, num_threads_, [&](size_t k) {
       const VerificationPair& pair = pairs[k];
@@ -403,7 +386,7 @@ class GpuBatchVerifier : public BatchVerifier {
       points[k] = PrepareTwoViewPoints(*pair.points1, *pair.points2, *pair.matches);
       estimated[k] = 1;
       calibrated[k] = TwoViewIsCalibrated(*pair.camera1, *pair.camera2);
-      if (calibrated[k] && essential_on_gpu_) {
+      if (calibrated[k]) {
         essential_points[k] = PrepareEssentialPoints(*pair.camera1, *pair.camera2, points[k].pixels, options_);
       }
     });
@@ -411,31 +394,17 @@ class GpuBatchVerifier : public BatchVerifier {
     std::vector<const TwoViewPoints*> batch_points;
     std::vector<const EssentialPoints*> batch_essential;
     std::vector<uint64_t> batch_seeds;
-    std::vector<size_t> calibrated_pairs;
     for (size_t k = 0; k < n; ++k) {
       if (!estimated[k]) continue;
       batch.push_back(k);
       batch_points.push_back(&points[k]);
       batch_seeds.push_back(pairs[k].random_seed);
-      if (essential_on_gpu_) batch_essential.push_back(calibrated[k] ? &essential_points[k] : nullptr);
-      if (calibrated[k]) calibrated_pairs.push_back(k);
+      batch_essential.push_back(calibrated[k] ? &essential_points[k] : nullptr);
     }
     std::vector<TwoViewModelEstimate> F, H, E_batch, E(n);
     EstimatorLease ransac(this);
-    if (essential_on_gpu_) {
-      ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
-      for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
-    } else {
-      // E (calibrated pairs) on the CPU while the GPU estimates F and H: a
-      // diagnostic path, so E runs without F's and H's counts and does not
-      // stop where the decision is settled.
-      ransac->Estimate(batch_points, batch_seeds, &F, &H, [&]() {
-        ParallelFor(calibrated_pairs.size(), num_threads_, [&](size_t i) {
-          const size_t k = calibrated_pairs[i];
-          E[k] = EstimateEssential(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels, PairOptions(pairs[k]));
-        });
-      });
-    }
+    ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
+    for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
     ParallelFor(batch.size(), num_threads_, [&](size_t i) {
       const size_t k = batch[i];
       geometries[k] = DecideTwoViewGeometry(*pairs[k].camera1, *pairs[k].camera2, points[k].pixels,
@@ -508,7 +477,6 @@ class GpuBatchVerifier : public BatchVerifier {
   int num_threads_;
   int gpu_index_;
   int max_calls_;
-  bool essential_on_gpu_;
   mutable std::mutex mutex_;
   std::vector<std::unique_ptr<GpuTwoViewRansac>> estimators_;
   std::vector<GpuTwoViewRansac*> free_;

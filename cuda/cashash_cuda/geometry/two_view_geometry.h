@@ -71,15 +71,9 @@ class GpuTwoViewRansac {
 };
 
 // The BatchVerifier that estimates F, H and E of a whole chunk on the GPU
-// and prepares points and decides on num_threads CPU threads. With
-// CASHASH_GPU_ESSENTIAL=cpu in the environment, E stays on the CPU (run
-// while the kernels estimate F and H), to compare the two.
+// and prepares points and decides on num_threads CPU threads.
 std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
                                                       int num_threads);
-
-// Where the GPU verifier estimates E: on the device unless the environment
-// variable CASHASH_GPU_ESSENTIAL is "cpu".
-bool GpuEssentialFromEnvironment();
 
 // Chunks the GPU verifier keeps on the device at once (its
 // MaxConcurrentCalls): CASHASH_GPU_VERIFICATIONS_IN_FLIGHT (1 to 8) to
@@ -93,17 +87,11 @@ bool GpuEssentialFromEnvironment();
 // 1.22x against 1.39-1.58x at 300 images) but the whole command is 2-5 %
 // slower, so the default stays at 2; the pipeline's second verification
 // thread takes a chunk only on a backlog or after matching
-// (PipelineOptions::extra_verifiers_on_backlog), which gives the first
+// (the verification stage in matching_pipeline.cc), which gives the first
 // without the second (device run 58).
 constexpr int kDefaultGpuVerificationsInFlight = 2;
 int GpuVerificationsInFlightFromEnvironment();
 
-// Threads per E block (128 or 256): CASHASH_ESSENTIAL_BLOCK_THREADS to
-// compare, else kDefaultEssentialBlockThreads. 256: a pair needing
-// thousands of trials takes half the rounds, and such pairs set a chunk's
-// device time (H200: 0.96 s of device time against 1.48 s at 300 images).
-constexpr int kDefaultEssentialBlockThreads = 256;
-int EssentialBlockThreadsFromEnvironment();
 
 }  // namespace cuda
 }  // namespace cashash

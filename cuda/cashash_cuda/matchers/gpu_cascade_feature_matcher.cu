@@ -52,31 +52,13 @@ bool UseTiledKernels() {
   return value == nullptr || std::string(value) != "direct";
 }
 
-// The integer in environment variable `name`, at least `least`; `fallback`
-// when unset. The tile kernel's switches below, kept to compare.
-int IntFromEnvironment(const char* name, int fallback, int least) {
-  const char* value = std::getenv(name);
-  if (value == nullptr) return fallback;
-  try {
-    return std::max(least, std::stoi(value));
-  } catch (const std::exception&) {
-    throw std::invalid_argument(std::string(name) + ": expected a number, got '" + value + "'");
-  }
-}
-
-// Warps per bucket in the tile kernel (LaunchCascadeTiles' strips);
-// CASHASH_CASCADE_TILE_STRIPS=N sets it. 8 strips lost 0.4-0.6 s on every
-// street of device run 126, so 1.
-int TileStrips() { return IntFromEnvironment("CASHASH_CASCADE_TILE_STRIPS", 1, 1); }
-
 // Chunks of 32 A rows a tile warp takes before the rest of its bucket is
-// shared out in a second pass (BigBucketQueue); 0: no second pass.
-// Default 4: on one H100 (device run 126, docs/BENCHMARKS.md) it took the
+// shared out in a second pass (BigBucketQueue). 4: on one H100 it took the
 // 300 x 16,384 street from 2.25-2.36 s to 2.08 s, where a few buckets of
 // hundreds of features kept one warp busy past the rest of the launch, and
-// left 8,192 features within the runs' spread. Matches are identical.
-// CASHASH_CASCADE_BIG_BUCKETS=N sets it (0: one warp per bucket), to compare.
-int BigBucketFirstChunks() { return IntFromEnvironment("CASHASH_CASCADE_BIG_BUCKETS", 4, 0); }
+// left 8,192 features within the runs' spread; matches are identical. One
+// warp per bucket split over 8 strips instead lost 0.4-0.6 s on every street.
+constexpr uint32_t kBigBucketFirstChunks = 4;
 
 // Queue entries per batch: far more than the buckets past a few chunks
 // (about one per table and pair at 16,384 features), 512 KiB.
@@ -199,8 +181,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
         options_(options),
         device_(gpu_index),
         tiled_(UseTiledKernels()),
-        tile_strips_(TileStrips()),
-        big_bucket_chunks_(BigBucketFirstChunks()),
         list_capacity_(kCandidateListCapacity) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
@@ -643,7 +623,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
       lists.capacity = list_capacity_;
       CUDA_CHECK(cudaMemsetAsync(lists.counts, 0, rows * sizeof(uint32_t), slot->stream));
       BigBucketQueue big;
-      if (big_bucket_chunks_ > 0) {
+      {
         const size_t entry_bytes = size_t{kBigBucketCapacity} * sizeof(uint2);
         if (slot->big_buckets.bytes() == 0) slot->big_buckets.Allocate(entry_bytes + 64, "big-bucket queue");
         char* base = slot->big_buckets.as<char>();
@@ -652,11 +632,10 @@ class GpuCascadeMatcher : public FeatureMatcher {
         big.header = reinterpret_cast<unsigned long long*>(base + entry_bytes);
         big.cursor = reinterpret_cast<uint32_t*>(base + entry_bytes + 8);
         big.overflow_base = reinterpret_cast<uint32_t*>(base + entry_bytes + 12);
-        big.first_chunks = static_cast<uint32_t>(big_bucket_chunks_);
+        big.first_chunks = kBigBucketFirstChunks;
         big.warps = static_cast<unsigned>(sm_count_) * 32u;
       }
-      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream,
-                         tile_strips_, big);
+      LaunchCascadeTiles(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), params, lists, slot->stream, big);
       if (guided_) {
         LaunchCascadeSelectGuided(slot->tasks.as<PairTask>(), static_cast<int>(num_tasks), items, params, lists,
                                   slot->guides.as<EpipolarGuideDevice>(), points_.as<float2>(), max_distance_,
@@ -697,8 +676,6 @@ class GpuCascadeMatcher : public FeatureMatcher {
   const CasHashOptions options_;
   const int device_;
   const bool tiled_;
-  const int tile_strips_;  // warps per bucket in the tile kernel (TileStrips)
-  const int big_bucket_chunks_;  // BigBucketFirstChunks
   int sm_count_ = 1;
   const int list_capacity_;
   size_t budget_ = 0;

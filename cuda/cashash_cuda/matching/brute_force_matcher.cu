@@ -47,15 +47,12 @@ static_assert(kTileCols <= PackedBestTwo::kPositions, "tile positions must fit t
 // Dots at or above 512^2 all have angle 0 (the cosine is clamped to 1).
 constexpr int kAngleTableMaxDot = 512 * 512;
 
-// Variants measured on an H100 (docs/gpu_brute_force_design.md): 2 blocks per
-// SM with the strip loop unrolled twice was the fastest.
-#ifndef CASHASH_BF_MIN_BLOCKS
-#define CASHASH_BF_MIN_BLOCKS 2  // blocks per SM the register budget is sized for
-#endif
-#ifndef CASHASH_BF_STRIP_UNROLL
-#define CASHASH_BF_STRIP_UNROLL 2  // 8-column strips per unrolled step
-#endif
-constexpr int kStripUnroll = CASHASH_BF_STRIP_UNROLL;
+// 2 blocks per SM with the strip loop unrolled twice was the fastest of the
+// variants measured on an H100 at 8,192 features (pairs/s, blocks per SM /
+// unroll): 2/2 19,584; 3/2 19,244; 3/1 19,492; 2/1 19,556; 4/1 18,599
+// (128 registers, spills). Occupancy is not the limit.
+constexpr int kMinBlocksPerSm = 2;  // blocks per SM the register budget is sized for
+constexpr int kStripUnroll = 2;     // 8-column strips per unrolled step
 
 // -(s + 1) for each of a lane's 8 row slots, s the row's second best so far
 // over the four lanes that share it (each holds the best two of its own
@@ -97,7 +94,7 @@ __device__ __forceinline__ void FoldStrip(const int (&acc)[4][4], int key_scale,
 // One function because the warp's A fragments (a[4][4][4]) and best-two slots
 // must stay in registers across the whole double-buffered sweep over b; the
 // fully unrolled mma and fold loops index those arrays with constants only.
-__global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
+__global__ void __launch_bounds__(kThreads, kMinBlocksPerSm)
     BestTwoKernel(const BestTwoProblem* __restrict__ problems, const int2* __restrict__ items, int key_scale) {
   __shared__ __align__(128) uint8_t tiles[2][kTileBytes];
 
@@ -209,15 +206,7 @@ __global__ void __launch_bounds__(kThreads, CASHASH_BF_MIN_BLOCKS)
       // the multiply stays an IMAD (FMA pipe) instead of a shift on the
       // min/max (ALU) pipe.
       const int position_key = PackedBestTwo::kPositions - 1 - (n * 8 + 2 * t);
-#ifdef CASHASH_BF_PROBE_MMA_ONLY
-      // Timing probe only (wrong results): the tensor-core part without the
-      // best-two selection, one add per dot to keep the products alive.
-#pragma unroll
-      for (int i = 0; i < 4; ++i) window[2 * i].best += acc[i][0] + acc[i][1] + acc[i][2] + acc[i][3];
-      (void)position_key;
-#else
       FoldStrip(acc, key_scale, position_key, window);
-#endif
     }
     const int col0 = tile * kTileCols;
 #pragma unroll

@@ -244,27 +244,25 @@ __device__ __forceinline__ void TileChunk(TileScratch& s, const BucketView& v, u
   }
 }
 
-// First pass: one warp per (task, table, bucket) and A strip (see
-// LaunchCascadeTiles). With a queue (big.entries), the strips of a bucket
-// take its first big.first_chunks chunks of A; strip 0 queues the rest of a
-// larger bucket as (item, first flattened chunk) for the second pass, or,
-// if the queue is full, does the rest itself.
+// First pass: one warp per (task, table, bucket) (see LaunchCascadeTiles).
+// With a queue (big.entries), the warp takes its bucket's first
+// big.first_chunks chunks of A and queues the rest of a larger bucket as
+// (item, first flattened chunk) for the second pass, or, if the queue is
+// full, does the rest itself.
 __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask* tasks, uint32_t total_items,
                                                                   MatchParams params, CandidateLists lists,
-                                                                  uint32_t strip_shift, BigBucketQueue big) {
+                                                                  BigBucketQueue big) {
   __shared__ TileScratch s;
   const unsigned lane = LaneId();
   if (blockIdx.x >= total_items) return;
-  const uint32_t strip = blockIdx.x & ((1u << strip_shift) - 1);
-  const uint32_t item = blockIdx.x >> strip_shift;
+  const uint32_t item = blockIdx.x;
   const BucketView v = ViewBucket(tasks, params, item);
-  const uint32_t a_first = v.a_begin + 32u * strip;  // this warp's A chunks: a_first, + 32 << strip_shift, ...
-  if (a_first >= v.a_end || v.b_begin == v.b_end) return;
+  if (v.a_begin >= v.a_end || v.b_begin == v.b_end) return;
   uint32_t a_limit = v.a_end;
-  bool rest_here = false;  // the queue was full: strip 0 does the rest too
+  bool rest_here = false;  // the queue was full: this warp does the rest too
   if (big.entries != nullptr && v.a_end - v.a_begin > 32u * big.first_chunks) {
     a_limit = v.a_begin + 32u * big.first_chunks;
-    if (strip == 0) {  // one entry per bucket, whatever the strips
+    {
       unsigned long long old = 0;
       const uint32_t rest = (v.a_end - a_limit + 31) / 32;
       if (lane == 0) {
@@ -283,7 +281,7 @@ __global__ void __launch_bounds__(kTileThreads) CascadeTileKernel(const PairTask
 
   s.kept_a[lane] = 0;
   s.kept_b[lane] = 0;
-  for (uint32_t a0 = a_first; a0 < a_limit; a0 += 32u << strip_shift) TileChunk(s, v, a0, params, lists);
+  for (uint32_t a0 = v.a_begin; a0 < a_limit; a0 += 32u) TileChunk(s, v, a0, params, lists);
   if (rest_here) {
     for (uint32_t a0 = a_limit; a0 < v.a_end; a0 += 32) TileChunk(s, v, a0, params, lists);
   }
@@ -323,22 +321,16 @@ __global__ void __launch_bounds__(kTileThreads) CascadeBigBucketKernel(const Pai
 }  // namespace
 
 void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
-                        cudaStream_t stream, int strips, BigBucketQueue big) {
+                        cudaStream_t stream, BigBucketQueue big) {
   if (num_tasks == 0) return;
-  const uint64_t items = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
-  uint32_t strip_shift = 0;
-  while ((2u << strip_shift) <= static_cast<uint32_t>(std::max(strips, 1)) && strip_shift < 5 &&
-         (items << (strip_shift + 1)) <= uint64_t{0x7fffffff}) {
-    ++strip_shift;
-  }
-  const uint64_t blocks = items << strip_shift;
+  const uint64_t blocks = uint64_t(num_tasks) * params.num_tables * (uint64_t{1} << params.bits_per_table);
   if (big.entries != nullptr) {
     // header (count << 32 | chunks) and the second pass's cursor
     CUDA_CHECK(cudaMemsetAsync(big.header, 0, sizeof(unsigned long long), stream));
     CUDA_CHECK(cudaMemsetAsync(big.cursor, 0, sizeof(uint32_t), stream));
   }
   CascadeTileKernel<<<static_cast<unsigned>(blocks), kTileThreads, 0, stream>>>(
-      tasks, static_cast<uint32_t>(blocks), params, lists, strip_shift, big);
+      tasks, static_cast<uint32_t>(blocks), params, lists, big);
   CUDA_CHECK_LAUNCH();
   if (big.entries != nullptr) {
     CascadeBigBucketKernel<<<big.warps, kTileThreads, 0, stream>>>(tasks, params, lists, big);

@@ -64,17 +64,15 @@ struct BigBucketQueue {
   unsigned warps = 0;
 };
 
-// Fills `lists` for every task: one warp per (task, table, bucket) and A
-// strip, the bucket's A rows split over `strips` warps (a power of two; each
-// takes every strips-th chunk of 32 rows against all of B's bucket), and
-// with `big`, the chunks of large buckets past the first few shared out in a
-// second pass. Buckets are far from equal: at 16,384 features and 6 x 10
+// Fills `lists` for every task: one warp per (task, table, bucket), and
+// with `big`, the chunks of 32 A rows of large buckets past the first few
+// shared out in a second pass. Buckets are far from equal: at 16,384 features and 6 x 10
 // bits the largest hold 500-750 features, 24 x 24 tiles for one warp against
 // one for a bucket of 16, so a single warp could outlast the rest of the
 // launch. Either way the same candidates reach the same (unordered) lists.
 // Asynchronous on `stream`.
 void LaunchCascadeTiles(const PairTask* tasks, int num_tasks, const MatchParams& params, CandidateLists lists,
-                        cudaStream_t stream, int strips = 1, BigBucketQueue big = BigBucketQueue());
+                        cudaStream_t stream, BigBucketQueue big = BigBucketQueue());
 
 }  // namespace cuda
 }  // namespace cashash

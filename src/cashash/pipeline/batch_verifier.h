@@ -42,8 +42,8 @@ class BatchVerifier {
   // the device, because one chunk's device time is set by its slowest pair
   // while most of the device idles.
   virtual int MaxConcurrentCalls() const { return 1; }
-  // How many matched chunks that wait together one call should take
-  // (PipelineOptions::chunks_per_verification when that is 0).
+  // How many matched chunks that wait together one call should take: the
+  // pipeline gives a call up to this many.
   virtual size_t ChunksPerCall() const { return 1; }
   // One line on where the time went (device time, trials, early exits), for
   // the run's log; empty when there is nothing beyond the pipeline's times.

@@ -29,18 +29,6 @@ class BlockingQueue {
     return true;
   }
 
-  // As Push, but never waits for room: for a producer that must not block
-  // here (a small item that the consumer should see in order with the
-  // others). It counts against the capacity like any other, so bounded
-  // pushes wait until the consumer has taken it. Returns false if closed.
-  bool PushWithoutWaiting(T item) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (closed_) return false;
-    items_.push_back(std::move(item));
-    not_empty_.notify_all();
-    return true;
-  }
-
   // Blocks while empty; returns nullopt once closed and drained.
   std::optional<T> Pop() { return PopWhenBacklogged(1); }
 

@@ -21,8 +21,7 @@ bool CompleteDeferred(MatchedChunk* item) {
 }
 
 std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
-                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier,
-                                        const std::function<bool(const VerifiedChunk&)>& matches_final) {
+                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier) {
   std::vector<VerifiedChunk> out(items->size());
   for (size_t c = 0; c < items->size(); ++c) {
     MatchedChunk& item = (*items)[c];
@@ -39,7 +38,6 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
       results[k].pair = pairs[k];
       results[k].matches = std::move(item.matches[k]);
     }
-    if (matches_final) out[c].matches_written = matches_final(out[c]);
   }
   const Clock::time_point verify_started = Clock::now();
   for (VerifiedChunk& chunk : out) chunk.verify_started = verify_started;

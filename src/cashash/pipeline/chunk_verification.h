@@ -28,8 +28,7 @@ struct MatchedChunk {
   std::unordered_map<image_t, FeaturesPtr> features;
   std::vector<FeatureMatches> matches;
   // What the matcher left to complete the matches (the exact rematch on the
-  // GPU): done by the deferred-matching stage when there is one, else on the
-  // verification thread before verifying.
+  // GPU): done on the verification thread before verifying.
   std::unique_ptr<DeferredMatching> deferred;
   Clock::time_point started;
 };
@@ -37,14 +36,7 @@ struct MatchedChunk {
 struct VerifiedChunk {
   size_t index = 0;
   const PairChunk* chunk = nullptr;
-  // Shared with the chunk's matches-ahead item (write_matches_ahead), which
-  // the writer may write while the verifier fills in the geometries: the
-  // two read and write different members of each PairResult.
   std::shared_ptr<std::vector<PairResult>> results = std::make_shared<std::vector<PairResult>>();
-  // A matches-ahead item: only the raw matches are written, and the chunk
-  // comes again, verified (with matches_written set), later in the queue.
-  bool matches_only = false;
-  bool matches_written = false;
   Clock::time_point started;
   // For the trace: the chunk's deferred matching, if it had any, and when
   // its verifier call started.
@@ -57,17 +49,12 @@ struct VerifiedChunk {
 bool CompleteDeferred(MatchedChunk* item);
 
 // The verification of matched chunks in one call of the verifier: for each
-// chunk what the matcher deferred first (unless a stage of its own did it),
-// then results in the chunk's pair order, geometries left undefined when
+// chunk what the matcher deferred first, then results in the chunk's pair order, geometries left undefined when
 // verification is skipped. One call for several chunks because a GPU call
 // lasts as long as its slowest pair: chunks that wait together share that
 // tail instead of paying it in turn. Releases the chunks' features.
-// `matches_final`, when set, is given each chunk once its matches are
-// final, before the verifier call, and says whether it took them (to write
-// them ahead); the pipeline sets it only where chunks are verified.
 std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
-                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier,
-                                        const std::function<bool(const VerifiedChunk&)>& matches_final);
+                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier);
 
 }  // namespace pipeline_internal
 }  // namespace cashash

@@ -73,12 +73,10 @@ class VerificationGate {
 // One run of the pipeline: the queues, the turnstile, the gate, the first
 // error and the stats that its stages share, and the stages themselves, one
 // function each:
-//   Match                 this thread: load what a chunk needs, match it;
-//   CompleteDeferredWork  (deferred_matching_thread) what the matcher
-//                         deferred, on a thread of its own;
-//   Verify                the batch verifier's calls, on as many threads
-//                         as it takes calls at once;
-//   Write                 the single writer.
+//   Match   this thread: load what a chunk needs, match it;
+//   Verify  what the matcher deferred, then the batch verifier's calls, on
+//           as many threads as the verifier takes calls at once;
+//   Write   the single writer.
 // Execute keeps the object alive until every thread is joined, which is what
 // makes a failure on any stage safe to stop the others: a stage that fails
 // records the error and closes the queues it shares.
@@ -94,17 +92,8 @@ class PipelineRun {
         progress_(progress),
         stop_(stop),
         chunks_in_queue_(std::max<size_t>(1, options.chunks_in_queue)),
-        // With a thread for the deferred matching, one chunk waits for it
-        // and one is on it: the queue to verification gives up that room, so
-        // that no more chunks are held than without it (kPipelineBlocks
-        // counts them).
-        deferred_stage_(options.deferred_matching_thread && !options.skip_geometric_verification),
-        to_complete_(1),
-        to_verify_(deferred_stage_ ? std::max<size_t>(1, chunks_in_queue_ - 2) : chunks_in_queue_),
-        to_write_(std::max<size_t>(1, options.chunks_to_write)),
-        // The writer takes a chunk's raw matches ahead of its verified rows.
-        write_ahead_(options.write_matches_ahead && !options.skip_geometric_verification &&
-                     sink->WritesMatchesAhead()) {
+        to_verify_(chunks_in_queue_),
+        to_write_(std::max<size_t>(1, options.chunks_to_write)) {
     verifier_ = verifier;
     if (verifier_ == nullptr && !options_.skip_geometric_verification) {
       default_verifier_ = CreateCpuBatchVerifier(options_.two_view, options_.num_threads);
@@ -112,9 +101,12 @@ class PipelineRun {
     }
     num_verifier_threads_ = options_.skip_geometric_verification ? 1 : std::max(1, verifier_->MaxConcurrentCalls());
     verifier_threads_left_ = num_verifier_threads_;
-    chunks_per_call_ = options_.chunks_per_verification;
-    if (chunks_per_call_ == 0) chunks_per_call_ = verifier_ != nullptr ? verifier_->ChunksPerCall() : 1;
-    chunks_per_call_ = std::max<size_t>(1, chunks_per_call_);
+    // A verification thread takes the chunks that wait for it, up to as many
+    // as the verifier prefers, in one call: a GPU call lasts as long as its
+    // slowest pair, so chunks verified together pay that tail once. The
+    // extra chunks keep their room in the queue until verified, so what the
+    // pipeline holds does not grow.
+    chunks_per_call_ = std::max<size_t>(1, verifier_ != nullptr ? verifier_->ChunksPerCall() : 1);
   }
 
   PipelineStats Execute(const std::vector<PairChunk>& chunks) {
@@ -123,10 +115,7 @@ class PipelineRun {
     std::thread writer(&PipelineRun::Write, this);
     std::vector<std::thread> verifier_threads;
     for (int t = 0; t < num_verifier_threads_; ++t) verifier_threads.emplace_back(&PipelineRun::Verify, this, t);
-    std::thread completer;
-    if (deferred_stage_) completer = std::thread(&PipelineRun::CompleteDeferredWork, this);
     Match(chunks);
-    if (completer.joinable()) completer.join();
     for (std::thread& thread : verifier_threads) thread.join();
     writer.join();
     error_.RethrowIfAny();
@@ -162,7 +151,7 @@ class PipelineRun {
   // gate opens once the matcher has chosen, or before a push that could
   // wait for verification (the queue full), or when matching ends.
   void Match(const std::vector<PairChunk>& chunks) {
-    BlockingQueue<MatchedChunk>& after_matching = deferred_stage_ ? to_complete_ : to_verify_;
+    BlockingQueue<MatchedChunk>& after_matching = to_verify_;
     size_t pushed_while_gated = 0;
     try {
       std::unordered_map<image_t, FeaturesPtr> loaded;
@@ -230,46 +219,16 @@ class PipelineRun {
     after_matching.Close();
   }
 
-  // Stage 2 (deferred_matching_thread): what the matcher deferred, in
-  // matching order. Ends by closing the queue to verification; a failure
-  // closes both of its queues, so that matching stops instead of waiting
-  // for room.
-  void CompleteDeferredWork() {
-    try {
-      for (;;) {
-        std::optional<MatchedChunk> item = to_complete_.Pop();
-        if (!item) break;
-        const Clock::time_point t0 = Clock::now();
-        if (CompleteDeferred(&*item)) Trace("rematch", item->index, 0, -2, t0, Clock::now(), item->chunk->pairs.size());
-        if (!to_verify_.Push(std::move(*item))) break;
-      }
-    } catch (...) {
-      error_.Set(std::current_exception());
-    }
-    to_complete_.Close();
-    to_verify_.Close();
-  }
-
-  // Write-ahead (write_matches_ahead): the chunk's raw matches go to the
-  // writer before its verifier call. The item goes before the chunk's own
-  // (same queue, pushed earlier) and never waits for room, so the verifier
-  // call is not held up by the writer. Returns whether it was queued.
-  bool QueueMatchesAhead(const VerifiedChunk& chunk) {
-    VerifiedChunk ahead;
-    ahead.index = chunk.index;
-    ahead.chunk = chunk.chunk;
-    ahead.results = chunk.results;
-    ahead.matches_only = true;
-    return to_write_.PushWithoutWaiting(std::move(ahead));
-  }
-
-  // Stage 3: verification of whole chunks by the batch verifier. Chunks
+  // Stage 2: verification of whole chunks by the batch verifier. Chunks
   // still reach the writer in the order they were matched (the turnstile).
   void Verify(int thread) {
-    // A helper (the second thread on) waits for a full queue or the end.
-    const size_t backlog = thread > 0 && options_.extra_verifiers_on_backlog ? to_verify_.capacity() : 1;
-    std::function<bool(const VerifiedChunk&)> matches_final;
-    if (write_ahead_) matches_final = [this](const VerifiedChunk& chunk) { return QueueMatchesAhead(chunk); };
+    // With several verification threads (a GPU verifier keeps two chunks in
+    // flight), the second and later take a chunk only once the queue to
+    // verification is full, that is when matching is about to wait for them,
+    // or once matching has ended. While matching runs it then shares the GPU
+    // with one chunk's RANSAC instead of two; the backlog and the tail are
+    // still verified two at a time.
+    const size_t backlog = thread > 0 ? to_verify_.capacity() : 1;
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
@@ -278,7 +237,7 @@ class PipelineRun {
         AddSeconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (items.empty()) break;
         const Clock::time_point t0 = Clock::now();
-        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier_, matches_final);
+        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier_);
         to_verify_.Release(items.size() - 1);
         const Clock::time_point t_verified = Clock::now();
         size_t call = 0;
@@ -309,14 +268,13 @@ class PipelineRun {
       }
     } catch (...) {
       error_.Set(std::current_exception());
-      to_complete_.Close();
       to_verify_.Close();
       to_writer_in_order_.Cancel();
     }
     if (--verifier_threads_left_ == 0) to_write_.Close();
   }
 
-  // Stage 4: the single writer.
+  // Stage 3: the single writer.
   void Write() {
     try {
       for (;;) {
@@ -326,17 +284,7 @@ class PipelineRun {
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
         const std::vector<PairResult>& results = *item->results;
-        if (item->matches_only) {
-          sink_->WriteMatchesAhead(results);
-          Trace("write_ahead", item->index, 0, -1, t0, Clock::now(), results.size());
-          AddSeconds(&PipelineStats::seconds_writing, t0);
-          continue;
-        }
-        if (item->matches_written) {
-          sink_->WriteGeometries(results);
-        } else {
-          sink_->WriteChunk(results);
-        }
+        sink_->WriteChunk(results);
         Trace("write", item->index, 0, -1, t0, Clock::now(), results.size());
         PipelineProgress progress;
         {
@@ -360,7 +308,6 @@ class PipelineRun {
       }
     } catch (...) {
       error_.Set(std::current_exception());
-      to_complete_.Close();
       to_verify_.Close();
       to_write_.Close();
     }
@@ -375,11 +322,8 @@ class PipelineRun {
   const Clock::time_point run_start_ = Clock::now();
 
   const size_t chunks_in_queue_;
-  const bool deferred_stage_;
-  BlockingQueue<MatchedChunk> to_complete_;
   BlockingQueue<MatchedChunk> to_verify_;
   BlockingQueue<VerifiedChunk> to_write_;
-  const bool write_ahead_;
   InOrderTurnstile to_writer_in_order_;
   VerificationGate gate_;
   FirstError error_;

@@ -1,7 +1,7 @@
 // The matching pipeline: load features of a chunk of pairs, match them with a
 // FeatureMatcher backend, verify each pair geometrically, hand the results to
-// a writer. The stages (matching; optionally what the matcher deferred;
-// verification; writing) run on their own threads with bounded queues, so
+// a writer. The stages (matching; verification, which first completes what
+// the matcher deferred; writing) run on their own threads with bounded queues, so
 // the GPU matches chunk k+1 while chunk k is verified and the database
 // commits chunk k-1. The stages themselves are in matching_pipeline.cc,
 // what travels between them in chunk_verification.h.
@@ -57,16 +57,6 @@ class ResultSink {
   virtual ~ResultSink() = default;
   // A chunk's matches and geometries, in one transaction.
   virtual void WriteChunk(const std::vector<PairResult>& results) = 0;
-
-  // A chunk in two steps instead: its raw matches as soon as they are final
-  // (while the chunk is verified), then its geometries, each step in a
-  // transaction of its own. Only for a sink where a chunk whose second step
-  // never came looks unfinished to a rerun (which matches its pairs again),
-  // so that a run stopped between the two steps resumes like one stopped
-  // anywhere else. The pipeline calls these only when this says so.
-  virtual bool WritesMatchesAhead() const { return false; }
-  virtual void WriteMatchesAhead(const std::vector<PairResult>& results) {}
-  virtual void WriteGeometries(const std::vector<PairResult>& results) { WriteChunk(results); }
 };
 
 struct PipelineOptions {
@@ -84,46 +74,6 @@ struct PipelineOptions {
   // and 1,000 images unchanged within noise.
   size_t chunks_in_queue = 6;
   size_t chunks_to_write = 6;
-  // With several verification threads (a GPU verifier keeps two chunks in
-  // flight), the second and later take a chunk only once the queue to
-  // verification is full, that is when matching is about to wait for them,
-  // or once matching has ended. While matching runs it then shares the GPU
-  // with one chunk's RANSAC instead of two; the backlog and the tail are
-  // still verified two at a time. false: every thread takes chunks at once.
-  bool extra_verifiers_on_backlog = true;
-  // Most matched chunks one verifier call takes: a verification thread takes
-  // the chunks that wait for it, up to this many, in one BatchVerifier call.
-  // A GPU call lasts as long as its slowest pair, so chunks verified
-  // together pay that tail once. The extra chunks keep their room in the
-  // queue until verified, so what the pipeline holds does not grow. 1: one
-  // chunk per call; 0: as the verifier prefers (BatchVerifier::ChunksPerCall).
-  size_t chunks_per_verification = 0;
-  // Hand a chunk's raw matches to the writer once they are final (after
-  // the exact rematch, before the verifier call), when the sink can take
-  // them ahead (ResultSink::WritesMatchesAhead): the writer, idle while
-  // chunks are verified, writes them then, and after verification only the
-  // geometries are left. A run ends with the writes of its last verified
-  // chunks; on the 300-image street that was 0.05-0.10 s with the device
-  // idle (device run 121's traces), and two_view_geometries rows are 44-75 %
-  // of a chunk's writing (write_rows_bench --two_steps 1). Ignored when
-  // verification is skipped. Off: on one H100 (device run 125) it halved
-  // the writer's time alone at the end, but the run was no shorter (the
-  // cascade's run is bound by the device's total work), and it lets a
-  // reader see a chunk's matches before its geometries.
-  bool write_matches_ahead = false;
-  // Complete what the matcher deferred (the GPU cascade's exact rematch) on
-  // a thread of its own between matching and verification, instead of on
-  // the verification threads before their verifier calls. Where
-  // verification sets the pace (the GPU cascade at 300 images: rematch and
-  // verification busy from their first start to the end of device work),
-  // the rematch then stops adding to that stage: device run 121's traces
-  // have 0.22 s of rematch in a 0.70 s verification stage. The queue to
-  // verification is then two chunks shorter (one waits for that thread, one
-  // is on it). Ignored when verification is skipped. Off: on one H100
-  // (device run 125) the rematch then ran beside the matching kernels and
-  // both slowed (matching busy +0.15 s, rematch +0.09 s at 8,192 features),
-  // so the run was no shorter.
-  bool deferred_matching_thread = false;
   // Not owned; when set, every stage's interval per chunk is recorded in it
   // (pipeline_trace.h).
   PipelineTrace* trace = nullptr;
@@ -152,8 +102,7 @@ struct PipelineStats {
   double seconds_matching = 0;
   // Summed over the verification threads when chunks are verified
   // concurrently (verification_threads > 1), as are its waits below. It
-  // includes what the matcher deferred to them (the GPU's exact rematch),
-  // unless that has a thread of its own (deferred_matching_thread).
+  // includes what the matcher deferred to them (the GPU's exact rematch).
   double seconds_verification = 0;
   double seconds_writing = 0;
   // Waiting, apart from the busy times above: the matching thread for room
@@ -167,7 +116,7 @@ struct PipelineStats {
   bool stopped = false;  // the stop flag was raised before the end
   int verification_threads = 1;  // chunks verified at once (BatchVerifier::MaxConcurrentCalls)
   // Calls of the verification stage, each of one or more chunks
-  // (chunks_per_verification): one BatchVerifier call each unless
+  // (BatchVerifier::ChunksPerCall): one BatchVerifier call each unless
   // verification is skipped.
   size_t verification_calls = 0;
 };

@@ -162,50 +162,6 @@ std::vector<PairChunk> ChunksOfBlockPairs(const std::vector<image_t>& image_ids,
   return chunks;
 }
 
-// The pairs of blocks two or more apart, after the band ended on `last`:
-// each time a pair that shares a block with the one before, the farthest
-// apart first (ties: the smaller pair); where none is left, the smallest
-// pair left. Each block keeps its unused partners, so a step costs O(m).
-std::vector<std::pair<int, int>> FarBlockPairs(int m, std::pair<int, int> last) {
-  std::vector<std::vector<char>> unused(m, std::vector<char>(m, 0));
-  size_t left = 0;
-  for (int i = 0; i < m; ++i) {
-    for (int j = i + 2; j < m; ++j) {
-      unused[i][j] = unused[j][i] = 1;
-      ++left;
-    }
-  }
-  std::vector<std::pair<int, int>> order;
-  std::pair<int, int> next_smallest(0, 2);  // no pair before it is unused
-  while (left > 0) {
-    std::pair<int, int> pick(-1, -1);
-    for (int b : {last.first, last.second}) {
-      for (int p = 0; p < m; ++p) {
-        if (!unused[b][p]) continue;
-        const std::pair<int, int> pair(std::min(b, p), std::max(b, p));
-        const int gap = pair.second - pair.first, best = pick.second - pick.first;
-        if (pick.first < 0 || gap > best || (gap == best && pair < pick)) pick = pair;
-      }
-    }
-    if (pick.first < 0) {
-      // Pairs before next_smallest are all used, and one after it is not.
-      while (next_smallest.second >= m || !unused[next_smallest.first][next_smallest.second]) {
-        if (next_smallest.second >= m) {
-          next_smallest = {next_smallest.first + 1, next_smallest.first + 3};
-        } else {
-          ++next_smallest.second;
-        }
-      }
-      pick = next_smallest;
-    }
-    unused[pick.first][pick.second] = unused[pick.second][pick.first] = 0;
-    --left;
-    order.push_back(pick);
-    last = pick;
-  }
-  return order;
-}
-
 }  // namespace
 
 std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
@@ -216,20 +172,6 @@ std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids
   const int num_blocks = static_cast<int>((n + bs - 1) / bs);
   const int per_group = std::min(num_blocks, std::max(1, blocks_per_group));
   return ChunksOfBlockPairs(image_ids, bs, num_blocks, per_group, BlockPairOrder(num_blocks, per_group).Build());
-}
-
-std::vector<PairChunk> NeighboursFirstPairChunks(const std::vector<image_t>& image_ids, int block_size) {
-  const size_t n = image_ids.size();
-  if (n < 2) return {};
-  const size_t bs = static_cast<size_t>(std::max(1, block_size));
-  const int m = static_cast<int>((n + bs - 1) / bs);
-  std::vector<std::pair<int, int>> order;
-  for (int b = 0; b < m; ++b) {
-    order.emplace_back(b, b);
-    if (b + 1 < m) order.emplace_back(b, b + 1);
-  }
-  for (const auto& pair : FarBlockPairs(m, order.back())) order.push_back(pair);
-  return ChunksOfBlockPairs(image_ids, bs, m, m, order);
 }
 
 std::vector<PairChunk> ListPairChunks(const std::vector<ImagePair>& pairs, size_t max_pairs_per_chunk,

@@ -48,16 +48,6 @@ std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_id
 std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
                                            int blocks_per_group);
 
-// One group of blocks (all images in host memory), neighbours first: the
-// diagonal and next-to-diagonal block pairs as a band, (0,0) (0,1) (1,1)
-// (1,2) ... (m-1,m-1), then the pairs of blocks two or more apart, each
-// sharing a block with the one before where one is left. On images taken
-// in sequence the band holds nearly every pair that verifies, so its
-// verification runs while the far pairs are matched, and the run ends on
-// chunks that verify at once. A far chunk may bring two new blocks (when
-// no remaining far pair shares one). Several groups: ScheduledPairChunks.
-std::vector<PairChunk> NeighboursFirstPairChunks(const std::vector<image_t>& image_ids, int block_size);
-
 // Splits an arbitrary pair list into chunks of at most max_pairs_per_chunk
 // pairs (in the given order), each touching at most max_images_per_chunk
 // images where possible.
