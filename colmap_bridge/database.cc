@@ -32,20 +32,6 @@ namespace cashash {
 namespace colmap {
 namespace {
 
-// A concurrent COLMAP process (GUI, another matcher) holding the lock makes
-// us wait this long before giving up; CASHASH_BUSY_TIMEOUT_MS overrides it
-// (tests use a short one).
-constexpr int kDefaultBusyTimeoutMs = 60000;
-
-int BusyTimeoutMs() {
-  const char* text = std::getenv("CASHASH_BUSY_TIMEOUT_MS");
-  if (text == nullptr || *text == '\0') return kDefaultBusyTimeoutMs;
-  char* end = nullptr;
-  const long value = std::strtol(text, &end, 10);
-  if (*end != '\0' || value < 0 || value > 24L * 3600 * 1000) return kDefaultBusyTimeoutMs;
-  return static_cast<int>(value);
-}
-
 // COLMAP 4.x numbers user_version as major * 1000000 + minor * 10000 + ...
 // (4.2.1 -> 4020100); 3.x used major * 1000 + minor * 100 (3.8 -> 3800).
 constexpr int kFirstUserVersion4x = 4000000;
@@ -76,6 +62,7 @@ std::string SchemaInfo::Describe() const {
 struct Database::Impl {
   std::string path;
   bool read_only = false;
+  DatabaseOptions options;
   sqlite3* db = nullptr;
   SchemaInfo schema;
   bool write_nulls_for_unset = false;  // 4.x convention
@@ -192,7 +179,7 @@ struct Database::Impl {
       const std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
       throw DatabaseError("cannot open database " + path + ": " + message);
     }
-    sqlite3_busy_timeout(db, BusyTimeoutMs());
+    sqlite3_busy_timeout(db, std::max(0, options.busy_timeout_ms));
     // Nothing can be written through a reader (SQLITE_READONLY otherwise).
     if (read_only) ExecuteSql(db, "PRAGMA query_only = 1");
     // SQLite silently opens a write-protected file read-only; say so now
@@ -273,9 +260,11 @@ struct Database::Impl {
   }
 };
 
-Database::Database(const std::string& path, bool read_only) : impl_(std::make_unique<Impl>()) {
+Database::Database(const std::string& path, bool read_only, const DatabaseOptions& options)
+    : impl_(std::make_unique<Impl>()) {
   impl_->path = path;
   impl_->read_only = read_only;
+  impl_->options = options;
   impl_->Open();
 }
 

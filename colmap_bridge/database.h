@@ -35,11 +35,17 @@ struct SchemaInfo {
   std::string Describe() const;
 };
 
+struct DatabaseOptions {
+  // How long a connection waits for a lock another process holds (COLMAP's
+  // GUI, another matcher) before a statement fails naming the busy timeout.
+  int busy_timeout_ms = 60000;
+};
+
 class Database {
  public:
   // Opens an existing COLMAP database; throws DatabaseError if the file does
   // not exist, is not SQLite, or lacks a required table.
-  explicit Database(const std::string& path, bool read_only = false);
+  explicit Database(const std::string& path, bool read_only = false, const DatabaseOptions& options = {});
   ~Database();
   Database(const Database&) = delete;
   Database& operator=(const Database&) = delete;

@@ -122,7 +122,9 @@ DatabaseResultSink::DatabaseResultSink(const std::string& database_path, bool wr
     : DatabaseResultSink(database_path, Options{write_two_view_geometries, true, false}) {}
 
 DatabaseResultSink::DatabaseResultSink(const std::string& database_path, const Options& options)
-    : lock_(database_path), database_(database_path, /*read_only=*/false), options_(options) {
+    : lock_(database_path),
+      database_(database_path, /*read_only=*/false, DatabaseOptions{options.busy_timeout_ms}),
+      options_(options) {
   if (database_.UsesWriteAheadLog()) {
     checkpointer_ = std::make_unique<WalCheckpointer>(database_path);
     database_.HandOverLogFolding([this](int pages) { logged_pages_ = pages; });

@@ -83,6 +83,8 @@ class DatabaseResultSink : public ResultSink {
     // chunk starts it over. 16,384 pages are 64 MiB with COLMAP's 4 KiB
     // pages, 16 times SQLite's own bound, so that most chunks never wait.
     int log_pages_before_catch_up = 16384;
+    // DatabaseOptions::busy_timeout_ms of the writer's connection.
+    int busy_timeout_ms = DatabaseOptions().busy_timeout_ms;
   };
 
   // Throws DatabaseError when another cashash process writes to the same

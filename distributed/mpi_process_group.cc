@@ -13,14 +13,6 @@ namespace cashash {
 namespace distributed {
 namespace {
 
-// Open MPI, MPICH / Intel MPI (Hydra) and PMIx launchers.
-bool LaunchedByMpi() {
-  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "MPI_LOCALNRANKS"}) {
-    if (std::getenv(name) != nullptr) return true;
-  }
-  return false;
-}
-
 void FinalizeAtExit() {
   int finalized = 0;
   MPI_Finalized(&finalized);
@@ -29,8 +21,11 @@ void FinalizeAtExit() {
 
 class MpiProcessGroup : public ProcessGroup {
  public:
+  explicit MpiProcessGroup(ProcessLaunch launch) : launch_(launch) {}
+
   int Rank() override { return World().rank; }
   int Size() override { return World().size; }
+  int LocalRank() override { return World().local_rank; }
 
   void Barrier() override {
     if (World().active) MPI_Barrier(MPI_COMM_WORLD);
@@ -69,12 +64,13 @@ class MpiProcessGroup : public ProcessGroup {
   struct State {
     int rank = 0;
     int size = 1;
+    int local_rank = 0;
     bool active = false;
   };
 
   const State& World() {
     std::call_once(once_, [this]() {
-      if (!LaunchedByMpi()) return;
+      if (launch_ != ProcessLaunch::kMpiLauncher) return;
       int initialized = 0;
       MPI_Initialized(&initialized);
       if (!initialized) {
@@ -89,6 +85,11 @@ class MpiProcessGroup : public ProcessGroup {
       }
       MPI_Comm_rank(MPI_COMM_WORLD, &state_.rank);
       MPI_Comm_size(MPI_COMM_WORLD, &state_.size);
+      // The rank among the processes that share this machine's memory.
+      MPI_Comm node;
+      MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, state_.rank, MPI_INFO_NULL, &node);
+      MPI_Comm_rank(node, &state_.local_rank);
+      MPI_Comm_free(&node);
       state_.active = state_.size > 1;
     });
     return state_;
@@ -101,13 +102,16 @@ class MpiProcessGroup : public ProcessGroup {
     return result;
   }
 
+  const ProcessLaunch launch_;
   std::once_flag once_;
   State state_;
 };
 
 }  // namespace
 
-std::unique_ptr<ProcessGroup> CreateMpiProcessGroup() { return std::make_unique<MpiProcessGroup>(); }
+std::unique_ptr<ProcessGroup> CreateMpiProcessGroup(ProcessLaunch launch) {
+  return std::make_unique<MpiProcessGroup>(launch);
+}
 
 }  // namespace distributed
 }  // namespace cashash

@@ -16,11 +16,6 @@ std::unique_ptr<ProcessGroup>& InstalledGroup() {
 
 ProcessGroup* Group() { return InstalledGroup().get(); }
 
-int EnvInt(const char* name, int fallback) {
-  const char* value = std::getenv(name);
-  return value != nullptr && *value != '\0' ? std::atoi(value) : fallback;
-}
-
 }  // namespace
 
 void InstallProcessGroup(std::unique_ptr<ProcessGroup> group) { InstalledGroup() = std::move(group); }
@@ -51,9 +46,7 @@ void MpiAbortJob(const std::string& message) {
   std::abort();
 }
 
-int MpiLocalRank() {
-  return EnvInt("OMPI_COMM_WORLD_LOCAL_RANK", EnvInt("MPI_LOCALRANKID", EnvInt("PMI_LOCAL_RANK", 0)));
-}
+int MpiLocalRank() { return Group() ? Group()->LocalRank() : 0; }
 
 }  // namespace distributed
 }  // namespace cashash

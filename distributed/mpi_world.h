@@ -1,7 +1,7 @@
 // The few MPI operations cashash needs, usable whether or not MPI is linked
 // in. Only the `cashash` executable links MPI: it installs an MPI process
-// group at start (mpi_process_group.h), which starts MPI on first use and
-// only when the process was launched by mpirun / mpiexec. The library and
+// group at start (mpi_process_group.h), which starts MPI on first use when
+// the executable says it was launched by mpirun / mpiexec. The library and
 // the Python module never load libmpi: without an installed group this is
 // a world of one process and every collective is a no-op.
 #pragma once
@@ -20,6 +20,8 @@ class ProcessGroup {
   virtual ~ProcessGroup() = default;
   virtual int Rank() = 0;
   virtual int Size() = 0;
+  // Rank among the processes on this machine.
+  virtual int LocalRank() = 0;
   virtual void Barrier() = 0;
   virtual uint64_t Min(uint64_t value) = 0;
   virtual uint64_t Max(uint64_t value) = 0;
@@ -33,7 +35,7 @@ void InstallProcessGroup(std::unique_ptr<ProcessGroup> group);
 
 int MpiRank();
 int MpiSize();
-// Rank on this machine, from the launcher (0 when unknown).
+// Rank among the processes on this machine (0 without MPI).
 int MpiLocalRank();
 
 void MpiBarrier();

@@ -239,7 +239,11 @@ void BindOptions(py::module_& m) {
       .def_readwrite("gpu_index", &MatcherCommandOptions::gpu_index)
       .def_readwrite("skip_geometric_verification", &MatcherCommandOptions::skip_geometric_verification)
       .def_readwrite("overwrite", &MatcherCommandOptions::overwrite)
-      .def_readwrite("write_empty_pairs", &MatcherCommandOptions::write_empty_pairs);
+      .def_readwrite("write_empty_pairs", &MatcherCommandOptions::write_empty_pairs)
+      .def_readwrite("max_host_memory", &MatcherCommandOptions::max_host_memory)
+      .def_readwrite("max_gpu_memory", &MatcherCommandOptions::max_gpu_memory)
+      .def_readwrite("pipeline_trace_path", &MatcherCommandOptions::pipeline_trace_path)
+      .def_readwrite("gpu_verifications_in_flight", &MatcherCommandOptions::gpu_verifications_in_flight);
 }
 
 }  // namespace

@@ -114,6 +114,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Host memory for features, e.g. 16G or 4096 (MiB); default half the physical memory");
   table.Add({"max_gpu_memory"}, &o.max_gpu_memory,
             "GPU memory for matching, e.g. 8G or 4096 (MiB); default the device's free memory");
+  table.Add({"pipeline_trace_path"}, &o.pipeline_trace_path,
+            "Write each chunk's stage intervals to this CSV file (scripts/bench/pipeline_trace_summary.py reads "
+            "it); under MPI each rank writes PATH.rankN");
 
   std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
   table.Add({"CasHash.matcher"}, &matcher_name,
@@ -189,6 +192,9 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
     }
   }
   if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
+  if (o.gpu_verifications_in_flight < 1 || o.gpu_verifications_in_flight > 8) {
+    return "gpu_verifications_in_flight must be 1 to 8, got " + std::to_string(o.gpu_verifications_in_flight);
+  }
   std::string message = o.sift.Check();
   if (!message.empty()) return message;
   message = o.cashash.Check();

@@ -70,6 +70,14 @@ struct MatcherCommandOptions {
   // matches_importer only.
   std::string match_list_path;
   std::string match_type = "pairs";
+  // Not empty: each chunk's stage intervals are written to this CSV file
+  // (pipeline_trace.h; under MPI each rank writes PATH.rankN), to read a
+  // run's critical path with scripts/bench/pipeline_trace_summary.py.
+  std::string pipeline_trace_path;
+  // Chunks the GPU verifier keeps on the device at once, 1 to 8 (not a
+  // command-line option): 2 verifies most where verification sets the pace
+  // and costs little where matching does (cuda::GpuVerifierConfig).
+  int gpu_verifications_in_flight = 2;
 };
 
 enum class ParseOutcome { kRun, kHelpShown, kError };

@@ -1,7 +1,6 @@
 #include "colmap_bridge/api/matcher_factory.h"
 
 #include <algorithm>
-#include <cstdlib>
 #include <functional>
 #include <memory>
 #include <stdexcept>
@@ -14,6 +13,7 @@
 #include "cashash/matchers/fallback_feature_matcher.h"
 #include "cashash/matchers/split_feature_matcher.h"
 #include "cashash/matching/table_shape.h"
+#include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/matching_api.h"
 #ifdef CASHASH_WITH_CUDA
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
@@ -68,6 +68,12 @@ int GpuIndexForRun(const MatcherCommandOptions& options) {
 #endif
 }
 
+size_t GpuMatcherMemoryBudget(const MatcherCommandOptions& options) {
+  size_t bytes = 0;
+  if (!options.max_gpu_memory.empty()) ParseMemorySize(options.max_gpu_memory, &bytes);  // checked with the options
+  return bytes;
+}
+
 namespace {
 
 // The backend of one matcher type (cascade or brute force): on the GPUs of
@@ -87,9 +93,12 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
         reason += (reason.empty() ? "" : "; ") + std::string("device ") + std::to_string(gpu_index) + ": " + why;
         continue;
       }
+      cuda::GpuMatcherConfig config;
+      config.gpu_index = gpu_index;
+      config.memory_budget_bytes = GpuMatcherMemoryBudget(options);
       // A run that outgrows the card (device memory) finishes on the CPU.
       parts.push_back(CreateFallbackFeatureMatcher(
-          cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, gpu_index),
+          cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, config),
           [sift = options.sift, cashash = options.cashash, mean]() {
             return CreateCpuFeatureMatcher(sift, cashash, mean);
           },

@@ -1,7 +1,6 @@
 #include "colmap_bridge/api/matching_api.h"
 
 #include <algorithm>
-#include <cstdlib>
 #include <fstream>
 #include <future>
 #include <iostream>
@@ -86,8 +85,7 @@ std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vecto
 
 // Block and group sizes for the three-level scheduling from the memory caps
 // (options or defaults) and the images' feature counts (row counts only, no
-// descriptors are read). A --max_gpu_memory also caps the GPU matcher
-// (CASHASH_GPU_MEMORY_LIMIT_MB, unless that is set already).
+// descriptors are read).
 ScheduleSizes ChooseSizesForRun(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
                                 const std::vector<image_t>& image_ids, const MatchingCallbacks& callbacks) {
   ScheduleLimits limits;
@@ -102,10 +100,7 @@ ScheduleSizes ChooseSizesForRun(const MatcherCommandOptions& options, DatabaseFe
     if (options.max_gpu_memory.empty()) {
       limits.max_gpu_bytes = GpuFreeMemoryBytes(gpu_index);
     } else {
-      ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);
-      if (std::getenv("CASHASH_GPU_MEMORY_LIMIT_MB") == nullptr) {
-        setenv("CASHASH_GPU_MEMORY_LIMIT_MB", std::to_string(limits.max_gpu_bytes >> 20).c_str(), 1);
-      }
+      ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);  // checked with the options
     }
   }
   // Ranks must cut the same blocks and groups: the smallest caps of all.

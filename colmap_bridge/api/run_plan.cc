@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdlib>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -349,14 +348,11 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
                       " group steps, at most " + FormatMemorySize(stats.peak_bytes) + " cached");
 }
 
-// CASHASH_PIPELINE_TRACE=FILE records each chunk's stage intervals and
-// writes them to FILE as CSV (pipeline_trace.h; under MPI each rank writes
-// FILE.rankN), to read a run's critical path with
-// scripts/bench/pipeline_trace_summary.py. Empty when unset.
-std::string PipelineTracePathFromEnvironment(const RunShare& share) {
-  const char* text = std::getenv("CASHASH_PIPELINE_TRACE");
-  if (text == nullptr || *text == '\0') return {};
-  std::string path = text;
+// The trace file of this rank: options.pipeline_trace_path, under MPI with
+// .rankN appended; empty when no trace is asked for.
+std::string PipelineTracePath(const MatcherCommandOptions& options, const RunShare& share) {
+  if (options.pipeline_trace_path.empty()) return {};
+  std::string path = options.pipeline_trace_path;
   if (share.num_ranks > 1) path += ".rank" + std::to_string(share.rank);
   return path;
 }
@@ -382,7 +378,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline_options.skip_geometric_verification = plan.options.skip_geometric_verification;
   pipeline_options.two_view = plan.options.two_view;
   PipelineTrace trace;
-  const std::string trace_path = PipelineTracePathFromEnvironment(share);
+  const std::string trace_path = PipelineTracePath(plan.options, share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;
   MatchingPipeline pipeline(pipeline_options, plan.features, plan.matcher.get(), plan.sink);
 

@@ -25,7 +25,11 @@ std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherComman
     }
     std::string reason;
     if (cuda::CudaDeviceUsable(gpu_index, &reason)) {
-      return cuda::CreateGpuBatchVerifier(options.two_view, gpu_index, options.sift.num_threads);
+      cuda::GpuVerifierConfig config;
+      config.gpu_index = gpu_index;
+      config.num_threads = options.sift.num_threads;
+      config.verifications_in_flight = options.gpu_verifications_in_flight;
+      return cuda::CreateGpuBatchVerifier(options.two_view, config);
     }
     if (warning) warning("no usable CUDA device (" + reason + "); verifying on the CPU");
 #else

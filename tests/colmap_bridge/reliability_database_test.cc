@@ -503,9 +503,9 @@ TEST(ReliabilityImageTest, CameraParamsMustFitTheModel) {
 TEST(ReliabilityFaultTest, LockedDatabaseTimesOut) {
   TempDir dir;
   const std::string path = MakeDatabase(dir, "db.db", 3, 5);
-  setenv("CASHASH_BUSY_TIMEOUT_MS", "300", 1);
-  DatabaseResultSink sink(path, true);
-  unsetenv("CASHASH_BUSY_TIMEOUT_MS");
+  DatabaseResultSink::Options options;
+  options.busy_timeout_ms = 300;
+  DatabaseResultSink sink(path, options);
   {
     RawDb other(path);
     other.Exec("BEGIN IMMEDIATE");

@@ -217,15 +217,16 @@ TEST(GpuCascadeTest, EmptySingleAndLargeImages) {
   EXPECT_GE(a.value(), 0.995);
 }
 
-// Sets an environment variable for the lifetime of the object.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) { setenv(name, value.c_str(), 1); }
-  ~ScopedEnv() { unsetenv(name_); }
-
- private:
-  const char* name_;
-};
+// The GPU matcher on device 0 with a memory budget of `budget_mib` MiB
+// (0: none) and the given cascade kernels.
+cuda::GpuMatcherConfig DeviceZero(size_t budget_mib = 0,
+                                  cuda::GpuCascadeKernel kernel = cuda::GpuCascadeKernel::kBucketTiles) {
+  cuda::GpuMatcherConfig config;
+  config.gpu_index = 0;
+  config.memory_budget_bytes = budget_mib << 20;
+  config.cascade_kernel = kernel;
+  return config;
+}
 
 // A chain of `num_images` related images (the first of `first` features,
 // image i of base + step * i), and one descriptor repeated 400 times in the
@@ -268,13 +269,11 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
     // ~1.05 MiB per image of 3000 features, ~6.2 MiB of candidate lists per
     // pair: 40 MiB leave scratch for about two pairs per batch, so the 66
     // pairs run in many batches.
-    ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "40");
-    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, DeviceZero(40));
     EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), unlimited);
   }
   {
-    ScopedEnv env("CASHASH_GPU_MEMORY_LIMIT_MB", "4");
-    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, 0);
+    auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), options, mean, DeviceZero(4));
     try {
       AddAndMatch(gpu.get(), images, pairs);
       ADD_FAILURE() << "12 images of 3000 features cannot fit in 4 MiB";
@@ -301,8 +300,7 @@ TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
       cas.top_k = top_k;
       std::vector<FeatureMatches> direct, tiled;
       {
-        ScopedEnv env("CASHASH_GPU_CASCADE_KERNEL", "direct");
-        auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+        auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, DeviceZero(0, cuda::GpuCascadeKernel::kPerQuery));
         direct = AddAndMatch(gpu.get(), images, pairs);
       }
       {
@@ -335,8 +333,7 @@ TEST(GpuCascadeTest, BigBucketsSharedOutGiveThePerQueryKernelsMatches) {
   cas.tau = 32;
   std::vector<FeatureMatches> direct;
   {
-    ScopedEnv env("CASHASH_GPU_CASCADE_KERNEL", "direct");
-    auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+    auto gpu = cuda::CreateGpuFeatureMatcher(sift, cas, mean, DeviceZero(0, cuda::GpuCascadeKernel::kPerQuery));
     direct = AddAndMatch(gpu.get(), images, pairs);
   }
   size_t total = 0;

@@ -55,15 +55,16 @@ size_t Differences(const FeatureMatches& a, const FeatureMatches& b) {
 // edge could differ.
 void ExpectSameGuidedMatches(const std::vector<const ImageFeatures*>& images, const std::vector<GuidedPair>& pairs,
                              double max_distance, const char* kernel) {
-  if (kernel != nullptr) setenv("CASHASH_GPU_CASCADE_KERNEL", kernel, 1);
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures* f : images) descriptors.push_back(&f->descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
   const SiftMatchingOptions sift;
   const CasHashOptions cashash;
   auto cpu = CreateCpuFeatureMatcher(sift, cashash, mean);
-  auto gpu = cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0);
-  unsetenv("CASHASH_GPU_CASCADE_KERNEL");
+  cuda::GpuMatcherConfig config;
+  config.cascade_kernel = kernel != nullptr && std::string(kernel) == "direct" ? cuda::GpuCascadeKernel::kPerQuery
+                                                                              : cuda::GpuCascadeKernel::kBucketTiles;
+  auto gpu = cuda::CreateGpuFeatureMatcher(sift, cashash, mean, config);
   ASSERT_TRUE(gpu->SupportsEpipolarGuidance());
   for (size_t k = 0; k < images.size(); ++k) {
     cpu->AddImage(images[k]->image_id, images[k]->descriptors);

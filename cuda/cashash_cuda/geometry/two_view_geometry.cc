@@ -322,26 +322,17 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-int GpuVerificationsInFlightFromEnvironment() {
-  static const int calls = [] {
-    const char* text = std::getenv("CASHASH_GPU_VERIFICATIONS_IN_FLIGHT");
-    const int value = text == nullptr ? kDefaultGpuVerificationsInFlight : std::atoi(text);
-    return std::min(std::max(value, 1), 8);
-  }();
-  return calls;
-}
-
 namespace {
 
 class GpuBatchVerifier : public BatchVerifier {
  public:
-  GpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index, int num_threads)
+  GpuBatchVerifier(const TwoViewGeometryOptions& options, const GpuVerifierConfig& config)
       : options_(options),
-        num_threads_(num_threads),
-        gpu_index_(gpu_index),
-        max_calls_(GpuVerificationsInFlightFromEnvironment()) {
+        num_threads_(config.num_threads),
+        gpu_index_(config.gpu_index),
+        max_calls_(std::min(std::max(config.verifications_in_flight, 1), kMaxGpuVerificationsInFlight)) {
     // The first estimator now, so that an unusable device fails here.
-    estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index));
+    estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index_));
     free_.push_back(estimators_.back().get());
   }
 
@@ -484,9 +475,17 @@ class GpuBatchVerifier : public BatchVerifier {
 
 }  // namespace
 
+std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options,
+                                                      const GpuVerifierConfig& config) {
+  return std::make_unique<GpuBatchVerifier>(options, config);
+}
+
 std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
                                                       int num_threads) {
-  return std::make_unique<GpuBatchVerifier>(options, gpu_index, num_threads);
+  GpuVerifierConfig config;
+  config.gpu_index = gpu_index;
+  config.num_threads = num_threads;
+  return CreateGpuBatchVerifier(options, config);
 }
 
 }  // namespace cuda

@@ -70,14 +70,8 @@ class GpuTwoViewRansac {
   std::unique_ptr<Impl> impl_;
 };
 
-// The BatchVerifier that estimates F, H and E of a whole chunk on the GPU
-// and prepares points and decides on num_threads CPU threads.
-std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
-                                                      int num_threads);
-
 // Chunks the GPU verifier keeps on the device at once (its
-// MaxConcurrentCalls): CASHASH_GPU_VERIFICATIONS_IN_FLIGHT (1 to 8) to
-// compare, else kDefaultGpuVerificationsInFlight. Measured on the H200
+// MaxConcurrentCalls), by default. Measured on the H200
 // (device runs 21 and 22): more chunks at once help where verification sets
 // the pace (guided matching: 23.5k, 25.6k and 26.9k pairs/s at 300 images
 // with 1, 2 and 3) and cost a little where matching does (exhaustive: 20.6k,
@@ -90,7 +84,25 @@ std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptio
 // (the verification stage in matching_pipeline.cc), which gives the first
 // without the second (device run 58).
 constexpr int kDefaultGpuVerificationsInFlight = 2;
-int GpuVerificationsInFlightFromEnvironment();
+constexpr int kMaxGpuVerificationsInFlight = 8;
+
+// What the GPU verifier is set up with, given to its constructor.
+struct GpuVerifierConfig {
+  int gpu_index = 0;
+  // CPU threads that prepare the points and decide (-1: all cores).
+  int num_threads = -1;
+  // Chunks verified on the device at once, 1 to kMaxGpuVerificationsInFlight
+  // (values outside are clamped).
+  int verifications_in_flight = kDefaultGpuVerificationsInFlight;
+};
+
+// The BatchVerifier that estimates F, H and E of a whole chunk on the GPU
+// and prepares points and decides on CPU threads.
+std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options,
+                                                      const GpuVerifierConfig& config);
+// The same with the default number of verifications in flight.
+std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options, int gpu_index,
+                                                      int num_threads);
 
 
 }  // namespace cuda

@@ -45,13 +45,6 @@ constexpr size_t kMaxBatchPairs = 8192;
 // pairs per batch, ~1.2 ms of work at 50k pairs/s.
 constexpr size_t kMaxBatchListBytes = size_t{1} << 30;
 
-// Which matching kernels run: the bucket-tile kernels (default) or the older
-// per-query kernel, kept to compare against (CASHASH_GPU_CASCADE_KERNEL=direct).
-bool UseTiledKernels() {
-  const char* value = std::getenv("CASHASH_GPU_CASCADE_KERNEL");
-  return value == nullptr || std::string(value) != "direct";
-}
-
 // Chunks of 32 A rows a tile warp takes before the rest of its bucket is
 // shared out in a second pass (BigBucketQueue). 4: on one H100 it took the
 // 300 x 16,384 street from 2.25-2.36 s to 2.08 s, where a few buckets of
@@ -176,20 +169,20 @@ class GpuExactMatchingTicket : public ExactMatchingTicket {
 class GpuCascadeMatcher : public FeatureMatcher {
  public:
   GpuCascadeMatcher(const SiftMatchingOptions& sift_options, const CasHashOptions& options,
-                    const MeanDescriptor& mean, int gpu_index)
+                    const MeanDescriptor& mean, const GpuMatcherConfig& config)
       : sift_options_(sift_options),
         options_(options),
-        device_(gpu_index),
-        tiled_(UseTiledKernels()),
+        device_(config.gpu_index),
+        tiled_(config.cascade_kernel == GpuCascadeKernel::kBucketTiles),
         list_capacity_(kCandidateListCapacity) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
     if (error.empty()) error = CheckGpuCascadeOptions(options);
     if (!error.empty()) throw std::invalid_argument(error);
     std::string reason;
-    if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+    if (!CudaDeviceUsable(device_, &reason)) throw std::runtime_error(reason);
     CUDA_CHECK(cudaSetDevice(device_));
-    budget_ = MemoryBudgetFromEnvironment();
+    budget_ = MemoryBudget(config.memory_budget_bytes);
 
     const CascadeProjections projections = GenerateCascadeProjections(options_);
     UploadProjections(projections, mean);
@@ -706,8 +699,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
 
 std::unique_ptr<FeatureMatcher> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, int gpu_index) {
-  return std::make_unique<GpuCascadeMatcher>(sift_options, cashash_options, mean, gpu_index);
+                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config) {
+  return std::make_unique<GpuCascadeMatcher>(sift_options, cashash_options, mean, config);
 }
 
 }  // namespace cuda

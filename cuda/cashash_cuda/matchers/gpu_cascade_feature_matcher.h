@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "cashash/matchers/feature_matcher.h"
+#include "cashash_cuda/matchers/gpu_matcher_config.h"
 
 namespace cashash {
 namespace cuda {
@@ -13,7 +14,7 @@ namespace cuda {
 // std::runtime_error when the device cannot be used.
 std::unique_ptr<FeatureMatcher> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, int gpu_index);
+                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config);
 
 }  // namespace cuda
 }  // namespace cashash

@@ -28,12 +28,12 @@ namespace {
 
 class GpuBruteForceMatcher : public FeatureMatcher {
  public:
-  GpuBruteForceMatcher(const SiftMatchingOptions& sift_options, int gpu_index)
-      : sift_options_(sift_options), device_(gpu_index), budget_(MemoryBudgetFromEnvironment()) {
+  GpuBruteForceMatcher(const SiftMatchingOptions& sift_options, const GpuMatcherConfig& config)
+      : sift_options_(sift_options), device_(config.gpu_index), budget_(MemoryBudget(config.memory_budget_bytes)) {
     const std::string error = sift_options.Check();
     if (!error.empty()) throw std::invalid_argument(error);
     std::string reason;
-    if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+    if (!CudaDeviceUsable(device_, &reason)) throw std::runtime_error(reason);
     CUDA_CHECK(cudaSetDevice(device_));
     stream_ = CreateStageStream(StreamRole::kMatching);
     kernels_ = std::make_unique<BruteForceKernels>(stream_);
@@ -157,21 +157,29 @@ bool CudaDeviceUsable(int gpu_index, std::string* reason) {
 
 std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, int gpu_index) {
+                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config) {
   if (cashash_options.matcher == MatcherType::kBruteForce) {
-    return std::make_unique<GpuBruteForceMatcher>(sift_options, gpu_index);
+    return std::make_unique<GpuBruteForceMatcher>(sift_options, config);
   }
   if (cashash_options.matcher == MatcherType::kAuto) {
     CasHashOptions cascade = cashash_options, brute_force = cashash_options;
     cascade.matcher = MatcherType::kCascade;
     brute_force.matcher = MatcherType::kBruteForce;
-    return std::make_unique<AutoFeatureMatcher>(CreateGpuFeatureMatcher(sift_options, cascade, mean, gpu_index),
-                                                CreateGpuFeatureMatcher(sift_options, brute_force, mean, gpu_index),
+    return std::make_unique<AutoFeatureMatcher>(CreateGpuFeatureMatcher(sift_options, cascade, mean, config),
+                                                CreateGpuFeatureMatcher(sift_options, brute_force, mean, config),
                                                 GpuAutoMatcherOptions(), nullptr);
   }
   // Tables still at 0 (chosen per run, table_shape.h): the shape of 8,192
   // features, as the CPU backend.
-  return CreateGpuCascadeMatcher(sift_options, ResolveTableShape(cashash_options, 0), mean, gpu_index);
+  return CreateGpuCascadeMatcher(sift_options, ResolveTableShape(cashash_options, 0), mean, config);
+}
+
+std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean, int gpu_index) {
+  GpuMatcherConfig config;
+  config.gpu_index = gpu_index;
+  return CreateGpuFeatureMatcher(sift_options, cashash_options, mean, config);
 }
 
 }  // namespace cuda

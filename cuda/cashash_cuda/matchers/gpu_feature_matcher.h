@@ -6,6 +6,7 @@
 #include <string>
 
 #include "cashash/matchers/feature_matcher.h"
+#include "cashash_cuda/matchers/gpu_matcher_config.h"
 
 namespace cashash {
 namespace cuda {
@@ -17,6 +18,11 @@ int NumCudaDevices();
 bool CudaDeviceUsable(int gpu_index, std::string* reason);
 
 // Throws std::runtime_error when the device cannot be used.
+std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                        const CasHashOptions& cashash_options,
+                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config);
+
+// The same on device gpu_index, with no memory cap and the default kernels.
 std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean, int gpu_index);

@@ -25,13 +25,11 @@ namespace cuda {
 
 inline std::string MiB(size_t bytes) { return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB"; }
 
-// Optional cap on the device memory a matcher uses, for tests and shared
-// devices: CASHASH_GPU_MEMORY_LIMIT_MB. Without it the device's own limit
-// applies (allocations that fail throw).
-inline size_t MemoryBudgetFromEnvironment() {
-  const char* value = std::getenv("CASHASH_GPU_MEMORY_LIMIT_MB");
-  if (value == nullptr || *value == '\0') return std::numeric_limits<size_t>::max();
-  return static_cast<size_t>(std::strtoull(value, nullptr, 10)) << 20;
+// The cap a matcher checks its device memory against: `budget_bytes`
+// (GpuMatcherConfig::memory_budget_bytes), or with 0 none but the device's
+// own memory (allocations that fail throw).
+inline size_t MemoryBudget(size_t budget_bytes) {
+  return budget_bytes == 0 ? std::numeric_limits<size_t>::max() : budget_bytes;
 }
 
 // Device memory; move-only.

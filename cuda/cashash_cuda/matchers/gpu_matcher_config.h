@@ -1,0 +1,28 @@
+// What a GPU matcher is set up with beyond the matching options: its
+// device, its share of device memory and which cascade kernels it runs.
+// Given to the matcher's constructor (CreateGpuFeatureMatcher); the run
+// fills it from its resolved options (colmap_bridge/api/matcher_factory.cc).
+// Plain C++ header.
+#pragma once
+
+#include <cstddef>
+
+namespace cashash {
+namespace cuda {
+
+// The cascade's matching kernels: the bucket-tile kernels, or the older
+// per-query kernel, which the GPU tests keep as the tile kernels' oracle
+// (both give identical matches).
+enum class GpuCascadeKernel { kBucketTiles, kPerQuery };
+
+struct GpuMatcherConfig {
+  int gpu_index = 0;
+  // Most bytes the matcher's descriptors, hash codes and buckets may take
+  // on the device (--max_gpu_memory); past it adding an image throws, as a
+  // failed allocation does. 0: no cap but the device's own memory.
+  size_t memory_budget_bytes = 0;
+  GpuCascadeKernel cascade_kernel = GpuCascadeKernel::kBucketTiles;
+};
+
+}  // namespace cuda
+}  // namespace cashash
