@@ -14,6 +14,7 @@
 #include "cashash/geometry/camera_models.h"
 #include "cashash/matching/pair_matching.h"
 #include "cashash/matching/table_shape.h"
+#include "colmap_bridge/api/matcher_factory.h"
 #include "colmap_bridge/api/matching_api.h"
 
 namespace py = pybind11;
@@ -83,6 +84,21 @@ py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   d["inlier_matches"] = s.pipeline.inlier_matches;
   d["seconds"] = s.pipeline.seconds_total;
   d["stopped"] = s.pipeline.stopped;
+  // How the run was resolved (ResolveRun): the same for the same inputs as
+  // on the command line.
+  py::dict run;
+  run["matcher"] = MatcherTypeToString(s.run.options.cashash.matcher);
+  run["num_tables"] = s.run.options.cashash.num_tables;
+  run["bits_per_table"] = s.run.options.cashash.bits_per_table;
+  run["tau"] = s.run.options.cashash.tau;
+  run["exact_rematch_min_matches"] = s.run.options.cashash.exact_rematch_min_matches;
+  run["rematch_on_matching_thread"] = s.run.rematch_on_matching_thread;
+  run["block_size"] = s.run.options.block_size;
+  run["blocks_per_group"] = s.run.schedule.blocks_per_group;
+  run["gpu_index"] = s.run.gpu_index;
+  run["gpu_memory_budget_bytes"] = s.run.gpu_memory_budget_bytes;
+  run["max_host_bytes"] = s.run.max_host_bytes;
+  d["run"] = run;
   return d;
 }
 
@@ -152,19 +168,20 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   std::optional<Camera> c1, c2;
   if (camera1) c1 = CameraFromDict(*camera1);
   if (camera2) c2 = CameraFromDict(*camera2);
-  // Tables at 0 are chosen for the larger image, the same for the GPU
-  // matcher and MatchImagePair's CPU one.
-  MatcherCommandOptions resolved = options;
-  resolved.cashash =
-      ResolveTableShape(options.cashash, TypicalFeatureCount({d1.rows(), d2.rows()}, options.sift.max_num_matches));
-  // The CPU path (MatchImagePair's own matcher) keeps the cascade's
-  // matches, so its tau is the one for precision; the GPU matcher rematches
-  // as a run does.
-  if (!options.use_gpu) resolved.cashash.exact_rematch_min_matches = 0;
-  resolved.cashash.tau = colmap::RunTau(resolved);
+  // The pair resolves as a run of two images does (ResolveRun), except
+  // that without the GPU MatchImagePair's own CPU matcher keeps the
+  // cascade's matches (no exact rematch), so its tables and tau are the
+  // ones for recall and precision.
+  MatcherCommandOptions requested = options;
+  if (!options.use_gpu) requested.cashash.exact_rematch_min_matches = 0;
+  colmap::RunFacts facts;
+  facts.rows_per_image = {d1.rows(), d2.rows()};
+  facts.exhaustive = false;
+  facts.gpu_index = options.use_gpu ? colmap::GpuIndexForRun(options) : -1;
+  const colmap::ResolvedRun run = colmap::ResolveRun(requested, facts);
   PairMatchingOptions pair_options;
-  pair_options.sift = resolved.sift;
-  pair_options.cashash = resolved.cashash;
+  pair_options.sift = run.options.sift;
+  pair_options.cashash = run.options.cashash;
   pair_options.two_view = options.two_view;
   pair_options.skip_geometric_verification = options.skip_geometric_verification;
 
@@ -173,7 +190,7 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
     py::gil_scoped_release no_gil;
     std::unique_ptr<FeatureMatcher> matcher;
     if (options.use_gpu) {
-      matcher = colmap::CreateMatcherForOptions(resolved, ComputeMeanDescriptor({&d1, &d2}), nullptr);
+      matcher = colmap::CreateMatcherForRun(run, ComputeMeanDescriptor({&d1, &d2}), nullptr);
     }
     result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get());
   }
@@ -199,8 +216,10 @@ void BindOptions(py::module_& m) {
       .def_readwrite("max_distance", &SiftMatchingOptions::max_distance)
       .def_readwrite("cross_check", &SiftMatchingOptions::cross_check)
       .def_readwrite("max_num_matches", &SiftMatchingOptions::max_num_matches);
+  // The user-facing defaults, those of MatchingOptions().cashash (matcher
+  // auto, tables, tau and the rematch threshold chosen for the run).
   py::class_<CasHashOptions>(m, "CasHashOptions")
-      .def(py::init<>())
+      .def(py::init([]() { return MatcherCommandOptions().cashash; }))
       .def_property(
           "matcher", [](const CasHashOptions& o) { return MatcherTypeToString(o.matcher); },
           [](CasHashOptions& o, const std::string& name) {

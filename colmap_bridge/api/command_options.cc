@@ -6,6 +6,7 @@
 #include <boost/program_options.hpp>
 
 #include "cashash/pipeline/schedule_sizing.h"
+#include "colmap_bridge/api/run_resolution.h"
 
 namespace po = boost::program_options;
 
@@ -29,7 +30,14 @@ class OptionTable {
 
   template <typename T>
   void Add(const std::vector<std::string>& names, T* value, const std::string& help) {
-    const std::string text = help + " (=" + DefaultText(*value) + ")";
+    Add(names, value, help, DefaultText(*value));
+  }
+
+  // With the default shown as `shown` (a value chosen for the run shows
+  // what it is where nothing decides otherwise).
+  template <typename T>
+  void Add(const std::vector<std::string>& names, T* value, const std::string& help, const std::string& shown) {
+    const std::string text = help + " (=" + shown + ")";
     for (size_t i = 0; i < names.size(); ++i) {
       const std::string alias_note = i == 0 ? "" : " [alias of --" + names[0] + "]";
       description_->add_options()(names[i].c_str(), po::value<T>(value), (text + alias_note).c_str());
@@ -109,7 +117,7 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Largest chance that the sequential test rejects a model which would have beaten the best so far");
 
   table.Add({"ExhaustiveMatching.block_size"}, &o.block_size,
-            "Images per block (default: from the memory caps, at most 50)");
+            "Images per block (default: from the memory caps, at most 50)", std::to_string(kDefaultBlockSize));
   table.Add({"max_host_memory"}, &o.max_host_memory,
             "Host memory for features, e.g. 16G or 4096 (MiB); default half the physical memory");
   table.Add({"max_gpu_memory"}, &o.max_gpu_memory,
@@ -133,7 +141,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
   table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
             "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
-            "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image");
+            "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image",
+            std::to_string(kDefaultRematchMinMatches));
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
@@ -174,8 +183,6 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
               << std::endl;
     return ParseOutcome::kError;
   }
-  o.block_size_from_memory = vm.count("ExhaustiveMatching.block_size") == 0;
-  o.rematch_min_matches_from_shape = vm.count("CasHash.exact_rematch_min_matches") == 0;
   o.cashash.random_seed = o.random_seed;
   o.two_view.random_seed = o.random_seed;
   return ParseOutcome::kRun;
@@ -183,7 +190,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.database_path.empty()) return "--database_path is required";
-  if (o.block_size < 2) return "--ExhaustiveMatching.block_size must be >= 2";
+  // 0: chosen for the run.
+  if (o.block_size < 0 || o.block_size == 1) return "--ExhaustiveMatching.block_size must be >= 2";
   for (const auto& [name, text] : {std::make_pair("--max_host_memory", &o.max_host_memory),
                                    std::make_pair("--max_gpu_memory", &o.max_gpu_memory)}) {
     size_t bytes = 0;
@@ -197,12 +205,16 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   }
   std::string message = o.sift.Check();
   if (!message.empty()) return message;
-  message = o.cashash.Check();
+  CasHashOptions cashash = o.cashash;
+  if (cashash.exact_rematch_min_matches == kRematchMinMatchesChosen) {
+    cashash.exact_rematch_min_matches = kDefaultRematchMinMatches;
+  }
+  message = cashash.Check();
   if (!message.empty()) return message;
   if (o.guided.enabled) {
     message = o.guided.Check();
     if (!message.empty()) return message;
-    // auto resolves to the cascade (ResolveOptionsForRun).
+    // auto resolves to the cascade (MatcherTypeRule).
     if (o.cashash.matcher == MatcherType::kBruteForce) {
       return "--GuidedMatching.enabled needs --CasHash.matcher cascade or auto (the band filter is part of the "
              "cascade)";

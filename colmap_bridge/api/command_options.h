@@ -14,45 +14,42 @@
 namespace cashash {
 namespace colmap {
 
-// The runs' exact rematch threshold (CasHashOptions::exact_rematch_min_matches).
+// The runs' exact rematch threshold where it is not given
+// (RematchMinMatchesRule, run_resolution.h).
 constexpr int kDefaultRematchMinMatches = 12;
+// CasHashOptions::exact_rematch_min_matches of a run's options: not given,
+// chosen for the run (12, or kBucketScreeningRematchMinMatches with the
+// bucket screening tables).
+constexpr int kRematchMinMatchesChosen = -1;
 
+// The user's options of a run: the command line parses into it, Python's
+// MatchingOptions is it, and its defaults are the one set of user-facing
+// defaults. Values "chosen for the run" (0 tables, tau 0, block size 0,
+// rematch threshold -1) are decided by ResolveRun (run_resolution.h) from
+// the database and the machine.
 struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
   // --CasHash.matcher defaults to auto here: a run measures both matchers;
-  // and the pairs that may verify are matched again exactly. tau 0: chosen
-  // for the run (ChooseCascadeTau), 32 while the rematch decides.
+  // and the pairs that may verify are matched again exactly (threshold
+  // chosen for the run). tau 0: chosen for the run (ChooseCascadeTau), 32
+  // while the rematch decides. (A CasHashOptions of its own, as the
+  // library's matcher factories take it, is the cascade alone.)
   CasHashOptions cashash = [] {
     CasHashOptions options;
     options.matcher = MatcherType::kAuto;
-    options.exact_rematch_min_matches = kDefaultRematchMinMatches;
+    options.exact_rematch_min_matches = kRematchMinMatchesChosen;
     options.tau = 0;
     return options;
   }();
-  // A rematch threshold left at kDefaultRematchMinMatches is replaced by
-  // kBucketScreeningRematchMinMatches where the bucket screening shape is
-  // chosen (ResolveOptionsForRun). The command line clears this when
-  // --CasHash.exact_rematch_min_matches is given, so a typed 12 stays 12;
-  // any other threshold is always kept.
-  bool rematch_min_matches_from_shape = true;
-  // Where a single GPU's exact rematch runs. false: deferred to the
-  // verification threads (exact_rematch_feature_matcher.h), which paid
-  // while the cascade's screen set the pace. ResolveOptionsForRun sets it
-  // with the bucket screening shape, whose screen leaves the matching
-  // thread room while verification sets the pace: the 300-image streets
-  // ran 9 % (8,192 features) and 3.5 % (16,384) faster with the rematch on
-  // the matching thread (H100, device runs 132-133, docs/BENCHMARKS.md).
-  bool rematch_on_matching_thread = false;
   TwoViewGeometryOptions two_view;
   // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
   // guided_matcher command sets enabled).
   GuidedMatchingOptions guided;
-  int block_size = 50;  // ExhaustiveMatching.block_size
-  // Exhaustive matching derives the block size from the memory caps (at
-  // most block_size) instead; the command line sets it unless
-  // --ExhaustiveMatching.block_size is given.
-  bool block_size_from_memory = false;
+  // ExhaustiveMatching.block_size. 0: chosen; exhaustive matching derives
+  // it from the memory caps (at most kDefaultBlockSize, 50), a pair list is
+  // cut into chunks of 50 x 50 pairs.
+  int block_size = 0;
   // Memory caps of the three-level scheduling ("16G", "512M", plain numbers
   // are MiB); "" = default: half the machine's physical memory, the GPU's
   // free memory.

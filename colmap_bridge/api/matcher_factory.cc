@@ -13,7 +13,6 @@
 #include "cashash/matchers/fallback_feature_matcher.h"
 #include "cashash/matchers/split_feature_matcher.h"
 #include "cashash/matching/table_shape.h"
-#include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/matching_api.h"
 #ifdef CASHASH_WITH_CUDA
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
@@ -68,18 +67,12 @@ int GpuIndexForRun(const MatcherCommandOptions& options) {
 #endif
 }
 
-size_t GpuMatcherMemoryBudget(const MatcherCommandOptions& options) {
-  size_t bytes = 0;
-  if (!options.max_gpu_memory.empty()) ParseMemorySize(options.max_gpu_memory, &bytes);  // checked with the options
-  return bytes;
-}
-
 namespace {
 
 // The backend of one matcher type (cascade or brute force): on the GPUs of
 // the options where usable, else on the CPU. *on_gpu says which.
 std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOptions& options,
-                                                        const MeanDescriptor& mean,
+                                                        size_t gpu_memory_budget_bytes, const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
                                                         bool* on_gpu) {
   *on_gpu = false;
@@ -95,7 +88,7 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
       }
       cuda::GpuMatcherConfig config;
       config.gpu_index = gpu_index;
-      config.memory_budget_bytes = GpuMatcherMemoryBudget(options);
+      config.memory_budget_bytes = gpu_memory_budget_bytes;
       // A run that outgrows the card (device memory) finishes on the CPU.
       parts.push_back(CreateFallbackFeatureMatcher(
           cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, config),
@@ -122,20 +115,20 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 // Brute-force matchers on the run's GPU for the exact rematch deferred to the
 // verification threads (exact_rematch_feature_matcher.h); null where it
 // stays on the matching thread: with several GPUs (each chunk is split
-// between them), or where options.rematch_on_matching_thread says so.
-std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const MatcherCommandOptions& options,
-                                                      const MeanDescriptor& mean) {
+// between them), or where the run placed it there
+// (ResolvedRun::rematch_on_matching_thread).
+std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const ResolvedRun& run, const MeanDescriptor& mean) {
 #ifdef CASHASH_WITH_CUDA
-  if (options.rematch_on_matching_thread) return nullptr;
-  if (GpuIndices(options.gpu_index).size() != 1) return nullptr;
-  MatcherCommandOptions brute_force = options;
+  if (run.rematch_on_matching_thread) return nullptr;
+  if (GpuIndices(run.options.gpu_index).size() != 1) return nullptr;
+  MatcherCommandOptions brute_force = run.options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;
-  return std::make_shared<ExactMatcherPool>([brute_force, mean]() {
+  return std::make_shared<ExactMatcherPool>([brute_force, budget = run.gpu_memory_budget_bytes, mean]() {
     bool on_gpu = false;
-    return CreateBackendForOptions(brute_force, mean, nullptr, &on_gpu);
+    return CreateBackendForOptions(brute_force, budget, mean, nullptr, &on_gpu);
   });
 #else
-  (void)options;
+  (void)run;
   (void)mean;
   return nullptr;
 #endif
@@ -145,94 +138,42 @@ std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const MatcherCommandOption
 // it also matches the pairs that may verify again exactly, from the
 // descriptors it holds (exact_rematch_feature_matcher.h). Guided matching
 // keeps the bare cascade: its stage 2 screens by the epipolar band.
-std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOptions& options,
-                                                        const MeanDescriptor& mean,
-                                                        const std::function<void(const std::string&)>& warning,
-                                                        const std::shared_ptr<ExactRematchCounts>& counts,
-                                                        bool* on_gpu) {
+std::unique_ptr<FeatureMatcher> CreateCascadeForRun(const ResolvedRun& run, const MeanDescriptor& mean,
+                                                    const std::function<void(const std::string&)>& warning,
+                                                    const std::shared_ptr<ExactRematchCounts>& counts, bool* on_gpu) {
+  const MatcherCommandOptions& options = run.options;
   MatcherCommandOptions cascade = options;
   cascade.cashash.matcher = MatcherType::kCascade;
-  std::unique_ptr<FeatureMatcher> matcher = CreateBackendForOptions(cascade, mean, warning, on_gpu);
+  std::unique_ptr<FeatureMatcher> matcher =
+      CreateBackendForOptions(cascade, run.gpu_memory_budget_bytes, mean, warning, on_gpu);
   if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
   return std::make_unique<ExactRematchFeatureMatcher>(
       std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts,
-      *on_gpu ? DeferredRematchPool(options, mean) : nullptr);
+      *on_gpu ? DeferredRematchPool(run, mean) : nullptr);
 }
 
 }  // namespace
 
-int RunTau(const MatcherCommandOptions& options) {
-  if (options.cashash.tau > 0) return options.cashash.tau;
-  return ChooseCascadeTau(options.cashash.exact_rematch_min_matches, options.guided.enabled);
-}
-
-std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& given,
-                                                        const MeanDescriptor& mean,
-                                                        const std::function<void(const std::string&)>& warning,
-                                                        const std::function<void(const std::string&)>& info,
-                                                        const std::shared_ptr<ExactRematchCounts>& counts) {
-  // Options not passed through ResolveOptionsForRun get their tau here too.
-  MatcherCommandOptions options = given;
-  options.cashash.tau = RunTau(given);
+std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
+                                                    const std::function<void(const std::string&)>& warning,
+                                                    const std::function<void(const std::string&)>& info,
+                                                    const std::shared_ptr<ExactRematchCounts>& counts) {
+  const MatcherCommandOptions& options = run.options;
   bool on_gpu = false;
-  if (options.cashash.matcher == MatcherType::kCascade) {
-    return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
+  if (options.cashash.matcher == MatcherType::kCascade) return CreateCascadeForRun(run, mean, warning, counts, &on_gpu);
+  if (options.cashash.matcher != MatcherType::kAuto) {
+    return CreateBackendForOptions(options, run.gpu_memory_budget_bytes, mean, warning, &on_gpu);
   }
-  if (options.cashash.matcher != MatcherType::kAuto) return CreateBackendForOptions(options, mean, warning, &on_gpu);
-  // Guided matching filters candidates inside the cascade.
-  if (options.guided.enabled) return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
   MatcherCommandOptions brute_force = options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;
   // Both on the same devices (or both on the CPU); the warnings once.
-  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
+  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForRun(run, mean, warning, counts, &on_gpu);
   bool brute_force_on_gpu = false;
   std::unique_ptr<FeatureMatcher> brute_force_matcher =
-      CreateBackendForOptions(brute_force, mean, nullptr, &brute_force_on_gpu);
+      CreateBackendForOptions(brute_force, run.gpu_memory_budget_bytes, mean, nullptr, &brute_force_on_gpu);
   return std::make_unique<AutoFeatureMatcher>(std::move(cascade_matcher), std::move(brute_force_matcher),
                                               on_gpu ? GpuAutoMatcherOptions() : CpuAutoMatcherOptions(options.sift),
                                               info);
-}
-
-MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
-                                           const std::vector<size_t>& rows_per_image,
-                                           const std::function<void(const std::string&)>& info) {
-  MatcherCommandOptions resolved = options;
-  if (resolved.guided.enabled && resolved.cashash.matcher == MatcherType::kAuto) {
-    resolved.cashash.matcher = MatcherType::kCascade;
-    if (info) info("Matcher: cascade (guided matching needs it)");
-  }
-  const size_t features = TypicalFeatureCount(rows_per_image, options.sift.max_num_matches);
-  const TableShapeGoal goal =
-      CascadeOnlyScreens(resolved.cashash.exact_rematch_min_matches, resolved.guided.enabled)
-          ? TableShapeGoal::kScreening
-          : TableShapeGoal::kRecall;
-  resolved.cashash = ResolveTableShape(resolved.cashash, features, goal);
-  // Fewer tables find fewer of a pair's true matches: the threshold the
-  // bucket screening shape was measured with (table_shape.h).
-  const bool bucket_screen =
-      IsBucketScreeningShape(features, options.cashash.num_tables, options.cashash.bits_per_table, goal);
-  const bool rematch_from_shape = options.rematch_min_matches_from_shape &&
-                                  options.cashash.exact_rematch_min_matches == kDefaultRematchMinMatches && bucket_screen;
-  if (rematch_from_shape) resolved.cashash.exact_rematch_min_matches = kBucketScreeningRematchMinMatches;
-  // Its screen is light: the matching thread has room for the rematch.
-  if (bucket_screen) resolved.rematch_on_matching_thread = true;
-  resolved.cashash.tau = RunTau(resolved);
-  if (info && resolved.cashash.matcher != MatcherType::kBruteForce) {
-    std::string text =
-        DescribeTableShape(options.cashash, resolved.cashash, features, rows_per_image.size(), goal);
-    text += "; tau " + std::to_string(resolved.cashash.tau);
-    if (options.cashash.tau == 0) {
-      text += resolved.cashash.tau == kCascadeTauForScreening
-                  ? " (chosen: the exact rematch decides the pairs that may verify)"
-                  : " (chosen: the cascade's own matches are kept)";
-    }
-    if (rematch_from_shape) {
-      text += "; exact rematch from " + std::to_string(resolved.cashash.exact_rematch_min_matches) +
-              " cascade matches (chosen for these tables)";
-    }
-    info(text);
-  }
-  return resolved;
 }
 
 }  // namespace colmap

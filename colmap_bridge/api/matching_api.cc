@@ -83,49 +83,40 @@ std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vecto
   return rows;
 }
 
-// Block and group sizes for the three-level scheduling from the memory caps
-// (options or defaults) and the images' feature counts (row counts only, no
-// descriptors are read).
-ScheduleSizes ChooseSizesForRun(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
-                                const std::vector<image_t>& image_ids, const MatchingCallbacks& callbacks) {
-  ScheduleLimits limits;
-  if (options.max_host_memory.empty()) {
-    const size_t physical = PhysicalMemoryBytes();
-    limits.max_host_bytes = physical > 0 ? physical / 2 : (size_t{8} << 30);
-  } else {
-    ParseMemorySize(options.max_host_memory, &limits.max_host_bytes);  // checked with the options
-  }
-  const int gpu_index = GpuIndexForRun(options);
-  if (gpu_index >= 0) {
-    if (options.max_gpu_memory.empty()) {
-      limits.max_gpu_bytes = GpuFreeMemoryBytes(gpu_index);
-    } else {
-      ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);  // checked with the options
+// What the database and the machine say about a run, for ResolveRun: the
+// images' feature rows, the run's device and, for an exhaustive run, the
+// memory to size its blocks and groups from (the smallest over MPI ranks,
+// so that all cut the same).
+RunFacts GatherRunFacts(const MatcherCommandOptions& options, std::vector<size_t> rows_per_image, bool exhaustive) {
+  RunFacts facts;
+  facts.rows_per_image = std::move(rows_per_image);
+  facts.exhaustive = exhaustive;
+  facts.gpu_index = GpuIndexForRun(options);
+  if (exhaustive) {
+    facts.physical_memory_bytes = PhysicalMemoryBytes();
+    if (facts.gpu_index >= 0 && options.max_gpu_memory.empty()) {
+      facts.gpu_free_bytes = GpuFreeMemoryBytes(facts.gpu_index);
     }
+    facts.smallest_over_ranks = [](uint64_t value) { return MpiMin(value); };
   }
-  // Ranks must cut the same blocks and groups: the smallest caps of all.
-  limits.max_host_bytes = MpiMin(limits.max_host_bytes);
-  limits.max_gpu_bytes = MpiMin(limits.max_gpu_bytes);
-  limits.block_size = options.block_size_from_memory ? 0 : options.block_size;
-  limits.max_num_matches = options.sift.max_num_matches;
-  limits.num_tables = options.cashash.num_tables;
-  std::vector<size_t> features;
-  for (image_t image_id : image_ids) features.push_back(source.database().NumDescriptors(image_id));
-  ScheduleSizes sizes = ChooseScheduleSizes(features, limits);
-  if (options.block_size_from_memory) sizes.block_size = std::min(sizes.block_size, options.block_size);
-  if (!sizes.warning.empty()) Warn(callbacks, sizes.warning);
-  const size_t num_blocks = (image_ids.size() + sizes.block_size - 1) / sizes.block_size;
-  const size_t num_groups = (num_blocks + sizes.blocks_per_group - 1) / sizes.blocks_per_group;
-  Info(callbacks, "Schedule: blocks of " + std::to_string(sizes.block_size) + " images, groups of " +
-                      std::to_string(sizes.blocks_per_group) + " blocks (" + std::to_string(num_blocks) +
-                      " blocks, " + std::to_string(num_groups) + " groups); host memory " +
-                      FormatMemorySize(sizes.predicted_host_bytes) + " of " +
-                      FormatMemorySize(limits.max_host_bytes) +
-                      (limits.max_gpu_bytes > 0 ? ", GPU memory for images " +
-                                                      FormatMemorySize(sizes.predicted_gpu_bytes) + " of " +
-                                                      FormatMemorySize(limits.max_gpu_bytes)
-                                                : std::string()));
-  return sizes;
+  return facts;
+}
+
+// The run of `options` over `facts`; says what was chosen, as the command
+// line prints it.
+ResolvedRun ResolveAndReport(const MatcherCommandOptions& options, const RunFacts& facts,
+                             const MatchingCallbacks& callbacks) {
+  ResolvedRun run = ResolveRun(options, facts);
+  // The tables first, then the schedule's warning and the schedule.
+  if (!run.notes.empty() && facts.exhaustive) {
+    for (size_t k = 0; k + 1 < run.notes.size(); ++k) Info(callbacks, run.notes[k]);
+    for (const std::string& warning : run.warnings) Warn(callbacks, warning);
+    Info(callbacks, run.notes.back());
+  } else {
+    for (const std::string& note : run.notes) Info(callbacks, note);
+    for (const std::string& warning : run.warnings) Warn(callbacks, warning);
+  }
+  return run;
 }
 
 // Pairs of image ids for pairs of names, checked as a pair list file is:
@@ -153,23 +144,23 @@ std::vector<ImagePair> PairsOfNames(const std::vector<std::pair<std::string, std
 }
 
 MatchingSummary MatchIdPairs(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
-                             const std::vector<ImagePair>& pairs, const PhaseClock& clock,
+                             const std::vector<ImagePair>& pairs, PhaseClock clock,
                              const MatchingCallbacks& callbacks) {
-  const size_t block = static_cast<size_t>(options.block_size);
-  std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
   const std::vector<image_t> image_ids = ImagesOfPairs(pairs);
   std::shared_future<MeanDescriptor> mean = StartDatabaseMean(source, image_ids);
-  const MatcherCommandOptions resolved = ResolveOptionsForRun(
-      options, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
+  std::vector<size_t> rows = RowsOfImages(source, image_ids);
+  clock.Mark("reading the pairs and feature counts");
+  const RunFacts facts = GatherRunFacts(options, std::move(rows), /*exhaustive=*/false);
+  clock.Mark("starting the GPU and sizing the run");
   RunRequest request;
-  request.options = resolved;
+  request.run = ResolveAndReport(options, facts, callbacks);
+  const size_t block = static_cast<size_t>(request.run.options.block_size);
   request.source = &source;
   request.image_ids = image_ids;
-  request.chunks = std::move(chunks);
+  request.chunks = ListPairChunks(pairs, block * block, 2 * block);
   request.num_pairs_requested = pairs.size();
   request.mean = std::move(mean);
   request.clock = clock;
-  request.clock.Mark("reading the pairs and feature counts");
   return MatchChunks(std::move(request), callbacks);
 }
 
@@ -219,21 +210,19 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
       return MatchingSummary();
     }
     std::shared_future<MeanDescriptor> mean = StartDatabaseMean(source, image_ids);
-    const MatcherCommandOptions resolved = ResolveOptionsForRun(
-        checked, RowsOfImages(source, image_ids), [&](const std::string& text) { Info(callbacks, text); });
+    std::vector<size_t> rows = RowsOfImages(source, image_ids);
     clock.Mark("reading the feature counts");
-    const ScheduleSizes sizes = ChooseSizesForRun(resolved, source, image_ids, callbacks);
-    clock.Mark("starting the GPU and sizing the run");
-    std::vector<PairChunk> chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
-    const size_t n = image_ids.size();
+    const RunFacts facts = GatherRunFacts(checked, std::move(rows), /*exhaustive=*/true);
     RunRequest request;
-    request.options = resolved;
+    request.run = ResolveAndReport(checked, facts, callbacks);
+    clock.Mark("starting the GPU and sizing the run");
+    const ScheduleSizes& sizes = request.run.schedule;
+    const size_t n = image_ids.size();
     request.source = &source;
     request.image_ids = image_ids;
-    request.chunks = std::move(chunks);
+    request.chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
     request.num_pairs_requested = n * (n - 1) / 2;
     request.cache_groups = true;
-    request.matcher_keep_bytes = sizes.matcher_keep_bytes;
     request.mean = std::move(mean);
     request.clock = clock;
     return MatchChunks(std::move(request), callbacks);

@@ -16,6 +16,7 @@
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/run_resolution.h"
 
 namespace cashash {
 namespace colmap {
@@ -56,6 +57,9 @@ struct MatchingSummary {
   // it (opening the database, starting the GPU, making the matcher) and
   // after it (closing the database, freeing GPU memory).
   std::vector<PhaseClock::Phase> phases_outside_pipeline;
+  // The run as it was resolved from the options and the database (empty
+  // when there was nothing to match, and on MPI ranks > 0).
+  ResolvedRun run;
 };
 
 // Matches every pair of images of the database (options.database_path is
@@ -76,34 +80,22 @@ MatchingSummary MatchPairs(const std::string& database_path,
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
                               const MatcherCommandOptions& options, const MatchingCallbacks& callbacks = {});
 
-// The matcher backend the options ask for: the GPU one when use_gpu is set
-// and a device is usable, else the CPU one (reporting why through `warning`).
+// The matcher backend the resolved run asks for: the GPU one when use_gpu is
+// set and a device is usable (each GPU matcher within
+// run.gpu_memory_budget_bytes), else the CPU one (reporting why through
+// `warning`).
 //
 // --CasHash.matcher auto (the default) gives an AutoFeatureMatcher over one
 // cascade and one brute-force backend on the same device(s), which reports
-// its choice through `info`; with guided matching, the cascade alone. With
-// --CasHash.exact_rematch_min_matches > 0 (runs' default 12) the cascade
-// backend is an ExactRematchFeatureMatcher: pairs that may verify are
-// matched again by brute force, from the descriptors the cascade holds.
-std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& options,
-                                                        const MeanDescriptor& mean,
-                                                        const std::function<void(const std::string&)>& warning,
-                                                        const std::function<void(const std::string&)>& info = nullptr,
-                                                        const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
-
-// The tau a run ranks with: --CasHash.tau where set, else ChooseCascadeTau
-// (32 while the exact rematch decides the pairs that may verify, 43 where
-// the cascade's own matches are kept).
-int RunTau(const MatcherCommandOptions& options);
-
-// The options a run matches with, decided once from the feature rows of its
-// images: the hash tables chosen for their median size where
-// --CasHash.num_tables / --CasHash.bits_per_table are 0 (table_shape.h), and
-// auto resolved to the cascade for guided matching, and tau where
-// --CasHash.tau is 0 (RunTau). Says what it chose through `info`.
-MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
-                                           const std::vector<size_t>& rows_per_image,
-                                           const std::function<void(const std::string&)>& info);
+// its choice through `info`; with guided matching the run has resolved auto
+// to the cascade. With an exact rematch threshold > 0 the cascade backend is
+// an ExactRematchFeatureMatcher: pairs that may verify are matched again by
+// brute force, from the descriptors the cascade holds, on the matching
+// thread or deferred as run.rematch_on_matching_thread says.
+std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
+                                                    const std::function<void(const std::string&)>& warning,
+                                                    const std::function<void(const std::string&)>& info = nullptr,
+                                                    const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
 
 }  // namespace colmap
 }  // namespace cashash

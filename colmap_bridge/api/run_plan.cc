@@ -147,7 +147,7 @@ struct RunShare {
 // matcher), so a plan is neither copied nor moved once built.
 struct RunPlan {
   RunShare share;
-  MatcherCommandOptions options;  // with this rank's GPU
+  ResolvedRun run;  // the request's, with this rank's GPU
   std::unique_ptr<GroupFeatureCache> cache;
   std::unique_ptr<KeypointRecordingSource> keypoint_source;  // guided only
   FeatureSource* features = nullptr;
@@ -173,7 +173,7 @@ RunShare ShareOfRun(std::vector<PairChunk> chunks, const RunRequest& request, co
   RunShare share;
   share.rank = MpiRank();
   share.num_ranks = MpiSize();
-  if (!request.options.overwrite) {
+  if (!request.run.options.overwrite) {
     // One bit per pair of the run, whatever the database holds.
     const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, chunks);
     if (done.num_completed() > 0) {
@@ -205,37 +205,37 @@ RunShare ShareOfRun(std::vector<PairChunk> chunks, const RunRequest& request, co
 // when released images are to be kept.
 void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const MatchingCallbacks& callbacks,
                     RunPlan* plan) {
-  const MatcherCommandOptions& options = plan->options;
+  const MatcherCommandOptions& options = plan->run.options;
   plan->rematch_counts = std::make_shared<ExactRematchCounts>();
-  plan->matcher = CreateMatcherForOptions(options, mean, [&](const std::string& text) { Warn(callbacks, text); },
-                                          [&](const std::string& text) { Info(callbacks, text); },
-                                          plan->rematch_counts);
+  plan->matcher = CreateMatcherForRun(plan->run, mean, [&](const std::string& text) { Warn(callbacks, text); },
+                                      [&](const std::string& text) { Info(callbacks, text); }, plan->rematch_counts);
   // Guided matching (Ga-CasHash, cashash/matching/guided_matching.h): a
   // second matcher for the top-scale subsets, the stage-1 F estimator, and
   // the pipeline's features read through a source that keeps the keypoints.
   if (options.guided.enabled) {
     plan->keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
     auto guided = std::make_unique<GuidedFeatureMatcher>(
-        std::move(plan->matcher), CreateMatcherForOptions(options, mean, nullptr),
+        std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr),
         CreateFundamentalEstimatorForOptions(options), plan->keypoint_source.get(), options.guided,
         options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
     plan->guided = guided.get();
     plan->matcher = std::move(guided);
   }
-  if (request.matcher_keep_bytes > 0) {
+  const size_t keep_bytes = request.run.schedule.matcher_keep_bytes;
+  if (keep_bytes > 0) {
     const size_t max_rows = static_cast<size_t>(std::max(1, options.sift.max_num_matches));
     // A guided matcher also holds the top-scale subset and the positions.
     const double share = options.guided.enabled ? 1.0 + options.guided.top_scale_fraction : 1.0;
     const size_t position_bytes = options.guided.enabled ? 24 : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
-        std::move(plan->matcher), request.matcher_keep_bytes,
+        std::move(plan->matcher), keep_bytes,
         [max_rows, tables = options.cashash.num_tables, share, position_bytes](const FeatureDescriptors& d) {
           const size_t rows = std::min(d.rows(), max_rows);
           return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
                  rows * position_bytes;
         });
     plan->retaining = keeping.get();
-    plan->keep_bytes = request.matcher_keep_bytes;
+    plan->keep_bytes = keep_bytes;
     plan->matcher = std::move(keeping);
   }
 }
@@ -243,7 +243,7 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
 // Rank 0 alone opens the database for writing (and takes the writer lock);
 // the other ranks send their results to it.
 void OpenSink(RunPlan* plan) {
-  const MatcherCommandOptions& options = plan->options;
+  const MatcherCommandOptions& options = plan->run.options;
   if (plan->share.rank == 0) {
     plan->database_sink = std::make_unique<DatabaseResultSink>(
         options.database_path, DatabaseResultSink::Options{!options.skip_geometric_verification,
@@ -272,15 +272,15 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   plan->features = plan->cache ? static_cast<FeatureSource*>(plan->cache.get()) : request.source;
   clock.Mark("starting the feature reader");
 
-  plan->options = request.options;
+  plan->run = request.run;
 #ifdef CASHASH_WITH_CUDA
   // Ranks sharing a machine share its GPUs unless a device is named.
-  if (plan->share.num_ranks > 1 && request.options.gpu_index == "-1") {
+  if (plan->share.num_ranks > 1 && request.run.options.gpu_index == "-1") {
     const int devices = cuda::NumCudaDevices();
-    if (devices > 1) plan->options.gpu_index = std::to_string(MpiLocalRank() % devices);
+    if (devices > 1) plan->run.options.gpu_index = std::to_string(MpiLocalRank() % devices);
   }
 #endif
-  plan->gpu_memory = std::make_unique<GpuMemorySampler>(GpuIndexForRun(plan->options));
+  plan->gpu_memory = std::make_unique<GpuMemorySampler>(GpuIndexForRun(plan->run.options));
   clock.Mark("starting the GPU and sizing the run");
   const MeanDescriptor& mean = request.mean.get();
   clock.Mark("waiting for the hashing mean");
@@ -294,8 +294,8 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   clock.Mark("opening the database for writing");
   // Verification on the GPU too when use_gpu is set (the matcher has
   // already warned when no GPU can be used).
-  if (!plan->options.skip_geometric_verification) {
-    plan->verifier = CreateBatchVerifierForOptions(plan->options, nullptr);
+  if (!plan->run.options.skip_geometric_verification) {
+    plan->verifier = CreateBatchVerifierForOptions(plan->run.options, nullptr);
     clock.Mark("making the verifier");
   }
 }
@@ -322,7 +322,7 @@ void DismantlePlan(RunPlan& plan, PhaseClock& clock) {
 
 // What the matcher's wrappers and the feature cache did, for the log.
 void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCallbacks& callbacks) {
-  const MatcherCommandOptions& options = plan.options;
+  const MatcherCommandOptions& options = plan.run.options;
   if (plan.retaining != nullptr) {
     const RetainingStats& kept = plan.retaining->stats();
     Info(callbacks, "Hashing: " + std::to_string(kept.images_added) + " images hashed, " +
@@ -374,11 +374,11 @@ void WriteTrace(const PipelineTrace& trace, const std::string& path, const Match
 MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock, const MatchingCallbacks& callbacks) {
   const RunShare& share = plan.share;
   PipelineOptions pipeline_options;
-  pipeline_options.num_threads = plan.options.sift.num_threads;
-  pipeline_options.skip_geometric_verification = plan.options.skip_geometric_verification;
-  pipeline_options.two_view = plan.options.two_view;
+  pipeline_options.num_threads = plan.run.options.sift.num_threads;
+  pipeline_options.skip_geometric_verification = plan.run.options.skip_geometric_verification;
+  pipeline_options.two_view = plan.run.options.two_view;
   PipelineTrace trace;
-  const std::string trace_path = PipelineTracePath(plan.options, share);
+  const std::string trace_path = PipelineTracePath(plan.run.options, share);
   if (!trace_path.empty()) pipeline_options.trace = &trace;
   MatchingPipeline pipeline(pipeline_options, plan.features, plan.matcher.get(), plan.sink);
 
@@ -461,6 +461,7 @@ MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbac
   result.pairs_requested = summary.pairs_requested;
   result.pairs_skipped = summary.pairs_skipped;
   result.phases_outside_pipeline = request.clock.phases();
+  result.run = request.run;
   return result;
 }
 

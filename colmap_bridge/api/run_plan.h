@@ -24,7 +24,7 @@ namespace cashash {
 namespace colmap {
 
 struct RunRequest {
-  MatcherCommandOptions options;  // resolved (ResolveOptionsForRun)
+  ResolvedRun run;  // ResolveRun (run_resolution.h)
   DatabaseFeatureSource* source = nullptr;
   std::vector<image_t> image_ids;
   std::vector<PairChunk> chunks;
@@ -32,9 +32,6 @@ struct RunRequest {
   // Features through a GroupFeatureCache (chunks of ScheduledPairChunks):
   // one group pair in host memory, the next one loaded meanwhile.
   bool cache_groups = false;
-  // > 0: the matcher keeps released images up to that many bytes
-  // (RetainingFeatureMatcher), so that most images are hashed once.
-  size_t matcher_keep_bytes = 0;
   std::shared_future<MeanDescriptor> mean;
   // Started by the caller on entry; the run marks its own phases on it and
   // hands them back in MatchingSummary::phases_outside_pipeline.

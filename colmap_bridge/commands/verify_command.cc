@@ -153,7 +153,7 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
 
   MatchingSummary summary;
   summary.pairs_requested = pairs.size();
-  const size_t block = static_cast<size_t>(checked.block_size);
+  const size_t block = static_cast<size_t>(checked.block_size > 0 ? checked.block_size : kDefaultBlockSize);
   std::vector<PairChunk> chunks = ListPairChunks(pairs, block * block, 2 * block);
   if (!checked.overwrite) {
     std::vector<image_t> image_ids(known_images.begin(), known_images.end());

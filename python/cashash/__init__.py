@@ -81,7 +81,12 @@ def match_exhaustive(database_path, options=None, progress=None, **kwargs):
     called after each committed block; an exception it raises stops the run
     (finished blocks stay committed) and is raised again. Returns a dict of
     counts: pairs_requested, pairs_skipped, pairs_done, raw_matches,
-    verified_pairs, inlier_matches, seconds, matcher, stopped.
+    verified_pairs, inlier_matches, seconds, matcher, stopped; and run, a
+    dict of how the run was resolved from the options and the database
+    (matcher, num_tables, bits_per_table, tau, exact_rematch_min_matches,
+    rematch_on_matching_thread, block_size, blocks_per_group, gpu_index,
+    gpu_memory_budget_bytes, max_host_bytes), as the command line resolves
+    the same inputs.
     """
     return _core.match_exhaustive(str(database_path), make_options(options, **kwargs), progress)
 

@@ -56,7 +56,8 @@ def test_bad_input_raises():
 
 def test_exact_rematch_is_the_runs_default_and_can_be_turned_off(scene_database):
     # Runs match the pairs that may verify again exactly (12 cascade matches).
-    assert cashash.make_options().cashash.exact_rematch_min_matches == 12
+    # -1: chosen for the run (12, or 8 with the bucket screening tables).
+    assert cashash.make_options().cashash.exact_rematch_min_matches == -1
     summary = cashash.match_exhaustive(scene_database, matcher="cascade", exact_rematch_min_matches=0)
     assert summary["matcher"] == "cpu-cascade" and summary["pairs_done"] == 3
 
@@ -116,3 +117,24 @@ def test_warnings_become_runtime_warnings(tmp_path, views):
     with pytest.warns(RuntimeWarning, match=r"image 2 \(view2.jpg\) has 1 feature; its pairs get empty matches"):
         summary = cashash.match_exhaustive(path)
     assert summary["pairs_done"] == 1 and summary["verified_pairs"] == 0
+
+
+def test_max_gpu_memory_reaches_the_run_of_every_call(scene_database):
+    # Each call's max_gpu_memory is its own run's GPU matcher budget, for
+    # pair lists too, not the first call's for the whole process.
+    for given, expected in (("512M", 512 << 20), ("1G", 1 << 30), ("", 0)):
+        summary = cashash.match_exhaustive(scene_database, overwrite=True, max_gpu_memory=given)
+        assert summary["run"]["gpu_memory_budget_bytes"] == expected
+        summary = cashash.match_pairs(scene_database, [("view1.jpg", "view2.jpg")], overwrite=True,
+                                      max_gpu_memory=given)
+        assert summary["run"]["gpu_memory_budget_bytes"] == expected
+
+
+def test_a_given_rematch_threshold_and_block_size_are_kept(scene_database):
+    summary = cashash.match_exhaustive(scene_database, exact_rematch_min_matches=12, block_size=2)
+    assert summary["run"]["exact_rematch_min_matches"] == 12
+    assert summary["run"]["block_size"] == 2
+    # Not given: chosen for the run, the block size from the memory caps.
+    summary = cashash.match_exhaustive(scene_database, overwrite=True)
+    assert summary["run"]["exact_rematch_min_matches"] == 12  # hundreds of features: not the bucket screen
+    assert 2 <= summary["run"]["block_size"] <= 50

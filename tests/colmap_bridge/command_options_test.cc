@@ -8,6 +8,18 @@ namespace cashash {
 namespace colmap {
 namespace {
 
+// The run of `options` over images of `rows` features each (a pair list);
+// what it chose is appended to *notes when given.
+ResolvedRun Resolve(const MatcherCommandOptions& options, const std::vector<size_t>& rows,
+                    std::vector<std::string>* notes = nullptr) {
+  RunFacts facts;
+  facts.rows_per_image = rows;
+  facts.exhaustive = false;
+  ResolvedRun run = ResolveRun(options, facts);
+  if (notes != nullptr) notes->insert(notes->end(), run.notes.begin(), run.notes.end());
+  return run;
+}
+
 ParseOutcome Parse(std::vector<const char*> args, MatcherCommandOptions* options) {
   args.insert(args.begin(), "exhaustive_matcher");
   return ParseMatcherCommandOptions("exhaustive_matcher", static_cast<int>(args.size()), args.data(), options);
@@ -26,7 +38,7 @@ TEST(CommandOptions, DefaultsAreColmaps) {
   EXPECT_DOUBLE_EQ(o.two_view.confidence, 0.999);
   EXPECT_EQ(o.two_view.max_num_trials, 10000);
   EXPECT_DOUBLE_EQ(o.two_view.min_inlier_ratio, 0.25);
-  EXPECT_EQ(o.block_size, 50);
+  EXPECT_EQ(o.block_size, 0);  // chosen: from the memory caps, at most 50
   EXPECT_TRUE(o.use_gpu);
   EXPECT_EQ(CheckMatcherCommandOptions(o), "");
 }
@@ -95,24 +107,24 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
                   &set),
             ParseOutcome::kRun);
   EXPECT_EQ(set.cashash.matcher, MatcherType::kCascade);
-  const MatcherCommandOptions run = ResolveOptionsForRun(set, {32768, 32768, 32768}, nullptr);
+  const MatcherCommandOptions run = Resolve(set, {32768, 32768, 32768}).options;
   EXPECT_EQ(run.cashash.num_tables, 8);
   EXPECT_EQ(run.cashash.bits_per_table, 7);
   // Left at 0, they follow the images: at 32,768 features 8 x 8 for
   // recall, and 3 x 10 while the exact rematch decides (the default), since
   // the cascade then only screens the pairs (TableShapeGoal).
-  const MatcherCommandOptions chosen = ResolveOptionsForRun(defaults, {32768, 32768, 32768}, nullptr);
+  const MatcherCommandOptions chosen = Resolve(defaults, {32768, 32768, 32768}).options;
   EXPECT_EQ(chosen.cashash.num_tables, 3);
   EXPECT_EQ(chosen.cashash.bits_per_table, 10);
   MatcherCommandOptions kept;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "0"}, &kept), ParseOutcome::kRun);
-  const MatcherCommandOptions for_recall = ResolveOptionsForRun(kept, {32768, 32768, 32768}, nullptr);
+  const MatcherCommandOptions for_recall = Resolve(kept, {32768, 32768, 32768}).options;
   EXPECT_EQ(for_recall.cashash.num_tables, 8);
   EXPECT_EQ(for_recall.cashash.bits_per_table, 8);
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
-  EXPECT_EQ(ResolveOptionsForRun(guided, {8192, 8192}, nullptr).cashash.bits_per_table, 7);
-  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, nullptr).cashash.bits_per_table, 9);  // 3 x 9
+  EXPECT_EQ(Resolve(guided, {8192, 8192}).options.cashash.bits_per_table, 7);
+  EXPECT_EQ(Resolve(defaults, {8192, 8192}).options.cashash.bits_per_table, 9);  // 3 x 9
   MatcherCommandOptions auto_named;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "auto"}, &auto_named), ParseOutcome::kRun);
   EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
@@ -124,57 +136,57 @@ TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
   EXPECT_EQ(defaults.cashash.tau, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
   std::vector<std::string> said;
-  const auto say = [&](const std::string& text) { said.push_back(text); };
   // The default run: the rematch decides every pair that may verify.
-  EXPECT_EQ(ResolveOptionsForRun(defaults, {8192, 8192}, say).cashash.tau, kCascadeTauForScreening);
+  EXPECT_EQ(Resolve(defaults, {8192, 8192}, &said).options.cashash.tau, kCascadeTauForScreening);
   ASSERT_FALSE(said.empty());
   EXPECT_NE(said.back().find("tau 32 (chosen: the exact rematch"), std::string::npos) << said.back();
   // Without the rematch the cascade's matches are kept: tau for precision.
   MatcherCommandOptions kept;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "0"}, &kept), ParseOutcome::kRun);
-  EXPECT_EQ(ResolveOptionsForRun(kept, {8192, 8192}, nullptr).cashash.tau, kCascadeTauForPrecision);
-  EXPECT_EQ(RunTau(kept), kCascadeTauForPrecision);
+  EXPECT_EQ(Resolve(kept, {8192, 8192}).options.cashash.tau, kCascadeTauForPrecision);
   // Guided matching fits F to stage 1's cascade matches.
   const char* guided_argv[] = {"guided_matcher", "--database_path", "x"};
   MatcherCommandOptions guided;
   ASSERT_EQ(ParseMatcherCommandOptions("guided_matcher", 3, guided_argv, &guided), ParseOutcome::kRun);
-  EXPECT_EQ(ResolveOptionsForRun(guided, {8192, 8192}, nullptr).cashash.tau, kCascadeTauForPrecision);
+  EXPECT_EQ(Resolve(guided, {8192, 8192}).options.cashash.tau, kCascadeTauForPrecision);
   // Given on the command line, tau is kept whatever the rematch.
   MatcherCommandOptions set;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.tau", "40"}, &set), ParseOutcome::kRun);
   said.clear();
-  EXPECT_EQ(ResolveOptionsForRun(set, {8192, 8192}, say).cashash.tau, 40);
+  EXPECT_EQ(Resolve(set, {8192, 8192}, &said).options.cashash.tau, 40);
   ASSERT_FALSE(said.empty());
   EXPECT_EQ(said.back().find("chosen: the exact"), std::string::npos) << said.back();
 }
 
 TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiven) {
   const auto threshold = [](const MatcherCommandOptions& options, size_t features) {
-    return ResolveOptionsForRun(options, {features, features}, nullptr).cashash.exact_rematch_min_matches;
+    return Resolve(options, {features, features}).options.cashash.exact_rematch_min_matches;
   };
   MatcherCommandOptions defaults;
   ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
-  EXPECT_EQ(defaults.cashash.exact_rematch_min_matches, kDefaultRematchMinMatches);
-  EXPECT_TRUE(defaults.rematch_min_matches_from_shape);
+  EXPECT_EQ(defaults.cashash.exact_rematch_min_matches, kRematchMinMatchesChosen);
   // Three screening tables from 8,192 features find fewer of a pair's true
   // matches: the threshold measured for them. Below, the 8 x 8 screen keeps 12.
   EXPECT_EQ(threshold(defaults, 8192), kBucketScreeningRematchMinMatches);
   EXPECT_EQ(threshold(defaults, 16384), kBucketScreeningRematchMinMatches);
   EXPECT_EQ(threshold(defaults, 4096), kDefaultRematchMinMatches);
   std::vector<std::string> said;
-  ResolveOptionsForRun(defaults, {8192, 8192}, [&](const std::string& text) { said.push_back(text); });
+  Resolve(defaults, {8192, 8192}, &said);
   ASSERT_FALSE(said.empty());
   EXPECT_NE(said.back().find("exact rematch from 8 cascade matches (chosen for these tables)"), std::string::npos)
       << said.back();
   // Typed on the command line, even 12 is kept.
   MatcherCommandOptions typed;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "12"}, &typed), ParseOutcome::kRun);
-  EXPECT_FALSE(typed.rematch_min_matches_from_shape);
+  EXPECT_EQ(typed.cashash.exact_rematch_min_matches, 12);
   EXPECT_EQ(threshold(typed, 8192), 12);
-  // Set through the library (the Python module's options), another value is kept.
+  // Set through the library (the Python module's options), any value is
+  // kept, 12 included.
   MatcherCommandOptions api;
   api.cashash.exact_rematch_min_matches = 10;
   EXPECT_EQ(threshold(api, 8192), 10);
+  api.cashash.exact_rematch_min_matches = 12;
+  EXPECT_EQ(threshold(api, 8192), 12);
   // Tables or bits given: the shape is the user's, so is the threshold.
   MatcherCommandOptions tables;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "6"}, &tables), ParseOutcome::kRun);
@@ -192,11 +204,10 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
 // rematch stays there instead of going to the verification threads.
 TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
   const auto on_matching_thread = [](const MatcherCommandOptions& options, size_t features) {
-    return ResolveOptionsForRun(options, {features, features}, nullptr).rematch_on_matching_thread;
+    return Resolve(options, {features, features}).rematch_on_matching_thread;
   };
   MatcherCommandOptions defaults;
   ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
-  EXPECT_FALSE(defaults.rematch_on_matching_thread);
   EXPECT_TRUE(on_matching_thread(defaults, 8192));
   EXPECT_TRUE(on_matching_thread(defaults, 16384));
   EXPECT_FALSE(on_matching_thread(defaults, 4096));  // 8 x 8 tables: deferred
@@ -220,8 +231,7 @@ TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce)
   EXPECT_TRUE(o.guided.enabled);
   EXPECT_EQ(CheckMatcherCommandOptions(o), "");
   std::vector<std::string> said;
-  const MatcherCommandOptions run =
-      ResolveOptionsForRun(o, {1000, 2000}, [&](const std::string& text) { said.push_back(text); });
+  const MatcherCommandOptions run = Resolve(o, {1000, 2000}, &said).options;
   EXPECT_EQ(run.cashash.matcher, MatcherType::kCascade);
   ASSERT_FALSE(said.empty());
   EXPECT_NE(said.front().find("guided"), std::string::npos);

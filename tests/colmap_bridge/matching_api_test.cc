@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <numeric>
 #include <random>
 #include <stdexcept>
@@ -336,8 +337,58 @@ TEST_F(SceneDatabase, OptionErrorsCarryTheCommandLineMessage) {
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()), "--ExhaustiveMatching.block_size must be >= 2");
   }
-  options_.block_size = 50;
+  options_.block_size = 0;  // chosen for the run
   EXPECT_THROW(colmap::MatchExhaustive(path_ + ".missing", options_), std::runtime_error);
+}
+
+// The process environment, as name=value lines in order.
+std::vector<std::string> Environment() {
+  std::vector<std::string> lines;
+  for (char** entry = environ; *entry != nullptr; ++entry) lines.emplace_back(*entry);
+  return lines;
+}
+
+// --max_gpu_memory reaches the run's matchers (ResolvedRun::
+// gpu_memory_budget_bytes, which CreateMatcherForRun hands to each GPU
+// matcher's config) from every entry point, and from each call anew; the
+// environment is not how it gets there: a run leaves it untouched while
+// its threads start (setenv beside the mean-descriptor thread's reads was
+// a data race).
+TEST_F(SceneDatabase, MaxGpuMemoryReachesTheMatchersOfEveryEntryPointAndCall) {
+  const std::vector<std::string> environment = Environment();
+  const std::string pair_list = (dir_ / "pairs.txt").string();
+  {
+    std::ofstream file(pair_list);
+    file << "view1.jpg view2.jpg\nview2.jpg view3.jpg\n";
+  }
+  options_.overwrite = true;
+  for (const auto& [given, bytes] : {std::make_pair("512M", size_t{512} << 20), std::make_pair("1G", size_t{1} << 30),
+                                     std::make_pair("", size_t{0})}) {
+    SCOPED_TRACE(std::string("--max_gpu_memory '") + given + "'");
+    options_.max_gpu_memory = given;
+    EXPECT_EQ(colmap::MatchExhaustive(path_, options_).run.gpu_memory_budget_bytes, bytes);
+    EXPECT_EQ(colmap::MatchPairs(path_, {{"view1.jpg", "view3.jpg"}}, options_).run.gpu_memory_budget_bytes, bytes);
+    EXPECT_EQ(colmap::MatchPairList(path_, pair_list, options_).run.gpu_memory_budget_bytes, bytes);
+  }
+  EXPECT_EQ(Environment(), environment);
+}
+
+// Python's options are the command line's struct with the same defaults: an
+// exhaustive run from the library sizes its blocks from memory and keeps a
+// rematch threshold that was set, even the default's value.
+TEST_F(SceneDatabase, LibraryRunsResolveAsTheCommandLineDoes) {
+  const colmap::MatchingSummary summary = colmap::MatchExhaustive(path_, options_);
+  EXPECT_EQ(summary.run.options.block_size, summary.run.schedule.block_size);
+  EXPECT_GT(summary.run.schedule.blocks_per_group, 0);
+  EXPECT_GT(summary.run.max_host_bytes, 0u);
+  EXPECT_EQ(summary.run.options.cashash.exact_rematch_min_matches, colmap::kDefaultRematchMinMatches);
+  options_.overwrite = true;
+  options_.cashash.exact_rematch_min_matches = 12;
+  options_.block_size = 2;
+  const colmap::MatchingSummary set = colmap::MatchExhaustive(path_, options_);
+  EXPECT_EQ(set.run.options.cashash.exact_rematch_min_matches, 12);
+  EXPECT_EQ(set.run.options.block_size, 2);
+  EXPECT_EQ(set.run.schedule.block_size, 2);
 }
 
 }  // namespace

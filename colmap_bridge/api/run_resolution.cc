@@ -1,0 +1,130 @@
+#include "colmap_bridge/api/run_resolution.h"
+
+#include <algorithm>
+#include <string>
+
+#include "cashash/matching/table_shape.h"
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+uint64_t SmallestOverRanks(const RunFacts& facts, uint64_t value) {
+  return facts.smallest_over_ranks ? facts.smallest_over_ranks(value) : value;
+}
+
+// The memory caps and the blocks and groups of an exhaustive run; notes and
+// warnings say what was chosen.
+void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
+  const MatcherCommandOptions& options = run->options;
+  ScheduleLimits limits;
+  if (options.max_host_memory.empty()) {
+    limits.max_host_bytes = facts.physical_memory_bytes > 0 ? facts.physical_memory_bytes / 2 : (size_t{8} << 30);
+  } else {
+    ParseMemorySize(options.max_host_memory, &limits.max_host_bytes);  // checked with the options
+  }
+  if (facts.gpu_index >= 0) {
+    if (options.max_gpu_memory.empty()) {
+      limits.max_gpu_bytes = facts.gpu_free_bytes;
+    } else {
+      ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);
+    }
+  }
+  // Ranks must cut the same blocks and groups: the smallest caps of all.
+  limits.max_host_bytes = SmallestOverRanks(facts, limits.max_host_bytes);
+  limits.max_gpu_bytes = SmallestOverRanks(facts, limits.max_gpu_bytes);
+  const bool block_size_chosen = options.block_size == 0;
+  limits.block_size = options.block_size;
+  limits.max_num_matches = options.sift.max_num_matches;
+  limits.num_tables = options.cashash.num_tables;
+  ScheduleSizes sizes = ChooseScheduleSizes(facts.rows_per_image, limits);
+  if (block_size_chosen) sizes.block_size = std::min(sizes.block_size, kDefaultBlockSize);
+  if (!sizes.warning.empty()) run->warnings.push_back(sizes.warning);
+  const size_t num_images = facts.rows_per_image.size();
+  const size_t num_blocks = (num_images + sizes.block_size - 1) / sizes.block_size;
+  const size_t num_groups = (num_blocks + sizes.blocks_per_group - 1) / sizes.blocks_per_group;
+  run->notes.push_back(
+      "Schedule: blocks of " + std::to_string(sizes.block_size) + " images, groups of " +
+      std::to_string(sizes.blocks_per_group) + " blocks (" + std::to_string(num_blocks) + " blocks, " +
+      std::to_string(num_groups) + " groups); host memory " + FormatMemorySize(sizes.predicted_host_bytes) + " of " +
+      FormatMemorySize(limits.max_host_bytes) +
+      (limits.max_gpu_bytes > 0 ? ", GPU memory for images " + FormatMemorySize(sizes.predicted_gpu_bytes) + " of " +
+                                      FormatMemorySize(limits.max_gpu_bytes)
+                                : std::string()));
+  run->max_host_bytes = limits.max_host_bytes;
+  run->max_gpu_bytes = limits.max_gpu_bytes;
+  run->options.block_size = sizes.block_size;
+  run->schedule = sizes;
+}
+
+}  // namespace
+
+int RematchMinMatchesRule(int requested, bool bucket_screen) {
+  if (requested >= 0) return requested;
+  return bucket_screen ? kBucketScreeningRematchMinMatches : kDefaultRematchMinMatches;
+}
+
+MatcherType MatcherTypeRule(const MatcherCommandOptions& options, bool on_gpu) {
+  (void)on_gpu;  // the CPU and the GPU resolve alike today
+  if (options.guided.enabled && options.cashash.matcher == MatcherType::kAuto) return MatcherType::kCascade;
+  return options.cashash.matcher;
+}
+
+ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& facts) {
+  ResolvedRun run;
+  run.options = options;
+  CasHashOptions& cashash = run.options.cashash;
+  const bool guided = options.guided.enabled;
+  cashash.matcher = MatcherTypeRule(options, facts.gpu_index >= 0);
+  if (cashash.matcher != options.cashash.matcher) run.notes.push_back("Matcher: cascade (guided matching needs it)");
+
+  // The tables: for recall where the cascade's matches are kept, one bit
+  // coarser where the exact rematch decides and the cascade only screens.
+  const size_t features = TypicalFeatureCount(facts.rows_per_image, options.sift.max_num_matches);
+  const int requested_rematch = options.cashash.exact_rematch_min_matches;
+  const TableShapeGoal goal = CascadeOnlyScreens(RematchMinMatchesRule(requested_rematch, false), guided)
+                                  ? TableShapeGoal::kScreening
+                                  : TableShapeGoal::kRecall;
+  const int requested_tau = cashash.tau;
+  cashash = ResolveTableShape(cashash, features, goal);
+  // Fewer tables find fewer of a pair's true matches: the threshold the
+  // bucket screening shape was measured with (table_shape.h); its screen is
+  // light, so the matching thread has room for the rematch.
+  const bool bucket_screen =
+      IsBucketScreeningShape(features, options.cashash.num_tables, options.cashash.bits_per_table, goal);
+  cashash.exact_rematch_min_matches = RematchMinMatchesRule(requested_rematch, bucket_screen);
+  const bool rematch_from_shape =
+      requested_rematch < 0 && cashash.exact_rematch_min_matches != kDefaultRematchMinMatches;
+  run.rematch_on_matching_thread = bucket_screen;
+  // tau: where not given, for screening while the exact rematch decides the
+  // pairs that may verify, for precision where the cascade's matches are kept.
+  if (cashash.tau <= 0) cashash.tau = ChooseCascadeTau(cashash.exact_rematch_min_matches, guided);
+  if (cashash.matcher != MatcherType::kBruteForce) {
+    std::string text = DescribeTableShape(options.cashash, cashash, features, facts.rows_per_image.size(), goal);
+    text += "; tau " + std::to_string(cashash.tau);
+    if (requested_tau == 0) {
+      text += cashash.tau == kCascadeTauForScreening ? " (chosen: the exact rematch decides the pairs that may verify)"
+                                                     : " (chosen: the cascade's own matches are kept)";
+    }
+    if (rematch_from_shape) {
+      text += "; exact rematch from " + std::to_string(cashash.exact_rematch_min_matches) +
+              " cascade matches (chosen for these tables)";
+    }
+    run.notes.push_back(text);
+  }
+
+  run.gpu_index = facts.gpu_index;
+  if (!options.max_gpu_memory.empty()) {
+    ParseMemorySize(options.max_gpu_memory, &run.gpu_memory_budget_bytes);  // checked with the options
+  }
+  if (facts.exhaustive) {
+    ResolveSchedule(facts, &run);
+  } else {
+    run.options.block_size = options.block_size > 0 ? options.block_size : kDefaultBlockSize;
+    run.schedule.block_size = run.options.block_size;
+  }
+  return run;
+}
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,88 @@
+// The one place where a run's settings are decided: the user's options
+// (MatcherCommandOptions, the same struct and defaults for the command line
+// and Python) and the facts of the database and the machine go in, an
+// immutable ResolvedRun comes out. MatchExhaustive, MatchPairs,
+// MatchPairList (and so the command line and cashash.match_exhaustive /
+// match_pairs) and cashash.match all resolve through ResolveRun.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "cashash/pipeline/schedule_sizing.h"
+#include "colmap_bridge/api/command_options.h"
+
+namespace cashash {
+namespace colmap {
+
+// What the database and the machine say, gathered before a run is resolved
+// (GatherRunFacts in matching_api.cc); tests write them by hand.
+struct RunFacts {
+  // Feature rows of each image of the run (row counts, no descriptors).
+  std::vector<size_t> rows_per_image;
+  // Every pair of the images (blocks and groups sized from the memory caps)
+  // rather than a list of pairs (chunks of block_size^2 pairs).
+  bool exhaustive = true;
+  // Physical memory of the machine; 0: unknown (the host cap is then 8 GiB).
+  size_t physical_memory_bytes = 0;
+  // The device the run matches on (the first of --FeatureMatching.gpu_index
+  // that is usable), -1: none, the run matches on the CPU; and its free
+  // memory.
+  int gpu_index = -1;
+  size_t gpu_free_bytes = 0;
+  // Under MPI: the smallest of a value over all ranks, so that every rank
+  // cuts the same blocks and groups (distributed::MpiMin); unset: one process.
+  std::function<uint64_t(uint64_t)> smallest_over_ranks;
+};
+
+// The run as it will be carried out. Built by ResolveRun only.
+struct ResolvedRun {
+  // The user's options with every "chosen" value decided: the matcher (auto
+  // becomes the cascade for guided matching), the table shape, tau, the
+  // exact rematch threshold, and the block size.
+  MatcherCommandOptions options;
+  // Where a single GPU's exact rematch runs: on the matching thread (the
+  // bucket screen leaves it room) or deferred to the verification threads.
+  bool rematch_on_matching_thread = false;
+  // The device the run matches on, -1: the CPU (RunFacts::gpu_index).
+  int gpu_index = -1;
+  // Device memory each GPU matcher may take (cuda::GpuMatcherConfig::
+  // memory_budget_bytes): --max_gpu_memory, 0 when not given (no cap but
+  // the device's own memory).
+  size_t gpu_memory_budget_bytes = 0;
+  // The memory caps the schedule was sized with (exhaustive runs).
+  size_t max_host_bytes = 0;
+  size_t max_gpu_bytes = 0;
+  // Exhaustive runs: blocks, groups and what the matcher may keep
+  // (ChooseScheduleSizes); pair lists: block_size only.
+  ScheduleSizes schedule;
+  // What was chosen and why, in the order the log prints them.
+  std::vector<std::string> notes;
+  std::vector<std::string> warnings;
+};
+
+// Images per block where --ExhaustiveMatching.block_size is not given: an
+// exhaustive run derives it from the memory caps, at most this; a pair list
+// is cut into chunks of this many images squared.
+constexpr int kDefaultBlockSize = 50;
+
+// Resolves the options for a run over the given facts. Throws
+// std::invalid_argument when the options cannot fit (ChooseScheduleSizes).
+ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& facts);
+
+// The exact rematch threshold of a run: the user's value where given (>= 0),
+// else kDefaultRematchMinMatches, or kBucketScreeningRematchMinMatches with
+// the bucket screening tables (fewer tables find fewer of a pair's true
+// matches).
+int RematchMinMatchesRule(int requested, bool bucket_screen);
+
+// Which matcher the run builds on the CPU or the GPU: the user's, except
+// that guided matching needs the cascade for auto. On the CPU this is where
+// a policy of its own would go; today the CPU and the GPU resolve alike.
+MatcherType MatcherTypeRule(const MatcherCommandOptions& options, bool on_gpu);
+
+}  // namespace colmap
+}  // namespace cashash

@@ -1,0 +1,199 @@
+// ResolveRun: the user's options and the facts of the database and the
+// machine in, the resolved run out, as a table; and the same inputs given
+// on the command line and set as Python sets them resolve alike.
+#include <gtest/gtest.h>
+
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cashash/matching/table_shape.h"
+#include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/run_resolution.h"
+
+namespace cashash {
+namespace colmap {
+namespace {
+
+constexpr size_t kMiB = size_t{1} << 20;
+constexpr size_t kGiB = size_t{1} << 30;
+
+RunFacts Facts(size_t images, size_t rows, bool exhaustive, size_t physical = 16 * kGiB, int gpu_index = -1,
+               size_t gpu_free = 0) {
+  RunFacts facts;
+  facts.rows_per_image.assign(images, rows);
+  facts.exhaustive = exhaustive;
+  facts.physical_memory_bytes = physical;
+  facts.gpu_index = gpu_index;
+  facts.gpu_free_bytes = gpu_free;
+  return facts;
+}
+
+// What a resolved run decides, as one line, to compare runs whole.
+std::string Decisions(const ResolvedRun& run) {
+  const CasHashOptions& c = run.options.cashash;
+  std::ostringstream out;
+  out << MatcherTypeToString(c.matcher) << " " << c.num_tables << "x" << c.bits_per_table << " tau " << c.tau
+      << " rematch " << c.exact_rematch_min_matches << (run.rematch_on_matching_thread ? " on-matching" : " deferred")
+      << " block " << run.options.block_size << " groups " << run.schedule.blocks_per_group << " keep "
+      << run.schedule.matcher_keep_bytes << " host " << run.max_host_bytes << " gpu " << run.max_gpu_bytes
+      << " budget " << run.gpu_memory_budget_bytes << " device " << run.gpu_index;
+  return out.str();
+}
+
+// The options as the command line parses `args` (after the command name).
+MatcherCommandOptions FromCommandLine(const std::vector<std::string>& args, const std::string& command) {
+  std::vector<const char*> argv = {command.c_str(), "--database_path", "x.db"};
+  for (const std::string& arg : args) argv.push_back(arg.c_str());
+  MatcherCommandOptions options;
+  EXPECT_EQ(ParseMatcherCommandOptions(command, static_cast<int>(argv.size()), argv.data(), &options),
+            ParseOutcome::kRun);
+  EXPECT_EQ(CheckMatcherCommandOptions(options), "");
+  return options;
+}
+
+struct Row {
+  const char* what;
+  std::vector<std::string> args;  // command-line arguments
+  void (*set)(MatcherCommandOptions*);  // the same, as Python's keywords set them
+  RunFacts facts;
+  // Expected: matcher, tables, tau, rematch threshold and placement, block size.
+  const char* matcher;
+  int num_tables, bits_per_table, tau, rematch;
+  bool on_matching_thread;
+  int block_size;
+  size_t budget;
+  const char* command = "exhaustive_matcher";
+};
+
+const std::vector<Row>& Table() {
+  static const std::vector<Row> rows = {
+      {"defaults, 8,192 features: the bucket screen and its threshold", {}, [](MatcherCommandOptions*) {},
+       Facts(2, 8192, false), "auto", 3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true,
+       kDefaultBlockSize, 0},
+      {"defaults, 16,384 features", {}, [](MatcherCommandOptions*) {}, Facts(2, 16384, false), "auto", 3, 10,
+       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, kDefaultBlockSize, 0},
+      {"defaults, 4,096 features: 8 x 8, deferred rematch from 12", {}, [](MatcherCommandOptions*) {},
+       Facts(2, 4096, false), "auto", 8, 8, kCascadeTauForScreening, kDefaultRematchMinMatches, false,
+       kDefaultBlockSize, 0},
+      {"an explicit 12 stays 12", {"--CasHash.exact_rematch_min_matches", "12"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, Facts(2, 8192, false), "auto", 3,
+       9, kCascadeTauForScreening, 12, true, kDefaultBlockSize, 0},
+      {"no rematch: tables for recall, tau for precision", {"--CasHash.exact_rematch_min_matches", "0"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 0; }, Facts(2, 8192, false), "auto", 8,
+       7, kCascadeTauForPrecision, 0, false, kDefaultBlockSize, 0},
+      {"tables given: the user's shape and 12", {"--CasHash.num_tables", "6"},
+       [](MatcherCommandOptions* o) { o->cashash.num_tables = 6; }, Facts(2, 8192, false), "auto", 6, 8,
+       kCascadeTauForScreening, kDefaultRematchMinMatches, false, kDefaultBlockSize, 0},
+      {"tau given", {"--CasHash.tau", "40", "--CasHash.matcher", "cascade"},
+       [](MatcherCommandOptions* o) {
+         o->cashash.tau = 40;
+         o->cashash.matcher = MatcherType::kCascade;
+       },
+       Facts(2, 8192, false), "cascade", 3, 9, 40, kBucketScreeningRematchMinMatches, true, kDefaultBlockSize, 0},
+      {"guided matching: the cascade for auto, recall, no screen", {}, [](MatcherCommandOptions* o) {
+         o->guided.enabled = true;
+       },
+       Facts(2, 8192, false), "cascade", 8, 7, kCascadeTauForPrecision, kDefaultRematchMinMatches, false,
+       kDefaultBlockSize, 0, "guided_matcher"},
+      {"a pair list keeps a given block size", {"--ExhaustiveMatching.block_size", "20"},
+       [](MatcherCommandOptions* o) { o->block_size = 20; }, Facts(2, 8192, false), "auto", 3, 9,
+       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, 20, 0},
+      {"--max_gpu_memory is every GPU matcher's budget, pair lists too", {"--max_gpu_memory", "512M"},
+       [](MatcherCommandOptions* o) { o->max_gpu_memory = "512M"; }, Facts(2, 8192, false, 0, 0, 80 * kGiB), "auto",
+       3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, kDefaultBlockSize, 512 * kMiB},
+      {"exhaustive: the block size from memory, at most 50", {}, [](MatcherCommandOptions*) {},
+       Facts(300, 8192, true, 16 * kGiB), "auto", 3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches,
+       true, 50, 0},
+      {"exhaustive with little host memory: smaller blocks", {"--max_host_memory", "200M"},
+       [](MatcherCommandOptions* o) { o->max_host_memory = "200M"; }, Facts(300, 8192, true, 16 * kGiB), "auto", 3, 9,
+       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, -1, 0},
+      {"exhaustive, a given block size", {"--ExhaustiveMatching.block_size", "30"},
+       [](MatcherCommandOptions* o) { o->block_size = 30; }, Facts(300, 8192, true, 16 * kGiB), "auto", 3, 9,
+       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, 30, 0},
+      {"exhaustive on a GPU with a budget", {"--max_gpu_memory", "8G"},
+       [](MatcherCommandOptions* o) { o->max_gpu_memory = "8G"; }, Facts(300, 8192, true, 16 * kGiB, 0, 80 * kGiB),
+       "auto", 3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, 50, 8 * kGiB},
+  };
+  return rows;
+}
+
+TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
+  for (const Row& row : Table()) {
+    SCOPED_TRACE(row.what);
+    const ResolvedRun run = ResolveRun(FromCommandLine(row.args, row.command), row.facts);
+    EXPECT_EQ(MatcherTypeToString(run.options.cashash.matcher), row.matcher);
+    EXPECT_EQ(run.options.cashash.num_tables, row.num_tables);
+    EXPECT_EQ(run.options.cashash.bits_per_table, row.bits_per_table);
+    EXPECT_EQ(run.options.cashash.tau, row.tau);
+    EXPECT_EQ(run.options.cashash.exact_rematch_min_matches, row.rematch);
+    EXPECT_EQ(run.rematch_on_matching_thread, row.on_matching_thread);
+    if (row.block_size > 0) {
+      EXPECT_EQ(run.options.block_size, row.block_size);
+    } else {  // smaller than the default
+      EXPECT_GE(run.options.block_size, 2);
+      EXPECT_LT(run.options.block_size, kDefaultBlockSize);
+    }
+    EXPECT_EQ(run.schedule.block_size, run.options.block_size);
+    EXPECT_EQ(run.gpu_memory_budget_bytes, row.budget);
+    EXPECT_EQ(run.gpu_index, row.facts.gpu_index);
+    if (row.facts.exhaustive) {
+      EXPECT_GT(run.schedule.blocks_per_group, 0);
+      EXPECT_GT(run.max_host_bytes, 0u);
+      EXPECT_EQ(run.max_gpu_bytes, row.budget > 0 ? row.budget : row.facts.gpu_free_bytes);
+    }
+  }
+}
+
+// The command line and Python fill the same MatcherCommandOptions from the
+// same defaults; for the same inputs the runs are identical.
+TEST(RunResolution, TheCommandLineAndPythonResolveTheSameInputsIdentically) {
+  for (const Row& row : Table()) {
+    SCOPED_TRACE(row.what);
+    MatcherCommandOptions from_python;  // the module's MatchingOptions()
+    from_python.database_path = "x.db";
+    if (std::string(row.command) == "guided_matcher") from_python.guided.enabled = true;
+    row.set(&from_python);
+    EXPECT_EQ(Decisions(ResolveRun(from_python, row.facts)),
+              Decisions(ResolveRun(FromCommandLine(row.args, row.command), row.facts)));
+  }
+}
+
+TEST(RunResolution, MpiRanksSizeWithTheSmallestMemoryOfAll) {
+  RunFacts facts = Facts(300, 8192, true, 64 * kGiB, 0, 80 * kGiB);
+  facts.smallest_over_ranks = [](uint64_t value) { return value / 4; };  // another rank has a quarter
+  const ResolvedRun run = ResolveRun(MatcherCommandOptions(), facts);
+  EXPECT_EQ(run.max_host_bytes, 8 * kGiB);
+  EXPECT_EQ(run.max_gpu_bytes, 20 * kGiB);
+}
+
+TEST(RunResolution, NotesSayWhatWasChosenInOrder) {
+  MatcherCommandOptions guided;
+  guided.guided.enabled = true;
+  const ResolvedRun run = ResolveRun(guided, Facts(300, 8192, true));
+  ASSERT_EQ(run.notes.size(), 3u);
+  EXPECT_EQ(run.notes[0], "Matcher: cascade (guided matching needs it)");
+  EXPECT_EQ(run.notes[1].rfind("Hash tables: ", 0), 0u) << run.notes[1];
+  EXPECT_EQ(run.notes[2].rfind("Schedule: ", 0), 0u) << run.notes[2];
+  MatcherCommandOptions brute_force;
+  brute_force.cashash.matcher = MatcherType::kBruteForce;
+  EXPECT_TRUE(ResolveRun(brute_force, Facts(2, 8192, false)).notes.empty());
+}
+
+TEST(RunResolution, RulesOfTheRematchThresholdAndTheMatcher) {
+  EXPECT_EQ(RematchMinMatchesRule(kRematchMinMatchesChosen, false), kDefaultRematchMinMatches);
+  EXPECT_EQ(RematchMinMatchesRule(kRematchMinMatchesChosen, true), kBucketScreeningRematchMinMatches);
+  EXPECT_EQ(RematchMinMatchesRule(12, true), 12);
+  EXPECT_EQ(RematchMinMatchesRule(0, true), 0);
+  MatcherCommandOptions options;
+  for (const bool on_gpu : {false, true}) {
+    EXPECT_EQ(MatcherTypeRule(options, on_gpu), MatcherType::kAuto);
+    options.guided.enabled = true;
+    EXPECT_EQ(MatcherTypeRule(options, on_gpu), MatcherType::kCascade);
+    options.guided.enabled = false;
+  }
+}
+
+}  // namespace
+}  // namespace colmap
+}  // namespace cashash
