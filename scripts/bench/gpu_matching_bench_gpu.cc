@@ -238,11 +238,11 @@ int main(int argc, char** argv) {
         cascade_subset = matcher->MatchPairs(bf_subset);
         tiled_all = std::move(all);
       }
-      // The same pairs by the other kernels, selected by environment
-      // variables read when the matcher launches them.
-      const auto other_kernel = [&](const char* variable, const char* value, double* rate, int* identical) {
-        setenv(variable, value, 1);
-        auto matcher = cashash::cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
+      // The same pairs by the other kernels (GpuMatcherConfig::cascade_kernel).
+      const auto other_kernel = [&](cashash::cuda::GpuCascadeKernel kernel, double* rate, int* identical) {
+        cashash::cuda::GpuMatcherConfig config;
+        config.cascade_kernel = kernel;
+        auto matcher = cashash::cuda::CreateGpuFeatureMatcher(sift, cas, mean, config);
         for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(image_t(i), images[i]);
         matcher->MatchPairs({pairs.front()});
         std::vector<double> rates;
@@ -252,12 +252,11 @@ int main(int argc, char** argv) {
           other = matcher->MatchPairs(pairs);
           rates.push_back(pairs.size() / Seconds(start));
         }
-        unsetenv(variable);
         std::sort(rates.begin(), rates.end());
         *rate = rates[rates.size() / 2];
         *identical = other == tiled_all ? 1 : 0;
       };
-      other_kernel("CASHASH_GPU_CASCADE_KERNEL", "direct", &row.gpu_cascade_direct, &row.direct_identical);
+      other_kernel(cashash::cuda::GpuCascadeKernel::kPerQuery, &row.gpu_cascade_direct, &row.direct_identical);
       try {
         CasHashOptions bf_options = cas;
         bf_options.matcher = MatcherType::kBruteForce;

@@ -1,12 +1,11 @@
 #!/usr/bin/env python3
 """Where a matching run's time went, from its pipeline trace.
 
-    CASHASH_PIPELINE_TRACE=trace.csv cashash exhaustive_matcher --database_path db.db
+    cashash exhaustive_matcher --database_path db.db --pipeline_trace_path trace.csv
     pipeline_trace_summary.py trace.csv
 
 The run's summary line gives each stage's busy and waiting time; the trace
-(one line per chunk and stage: load, match, rematch, verify, write_ahead,
-write) says
+(one line per chunk and stage: load, match, rematch, verify, write) says
 what overlapped what. This prints, in Markdown:
 - per stage, the busy time summed over threads and the wall time during
   which at least one was busy;
@@ -60,7 +59,7 @@ def time_at_depth(intervals, end_of_run):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("trace", help="the CSV that CASHASH_PIPELINE_TRACE named")
+    parser.add_argument("trace", help="the CSV that --pipeline_trace_path named")
     args = parser.parse_args()
     events = read_events(args.trace)
     if not events:
@@ -78,7 +77,7 @@ def main():
 
     print("| stage | busy s (summed over threads) | wall s with one or more busy |")
     print("|---|---:|---:|")
-    for stage in ["load", "match", "rematch", "verify", "write_ahead", "write"]:
+    for stage in ["load", "match", "rematch", "verify", "write"]:
         if stage == "verify":
             intervals = [(c["start"], c["end"]) for c in calls.values()]
         else:
@@ -106,7 +105,7 @@ def main():
         tail = [e for e in events if e["end"] > last_match and e["stage"] != "match"]
         print(f"\nTail: {end_of_run - last_match:.3f} s after the last match ended "
               f"({last_match:.3f} s into the run), in which:")
-        for stage in ["rematch", "verify", "write_ahead", "write"]:
+        for stage in ["rematch", "verify", "write"]:
             if stage == "verify":
                 intervals = [(max(c["start"], last_match), c["end"]) for c in calls.values() if c["end"] > last_match]
             else:

@@ -73,17 +73,10 @@ python3 -c "import sys; w = float(sys.argv[2]) - float(sys.argv[1]); print(f'  w
 python3 "$TOOL" check "$WORK/wait.db" --pairs 15
 [[ "$(python3 "$TOOL" count "$WORK/wait.db")" == 15 ]] || fail "not every pair written"
 
-echo "== another writer holds the lock past the busy timeout: a clear error"
-cp "$WORK/small.db" "$WORK/locked.db"
-hold_write_lock "$WORK/locked.db" 5
-rc=0
-CASHASH_BUSY_TIMEOUT_MS=500 match "$WORK/locked.db" >"$WORK/locked.log" 2>&1 || rc=$?
-[[ $rc -eq 1 ]] || { cat "$WORK/locked.log"; fail "exit status $rc, expected 1"; }
-expect_error "$WORK/locked.log" "$WORK/locked.db" "database is locked" "busy timeout"
-wait "${PIDS[-1]}"
-python3 "$TOOL" check "$WORK/locked.db" --pairs 0
-match "$WORK/locked.db" >/dev/null 2>&1 || fail "the run after the lock was released failed"
-python3 "$TOOL" check "$WORK/locked.db" --pairs 15
+# A lock held past the busy timeout (60 s, DatabaseOptions::busy_timeout_ms)
+# fails with a clear error naming the file and the busy timeout, nothing
+# half-written: ReliabilityFaultTest.LockedDatabaseTimesOut checks it with a
+# 300 ms timeout set through the writer's options.
 
 # Permissions do not stop root: run those cases as nobody when we are root.
 AS_USER=()
