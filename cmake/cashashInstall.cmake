@@ -36,6 +36,7 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/src/cashash DESTINATION ${CMAKE_INSTALL_
 # Only the bridge headers the library API needs; the database internals stay
 # private.
 install(FILES ${PROJECT_SOURCE_DIR}/colmap_bridge/api/matching_api.h ${PROJECT_SOURCE_DIR}/colmap_bridge/api/command_options.h
+              ${PROJECT_SOURCE_DIR}/colmap_bridge/api/run_resolution.h
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/colmap_bridge/api COMPONENT devel)
 if(CASHASH_WITH_CUDA)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/cuda/cashash_cuda DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}

@@ -52,7 +52,9 @@ struct MatcherCommandOptions {
   int block_size = 0;
   // Memory caps of the three-level scheduling ("16G", "512M", plain numbers
   // are MiB); "" = default: half the machine's physical memory, the GPU's
-  // free memory.
+  // free memory. max_gpu_memory is also each GPU matcher's budget
+  // (ResolvedRun::gpu_memory_budget_bytes), exhaustive runs and pair lists
+  // alike.
   std::string max_host_memory;
   std::string max_gpu_memory;
   bool use_gpu = true;  // COLMAP's default; falls back to the CPU with a warning
