@@ -170,10 +170,11 @@ TEST(AutoFeatureMatcher, KeepsTheCascadeWhenItIsFaster) {
   // Brute force saw only a small probe.
   EXPECT_LT(h.brute_force.matched.size(), 100u);
   EXPECT_GT(h.cascade.matched.size(), 650u);
-  ASSERT_EQ(h.log.size(), 1u);
-  EXPECT_NE(h.log[0].find("fake-cascade 1.000 ms per pair"), std::string::npos) << h.log[0];
-  EXPECT_NE(h.log[0].find("fake-bruteforce 20.000 ms per pair"), std::string::npos) << h.log[0];
-  EXPECT_NE(h.log[0].find("using fake-cascade"), std::string::npos) << h.log[0];
+  EXPECT_EQ(h.matcher->decision().winner, "fake-cascade");
+  EXPECT_EQ(h.matcher->decision().reason, "measured");
+  EXPECT_NEAR(h.matcher->decision().cascade_seconds_per_pair, 0.001, 1e-9);
+  EXPECT_NEAR(h.matcher->decision().brute_force_seconds_per_pair, 0.02, 1e-9);
+  EXPECT_EQ(h.log.size(), 1u);  // the decision is reported once
 }
 
 // While timing, each backend's time must include all its work: nothing is
@@ -383,8 +384,7 @@ TEST(AutoFeatureMatcher, GuidedMatchingKeepsTheCascade) {
   EXPECT_TRUE(h.matcher->decision().cascade_won);
   EXPECT_EQ(h.matcher->decision().reason, "guided matching");
   EXPECT_TRUE(h.brute_force.destroyed);
-  ASSERT_EQ(h.log.size(), 1u);
-  EXPECT_NE(h.log[0].find("guided matching needs the cascade"), std::string::npos);
+  EXPECT_EQ(h.log.size(), 1u);  // the decision is reported once
 }
 
 // The CPU factory: auto wraps both CPU backends; an explicit type is that
@@ -406,14 +406,14 @@ TEST(AutoFeatureMatcher, CpuFactoryWrapsOnlyAuto) {
   for (const FeatureDescriptors& d : images) pointers.push_back(&d);
   const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
   const std::vector<ImagePair> pairs = AllPairs(0, 6);
+  // The name as made, before any pair could decide the backend.
   auto run = [&](MatcherType type, std::string* name) {
     CasHashOptions options;
     options.matcher = type;
     auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), options, mean);
-    for (int i = 0; i < 6; ++i) matcher->AddImage(image_t(i), images[i]);
-    auto results = matcher->MatchPairs(pairs);
     *name = matcher->Name();
-    return results;
+    for (int i = 0; i < 6; ++i) matcher->AddImage(image_t(i), images[i]);
+    return matcher->MatchPairs(pairs);
   };
   std::string cascade_name, brute_name, auto_name;
   const auto cascade = run(MatcherType::kCascade, &cascade_name);
@@ -421,10 +421,7 @@ TEST(AutoFeatureMatcher, CpuFactoryWrapsOnlyAuto) {
   const auto automatic = run(MatcherType::kAuto, &auto_name);
   EXPECT_EQ(cascade_name, "cpu-cascade");
   EXPECT_EQ(brute_name, "cpu-bruteforce");
-  EXPECT_EQ(auto_name.rfind("auto(cpu-cascade|cpu-bruteforce)", 0) == 0 || auto_name == "cpu-cascade" ||
-                auto_name == "cpu-bruteforce",
-            true)
-      << auto_name;
+  EXPECT_EQ(auto_name, "auto(cpu-cascade|cpu-bruteforce)");
   ASSERT_EQ(automatic.size(), pairs.size());
   for (size_t p = 0; p < pairs.size(); ++p) {
     EXPECT_TRUE(automatic[p] == cascade[p] || automatic[p] == brute[p]) << p;
