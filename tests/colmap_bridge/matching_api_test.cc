@@ -249,7 +249,6 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   EXPECT_EQ(last_done, 3u);
   EXPECT_TRUE(warnings.empty());
   ASSERT_FALSE(notes.empty());
-  EXPECT_NE(std::find(notes.begin(), notes.end(), "Matcher: cpu-cascade+exact-rematch"), notes.end());
   EXPECT_NE(std::find_if(notes.begin(), notes.end(),
                          [](const std::string& n) { return n.rfind("Exact rematch: 3 of 3 pairs", 0) == 0; }),
             notes.end())
@@ -261,7 +260,7 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   EXPECT_EQ(second.pairs_skipped, 3u);
   EXPECT_TRUE(second.matcher_name.empty());
   EXPECT_EQ(second.pipeline.pairs_done, 0u);
-  EXPECT_EQ(notes.back(), "Nothing to match.");
+  EXPECT_EQ(second.pairs_requested, 3u);
 }
 
 TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
@@ -278,7 +277,6 @@ TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
   // Hundreds of features per image: the reference's 8 x 7, and a bit more
   // while the exact rematch decides (the default).
   EXPECT_TRUE(starts("Hash tables: 8 x 8 bits (chosen for ")) << testing::PrintToString(notes);
-  EXPECT_TRUE(starts("Matcher: auto(cpu-cascade+exact-rematch|cpu-bruteforce)")) << testing::PrintToString(notes);
   // Three images make one chunk, and a run's first chunk is never timed
   // (CpuAutoMatcherOptions): the choice is still open when the run ends.
   EXPECT_EQ(summary.matcher_name, "auto(cpu-cascade+exact-rematch|cpu-bruteforce)");
