@@ -3,7 +3,13 @@
 # when the CUDA backend is built (they skip themselves without a GPU), and the
 # end-to-end tests on the rendered scene and on real photographs.
 #
-# Usage: scripts/test.sh [extra ctest arguments, e.g. -R integration]
+# Quick check while working, the unit tests alone (under 5 minutes on two
+# cores, once built):
+#   cmake --build build -j2 && ctest --test-dir build -L unit -j2
+# Labels: unit, gpu, integration, slow (tests/CMakeLists.txt); this script
+# runs them all.
+#
+# Usage: scripts/test.sh [extra ctest arguments, e.g. -L integration]
 # Environment:
 #   CASHASH_BUILD_DIR    build folder (default: build/ in the repo)
 #   CASHASH_SHARED_DATA  real data sets (default: ../shared/data beside the repo)

@@ -9,7 +9,6 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -741,8 +740,10 @@ TEST_P(DatabaseTest, WaitsForAConcurrentWriter) {
   EXPECT_EQ(db.ReadMatches(1, 2).size(), 1u);
 }
 
-// 100k pairs (an exhaustive run over ~450 images) in one transaction.
-TEST_P(DatabaseTest, WritesManyPairsQuickly) {
+// 100k pairs (an exhaustive run over ~450 images) in one transaction, every
+// other one given swapped: all of them read back as completed pairs. Rows
+// per second: scripts/bench/write_rows_bench.
+TEST_P(DatabaseTest, WritesManyPairsInOneTransaction) {
   constexpr image_t kNumImages = 448;  // 448 * 447 / 2 = 100128 pairs
   FeatureMatches matches(25);
   for (size_t i = 0; i < matches.size(); ++i) {
@@ -752,7 +753,6 @@ TEST_P(DatabaseTest, WritesManyPairsQuickly) {
   geometry.inlier_matches.assign(matches.begin(), matches.begin() + 20);
 
   Database db(path_);
-  const auto start = std::chrono::steady_clock::now();
   db.BeginTransaction();
   size_t num_pairs = 0;
   for (image_t i = 1; i <= kNumImages; ++i) {
@@ -765,14 +765,9 @@ TEST_P(DatabaseTest, WritesManyPairsQuickly) {
     }
   }
   db.Commit();
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const double rows_per_second = 2.0 * num_pairs / seconds;
-  std::printf("[ perf     ] %s: %zu pairs (%zu rows) in %.2f s: %.0f rows/s\n",
-              SchemaName({GetParam(), 0}).c_str(), num_pairs, 2 * num_pairs, seconds,
-              rows_per_second);
   EXPECT_EQ(db.ReadCompletedPairIds().size(), num_pairs);
-  EXPECT_LT(seconds, 60.0);
+  EXPECT_EQ(db.ReadMatches(2, 1).size(), matches.size());
+  EXPECT_EQ(db.ReadTwoViewGeometry(kNumImages - 1, kNumImages).inlier_matches.size(), 20u);
 }
 
 INSTANTIATE_TEST_SUITE_P(Schemas, DatabaseTest,

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -249,7 +250,6 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   EXPECT_EQ(last_done, 3u);
   EXPECT_TRUE(warnings.empty());
   ASSERT_FALSE(notes.empty());
-  EXPECT_NE(std::find(notes.begin(), notes.end(), "Matcher: cpu-cascade+exact-rematch"), notes.end());
   EXPECT_NE(std::find_if(notes.begin(), notes.end(),
                          [](const std::string& n) { return n.rfind("Exact rematch: 3 of 3 pairs", 0) == 0; }),
             notes.end())
@@ -261,7 +261,7 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   EXPECT_EQ(second.pairs_skipped, 3u);
   EXPECT_TRUE(second.matcher_name.empty());
   EXPECT_EQ(second.pipeline.pairs_done, 0u);
-  EXPECT_EQ(notes.back(), "Nothing to match.");
+  EXPECT_EQ(second.pairs_requested, 3u);
 }
 
 TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
@@ -278,20 +278,25 @@ TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
   // Hundreds of features per image: the reference's 8 x 7, and a bit more
   // while the exact rematch decides (the default).
   EXPECT_TRUE(starts("Hash tables: 8 x 8 bits (chosen for ")) << testing::PrintToString(notes);
-  EXPECT_TRUE(starts("Matcher: auto(cpu-cascade+exact-rematch|cpu-bruteforce)")) << testing::PrintToString(notes);
-  // Three pairs are too few to decide: the summary names whoever finished.
-  EXPECT_TRUE(summary.matcher_name == "auto(cpu-cascade+exact-rematch|cpu-bruteforce)" ||
-              summary.matcher_name == "cpu-cascade+exact-rematch" || summary.matcher_name == "cpu-bruteforce")
-      << summary.matcher_name;
+  // Three images make one chunk, and a run's first chunk is never timed
+  // (CpuAutoMatcherOptions): the choice is still open when the run ends.
+  EXPECT_EQ(summary.matcher_name, "auto(cpu-cascade+exact-rematch|cpu-bruteforce)");
 }
 
 TEST_F(SceneDatabase, TimeOutsideThePipelineIsReportedPhaseByPhase) {
+  const auto start = std::chrono::steady_clock::now();
   const colmap::MatchingSummary summary = colmap::MatchExhaustive(path_, options_);
+  const double call_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::vector<std::string> names;
+  double phase_seconds = 0;
   for (const PhaseClock::Phase& phase : summary.phases_outside_pipeline) {
-    EXPECT_GE(phase.seconds, 0.0) << phase.name;
     names.push_back(phase.name);
+    phase_seconds += phase.seconds;
   }
+  // The phases and the pipeline are disjoint stretches of the call: none is
+  // counted twice, so together they fit in the call's own time.
+  EXPECT_GT(summary.pipeline.seconds_total, 0.0);
+  EXPECT_LE(phase_seconds + summary.pipeline.seconds_total, call_seconds);
   // Before the pipeline, in the order the run builds itself, and after it,
   // in the order it is taken apart; the pipeline's own time is not a phase.
   const std::vector<std::string> expected = {"opening the database",

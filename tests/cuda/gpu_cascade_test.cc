@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -24,29 +23,13 @@
 namespace cashash {
 namespace {
 
-// Descriptor source: real SIFT rows from a raw N x 128 uint8 file
-// (CASHASH_SIFT_SAMPLE, or .devbin/sift_sample.u8 of the checkout) when
-// present, else synthetic SIFT-like rows (sparse, L2 norm ~512).
+// Descriptor source: synthetic SIFT-like rows (sparse, L2 norm ~512), the
+// same on every machine for the same seed.
 class DescriptorSource {
  public:
-  explicit DescriptorSource(uint32_t seed) : rng_(seed) {
-    const char* env = std::getenv("CASHASH_SIFT_SAMPLE");
-    const std::string path = env != nullptr ? env : std::string(CASHASH_SOURCE_DIR) + "/.devbin/sift_sample.u8";
-    std::ifstream file(path, std::ios::binary);
-    if (file) {
-      real_.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
-      real_.resize(real_.size() / kDescriptorDim * kDescriptorDim);
-    }
-  }
-  bool real() const { return !real_.empty(); }
+  explicit DescriptorSource(uint32_t seed) : rng_(seed) {}
 
   void Row(uint8_t* out) {
-    if (real()) {
-      const size_t rows = real_.size() / kDescriptorDim;
-      const size_t r = std::uniform_int_distribution<size_t>(0, rows - 1)(rng_);
-      std::copy(real_.begin() + r * kDescriptorDim, real_.begin() + (r + 1) * kDescriptorDim, out);
-      return;
-    }
     std::normal_distribution<float> normal(0.f, 1.f);
     std::bernoulli_distribution on(0.6);
     float v[kDescriptorDim];
@@ -92,7 +75,6 @@ class DescriptorSource {
 
  private:
   std::mt19937 rng_;
-  std::vector<uint8_t> real_;
 };
 
 MeanDescriptor MeanOf(const std::vector<FeatureDescriptors>& images) {
@@ -149,7 +131,6 @@ Agreement CompareWithCpu(const std::vector<FeatureDescriptors>& images, const st
 TEST(GpuCascadeTest, AgreesWithCpuCascade) {
   SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(1);
-  std::printf("descriptors: %s\n", source.real() ? "real SIFT sample" : "synthetic SIFT-like");
   std::vector<FeatureDescriptors> images{source.Image(4000)};
   for (int i = 1; i < 6; ++i) images.push_back(source.Related(images[i - 1], 3000 + 500 * i, 0.5));
   const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), CasHashOptions());

@@ -1,11 +1,10 @@
 // Ga-CasHash on the GPU against the CPU: the band filter of the select
 // kernel (and of the per-query kernel it falls back to) must give the CPU
 // cascade's matches; the guided matcher built from GPU parts must decide
-// stage 1 as the CPU one does. Skipped when no CUDA device is usable.
-//
-// CASHASH_GUIDED_DB=db.db (a COLMAP feature database, e.g. sceaux_castle)
-// adds real keypoints: F of the first pairs from the CPU's exhaustive
-// matches, then CPU and GPU guided matching with that F.
+// stage 1 as the CPU one does; and on a generated street (keypoints and
+// descriptors shaped like real ones, generated_street_pairs.h): F of each
+// pair from the CPU's exhaustive matches, then CPU and GPU guided matching
+// with that F. Skipped when no CUDA device is usable.
 #include <gtest/gtest.h>
 
 #include "gpu_test_support.h"
@@ -22,7 +21,7 @@
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/matching/guided_matching.h"
-#include "colmap_bridge/database_pipeline_io.h"
+#include "generated_street_pairs.h"
 #include "synthetic_guided.h"
 
 namespace cashash {
@@ -207,18 +206,11 @@ TEST(GpuGuidedMatching, RejectsRepeatedStructureOnTheEpipolarLine) {
   EXPECT_GT(right, 750u);
 }
 
-TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnARealDatabase) {
+TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnAGeneratedStreet) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  const char* path = std::getenv("CASHASH_GUIDED_DB");
-  if (path == nullptr) GTEST_SKIP() << "CASHASH_GUIDED_DB is not set (a COLMAP feature database)";
-  colmap::DatabaseFeatureSource source(path);
-  std::vector<ImageFeatures> images;
-  for (const Image& image : source.images()) {
-    if (images.size() == 6) break;
-    images.push_back(source.LoadFeatures(image.image_id));
-    images.back().image_id = image.image_id;
-  }
-  ASSERT_GE(images.size(), 2u);
+  const testing_support::ScratchDir dir("gpu_guided_street");
+  const std::vector<ImageFeatures> images = testing_support::GenerateStreet(dir, 6, 4000, 7).images;
+  ASSERT_EQ(images.size(), 6u);
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures& f : images) descriptors.push_back(&f.descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);

@@ -2,8 +2,6 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
-#include <cstdio>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -234,24 +232,16 @@ TEST(TwoViewGeometry, CheckNamesTheBadOption) {
   EXPECT_EQ(o.Check(), "TwoViewGeometry.max_num_trials must be >= min_num_trials");
 }
 
-// A typical pair: 2000 matches, half of them wrong.
-TEST(TwoViewGeometry, TimingTypicalPair) {
+// A typical pair: 2000 matches, half of them wrong. Its time:
+// scripts/bench/two_view_geometry_bench.
+TEST(TwoViewGeometry, TypicalPairWithHalfTheMatchesWrong) {
   SceneOptions opts;
   opts.num_inliers = 1000;
   opts.outlier_ratio = 0.5;
   const auto scene = MakeScene(opts);
   for (const bool priors : {false, true}) {
-    constexpr int kRuns = 5;
-    TwoViewGeometry g;
-    const auto start = std::chrono::steady_clock::now();
-    for (int r = 0; r < kRuns; ++r) g = Verify(scene, priors);
-    const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-            .count() / kRuns;
-    std::printf("EstimateTwoViewGeometry, 2000 matches, 50%% outliers, %s: %.2f ms (config %d, "
-                "%zu inliers)\n",
-                priors ? "with focal priors (F+H+E)" : "no priors (F+H)", ms, g.config,
-                g.inlier_matches.size());
+    SCOPED_TRACE(priors ? "with focal priors (F+H+E)" : "no priors (F+H)");
+    const TwoViewGeometry g = Verify(scene, priors);
     EXPECT_EQ(g.config, priors ? kCalibrated : kUncalibrated);
     EXPECT_GT(InlierRecall(scene, g).first, 0.95);
   }
