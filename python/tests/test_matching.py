@@ -116,3 +116,14 @@ def test_warnings_become_runtime_warnings(tmp_path, views):
     with pytest.warns(RuntimeWarning, match=r"image 2 \(view2.jpg\) has 1 feature; its pairs get empty matches"):
         summary = cashash.match_exhaustive(path)
     assert summary["pairs_done"] == 1 and summary["verified_pairs"] == 0
+
+
+def test_build_info_names_the_version_and_the_gpu_code():
+    info = cashash.build_info()
+    assert info["version"]
+    assert info["cuda"] == cashash.with_cuda
+    if info["cuda"]:
+        assert info["cuda_sass"] or info["cuda_ptx"]
+        assert info["cuda_architectures"] != "none"
+    else:
+        assert info["cuda_architectures"] == "none"

@@ -13,7 +13,8 @@
 #
 # Usage: older_architectures_validation.sh BINARIES SOURCE_DB WORK [ROUNDS]
 #   BINARIES/{reference,ptx75,ptx80,sm80}/cashash; BINARIES/{ptx75,ptx80}/tests/gpu_*_test;
-#   BINARIES/lib: shared libraries the binaries need beyond the system's (optional).
+#   BINARIES/lib: shared libraries the binaries need beyond the system's (optional);
+#   BINARIES/before/cashash (optional): an earlier build for the card, timed beside the reference.
 #   SOURCE_DB: a COLMAP database with real SIFT features (e.g. 7 images);
 #   WORK: a scratch folder; ROUNDS: timed runs per build (default 3).
 set -uo pipefail
@@ -25,6 +26,8 @@ mkdir -p "$WORK"
 [[ -d "$BIN/lib" ]] && export LD_LIBRARY_PATH="$BIN/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,compute_cap,driver_version --format=csv,noheader
 
+STREET_BUILDS="reference ptx75 ptx80"
+[[ -x "$BIN/before/cashash" ]] && STREET_BUILDS="before $STREET_BUILDS"
 for build in reference ptx75 ptx80 sm80; do
   echo "== $build: $("$BIN/$build/cashash" --version)"
 done
@@ -64,7 +67,7 @@ run_one() {
 
 echo "== streets (the first round of each build includes compiling its PTX for the card)"
 for round in $(seq 0 "$ROUNDS"); do
-  for build in reference ptx75 ptx80; do
+  for build in $STREET_BUILDS; do
     run_one "$build" default "$round"
     run_one "$build" bruteforce "$round" --CasHash.matcher bruteforce
   done
@@ -88,12 +91,12 @@ echo "== GPU tests"
 for build in ptx75 ptx80; do
   for test in "$BIN/$build"/tests/*_test; do
     name=$(basename "$test")
-    (cd "$WORK" && timeout 300 "$test" >"$WORK/$build.$name.log" 2>&1)
+    (cd "$WORK" && timeout 150 "$test" >"$WORK/$build.$name.log" 2>&1)
     rc=$?
     passed=$(grep -c '^\[       OK \]' "$WORK/$build.$name.log")
     skipped=$(grep -c '^\[  SKIPPED \]' "$WORK/$build.$name.log")
     failed=$(grep -c '^\[  FAILED  \]' "$WORK/$build.$name.log")
-    echo "$build $name: rc $rc, $passed passed, $skipped skipped, $failed failed lines"
+    echo "$build $name: rc $rc, $passed passed; SKIPPED lines $skipped, FAILED lines $failed (each counted in the list and the summary)"
   done
 done
 
