@@ -5,6 +5,7 @@
 #include <iostream>
 #include <string>
 
+#include "colmap_bridge/api/build_info.h"
 #include "colmap_bridge/commands/matching_commands.h"
 #include "colmap_bridge/commands/verify_command.h"
 #include "synthetic/generate_database_command.h"
@@ -35,7 +36,8 @@ void PrintUsage() {
                "  cashash guided_matcher --database_path DB [options]   (two-stage Ga-CasHash, all pairs)\n"
                "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
                "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n"
-               "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n\n"
+               "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n"
+               "  cashash --version   (version and the CUDA architectures this build carries)\n\n"
                "Run 'cashash COMMAND --help' for the options of a command (COLMAP's option names\n"
                "of 3.8 and 4.x are accepted, plus --CasHash.*)."
             << std::endl;
@@ -54,6 +56,10 @@ int main(int argc, char** argv) {
     return argc < 2 ? EXIT_FAILURE : EXIT_SUCCESS;
   }
   const std::string command = argv[1];
+  if (command == "--version" || command == "version") {
+    std::cout << cashash::colmap::BuildInfoLine() << std::endl;
+    return EXIT_SUCCESS;
+  }
   if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
   if (command == "guided_matcher") return cashash::colmap::RunGuidedMatcher(argc - 1, argv + 1);
   if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);

@@ -14,6 +14,7 @@
 #include "cashash/geometry/camera_models.h"
 #include "cashash/matching/pair_matching.h"
 #include "cashash/matching/table_shape.h"
+#include "colmap_bridge/api/build_info.h"
 #include "colmap_bridge/api/matcher_factory.h"
 #include "colmap_bridge/api/matching_api.h"
 
@@ -291,6 +292,16 @@ PYBIND11_MODULE(_core, m) {
       py::arg("database_path"), py::arg("pairs"), py::arg("options"), py::arg("progress") = py::none());
   m.def("match", &MatchInMemory, py::arg("descriptors1"), py::arg("descriptors2"), py::arg("keypoints1"),
         py::arg("keypoints2"), py::arg("camera1"), py::arg("camera2"), py::arg("options"));
+  m.def("build_info", []() {
+    const colmap::BuildInfo info = colmap::GetBuildInfo();
+    py::dict out;
+    out["version"] = info.version;
+    out["cuda"] = info.cuda;
+    out["cuda_sass"] = info.cuda_sass;
+    out["cuda_ptx"] = info.cuda_ptx;
+    out["cuda_architectures"] = info.cuda_architectures;
+    return out;
+  });
   m.def("camera_model_name", &CameraModelIdToName, py::arg("model_id"));
   m.def("camera_model_num_params", &CameraModelNumParams, py::arg("model_id"));
   m.attr("with_cuda") =

@@ -11,6 +11,7 @@
 #include <sys/resource.h>
 
 #include "cashash/pipeline/schedule_sizing.h"
+#include "colmap_bridge/api/build_info.h"
 #include "colmap_bridge/api/command_options.h"
 #include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/api/process_clock.h"
@@ -57,7 +58,10 @@ void PrintProgress(const PipelineProgress& p) {
 // on stderr, one line per committed block; Ctrl-C stops it cleanly.
 MatchingCallbacks ConsoleCallbacks(const std::string& heading) {
   MatchingCallbacks callbacks;
-  callbacks.database_opened = [heading]() { PrintHeading(heading); };
+  callbacks.database_opened = [heading]() {
+    PrintHeading(heading);
+    std::cout << BuildInfoLine() << std::endl;
+  };
   callbacks.info = [](const std::string& text) { std::cout << text << std::endl; };
   callbacks.warning = [](const std::string& text) { std::cerr << "WARNING: " << text << std::endl; };
   callbacks.progress = PrintProgress;

@@ -20,6 +20,7 @@ from ._core import CasHashOptions, MatchingOptions, SiftMatchingOptions, TwoView
 
 __all__ = [
     "CasHashOptions",
+    "build_info",
     "MatchingOptions",
     "SiftMatchingOptions",
     "TwoViewGeometryOptions",
@@ -31,6 +32,13 @@ __all__ = [
 ]
 
 with_cuda = _core.with_cuda
+
+
+def build_info():
+    """Version and GPU code of this build: {"version", "cuda", "cuda_sass",
+    "cuda_ptx", "cuda_architectures"} (SASS and PTX as compute capabilities
+    times ten, e.g. 75 for sm_75)."""
+    return _core.build_info()
 
 # COLMAP's two-view configuration names by value (TwoViewGeometry config).
 TWO_VIEW_CONFIGS = {

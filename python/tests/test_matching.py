@@ -138,3 +138,14 @@ def test_a_given_rematch_threshold_and_block_size_are_kept(scene_database):
     summary = cashash.match_exhaustive(scene_database, overwrite=True)
     assert summary["run"]["exact_rematch_min_matches"] == 12  # hundreds of features: not the bucket screen
     assert 2 <= summary["run"]["block_size"] <= 50
+
+
+def test_build_info_names_the_version_and_the_gpu_code():
+    info = cashash.build_info()
+    assert info["version"]
+    assert info["cuda"] == cashash.with_cuda
+    if info["cuda"]:
+        assert info["cuda_sass"] or info["cuda_ptx"]
+        assert info["cuda_architectures"] != "none"
+    else:
+        assert info["cuda_architectures"] == "none"

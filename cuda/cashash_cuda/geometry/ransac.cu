@@ -13,6 +13,9 @@
 
 #include <algorithm>
 #include <cfloat>
+#include <map>
+#include <mutex>
+#include <utility>
 
 #include "cashash/geometry/five_point_solver.h"
 #include "cashash/geometry/ransac_sprt.h"
@@ -579,13 +582,41 @@ __global__ void __launch_bounds__(Threads) EssentialRansacKernel(RansacLaunch E)
   LoRansacBlock<EssentialModel, Threads>(E, static_cast<int>(blockIdx.x), cached_points, s);
 }
 
+// The point cache (float4s) `kernel` may take on the current device beside
+// its static shared memory, at most max_points; raises the kernel's dynamic
+// shared-memory limit to it once per device. A block may opt in to 64 KiB
+// on 7.5, 99 KiB on 8.6 and 8.9, 163 KiB on 8.0 and 227 KiB on 9.0, so the
+// caches the kernels were sized for on 9.0 shrink on older cards: pairs
+// past the cap read their points from global memory (the same points, so
+// the same results).
+int SharedPointsOnDevice(const void* kernel, int max_points) {
+  static std::mutex mutex;
+  static std::map<std::pair<int, const void*>, int> points_of;  // (device, kernel)
+  int device = 0;
+  CUDA_CHECK(cudaGetDevice(&device));
+  std::lock_guard<std::mutex> lock(mutex);
+  const auto known = points_of.find({device, kernel});
+  if (known != points_of.end()) return known->second;
+  int opt_in_bytes = 0;
+  CUDA_CHECK(cudaDeviceGetAttribute(&opt_in_bytes, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
+  cudaFuncAttributes attributes{};
+  CUDA_CHECK(cudaFuncGetAttributes(&attributes, kernel));
+  const int free_bytes = std::max(0, opt_in_bytes - static_cast<int>(attributes.sharedSizeBytes));
+  const int points = std::min(max_points, free_bytes / static_cast<int>(sizeof(float4)));
+  CUDA_CHECK(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                  static_cast<int>(points * sizeof(float4))));
+  points_of[{device, kernel}] = points;
+  return points;
+}
+
 template <int Threads>
-void LaunchEssentialKernel(const RansacLaunch& E, size_t shared_bytes, cudaStream_t stream) {
-  static const cudaError_t opt_in =
-      cudaFuncSetAttribute(EssentialRansacKernel<Threads>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                           static_cast<int>(kEssentialMaxSharedPoints * sizeof(float4)));
-  CUDA_CHECK(opt_in);
-  EssentialRansacKernel<Threads><<<E.num_pairs, Threads, shared_bytes, stream>>>(E);
+void LaunchEssentialKernel(const RansacLaunch& E, cudaStream_t stream) {
+  RansacLaunch launch = E;
+  launch.shared_points = std::min(
+      E.shared_points,
+      SharedPointsOnDevice(reinterpret_cast<const void*>(&EssentialRansacKernel<Threads>), kEssentialMaxSharedPoints));
+  const size_t shared_bytes = static_cast<size_t>(launch.shared_points) * sizeof(float4);
+  EssentialRansacKernel<Threads><<<launch.num_pairs, Threads, shared_bytes, stream>>>(launch);
   CUDA_CHECK_LAUNCH();
 }
 
@@ -685,8 +716,7 @@ void EssentialSolveFromBasisOnDevice(const double* bases, int num_bases, double*
 
 void LaunchEssentialRansac(const RansacLaunch& E, cudaStream_t stream) {
   if (E.num_pairs == 0) return;
-  const size_t shared_bytes = static_cast<size_t>(E.shared_points) * sizeof(float4);
-  LaunchEssentialKernel<kEssentialLargeBlockThreads>(E, shared_bytes, stream);
+  LaunchEssentialKernel<kEssentialLargeBlockThreads>(E, stream);
 }
 
 float EssentialFivePointOnDevice(const float* samples, int num_samples, double* models, int* counts) {
@@ -723,14 +753,13 @@ float EssentialFivePointOnDevice(const float* samples, int num_samples, double* 
 void LaunchTwoViewRansac(const RansacLaunch& F, const RansacLaunch& H, cudaStream_t stream) {
   const int blocks = F.num_pairs + H.num_pairs;
   if (blocks == 0) return;
-  const int shared_points = std::max(F.shared_points, H.shared_points);
-  const size_t shared_bytes = static_cast<size_t>(shared_points) * sizeof(float4);
   // The point cache plus the static scratch may pass the default 48 KiB.
-  static const cudaError_t opt_in =
-      cudaFuncSetAttribute(TwoViewRansacKernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                           static_cast<int>(kRansacMaxSharedPoints * sizeof(float4)));
-  CUDA_CHECK(opt_in);
-  TwoViewRansacKernel<<<blocks, kRansacThreads, shared_bytes, stream>>>(F, H);
+  const int cap = SharedPointsOnDevice(reinterpret_cast<const void*>(&TwoViewRansacKernel), kRansacMaxSharedPoints);
+  RansacLaunch f = F, h = H;
+  f.shared_points = std::min(F.shared_points, cap);
+  h.shared_points = std::min(H.shared_points, cap);
+  const size_t shared_bytes = static_cast<size_t>(std::max(f.shared_points, h.shared_points)) * sizeof(float4);
+  TwoViewRansacKernel<<<blocks, kRansacThreads, shared_bytes, stream>>>(f, h);
   CUDA_CHECK_LAUNCH();
 }
 

@@ -18,6 +18,7 @@
 #include "cashash_cuda/matching/brute_force_matcher.cuh"
 #include "cashash_cuda/matchers/gpu_cascade_feature_matcher.h"
 #include "cashash_cuda/matching/cascade_matcher.cuh"
+#include "cashash_cuda/utils/architecture_support.h"
 #include "cashash_cuda/utils/device_memory.cuh"
 #include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/stream_priority.cuh"
@@ -118,6 +119,20 @@ class GpuBruteForceMatcher : public FeatureMatcher {
   PinnedUploadRing uploads_;
 };
 
+// A kernel compiled like every other of the backend: whether the driver can
+// load it tells whether the binary holds code (SASS or PTX) for the device.
+__global__ void KernelImageProbe() {}
+
+// The device's name, or "unknown" when the driver does not say.
+std::string DeviceName(int gpu_index) {
+  cudaDeviceProp properties{};
+  if (cudaGetDeviceProperties(&properties, gpu_index) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return "unknown";
+  }
+  return properties.name;
+}
+
 }  // namespace
 
 int NumCudaDevices() {
@@ -144,8 +159,22 @@ bool CudaDeviceUsable(int gpu_index, std::string* reason) {
     const cudaError_t e = cudaGetLastError();
     return fail("cannot use CUDA device " + std::to_string(gpu_index) + ": " + cudaGetErrorString(e));
   }
-  // The kernels are built for one architecture; this fails when the device
-  // cannot run them (e.g. built for sm_90, device sm_80).
+  // The device must find code it can run among the architectures the binary
+  // was built for (architecture_support.h); the probe asks the driver too.
+  int major = 0, minor = 0;
+  (void)cudaDeviceGetAttribute(&major, cudaDevAttrComputeCapabilityMajor, gpu_index);
+  (void)cudaDeviceGetAttribute(&minor, cudaDevAttrComputeCapabilityMinor, gpu_index);
+  cudaFuncAttributes probe{};
+  const cudaError_t loaded = cudaFuncGetAttributes(&probe, KernelImageProbe);
+  (void)cudaGetLastError();
+  if (!CanRunOnDevice(CompiledCudaArchitectures(), major, minor) || loaded == cudaErrorNoKernelImageForDevice ||
+      loaded == cudaErrorInvalidDeviceFunction) {
+    return fail(UnservableDeviceMessage(gpu_index, DeviceName(gpu_index), major, minor, CompiledCudaArchitectures()));
+  }
+  if (loaded != cudaSuccess) {
+    return fail("CUDA device " + std::to_string(gpu_index) + " cannot load the GPU code: " +
+                cudaGetErrorString(loaded));
+  }
   try {
     (void)CascadeMatchGridSize(gpu_index);
   } catch (const std::exception& e) {

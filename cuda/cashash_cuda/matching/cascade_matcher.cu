@@ -151,7 +151,7 @@ struct QueryRanking {
 __device__ __forceinline__ uint32_t ChunkEntryIndex(uint32_t my_start, uint32_t my_base, uint32_t first, uint32_t total,
                                                    uint32_t& slot_before) {
   const uint32_t rel = my_start - first;
-  const unsigned starts = __reduce_or_sync(kFullWarpMask, rel < 32 ? 1u << rel : 0u);
+  const unsigned starts = WarpReduceOr(rel < 32 ? 1u << rel : 0u);
   const uint32_t slot = slot_before + __popc(starts & LaneMaskLe());
   slot_before += __popc(starts);
   return __shfl_sync(kFullWarpMask, my_base, slot) + min(first + LaneId(), total - 1);
@@ -258,15 +258,15 @@ __device__ void NearestBeyondTau(const DeviceImageView& query, uint32_t q, const
   }
   // A feature sharing several tables' buckets can be the min of several
   // lanes: those lanes offer their own second instead.
-  *first = __reduce_min_sync(kFullWarpMask, min1);
-  *second = __reduce_min_sync(kFullWarpMask, min1 == *first ? min2 : min1);
+  *first = WarpReduceMin(min1);
+  *second = WarpReduceMin(min1 == *first ? min2 : min1);
 }
 
 // Exact dot product of the query row with target feature f (every lane).
 __device__ __forceinline__ int WarpDot(const uint8_t* query_row, const uint8_t* target_row) {
   const uint32_t a = reinterpret_cast<const uint32_t*>(query_row)[LaneId()];
   const uint32_t b = reinterpret_cast<const uint32_t*>(target_row)[LaneId()];
-  return static_cast<int>(__reduce_add_sync(kFullWarpMask, __dp4a(a, b, 0u)));
+  return static_cast<int>(WarpReduceAdd(__dp4a(a, b, 0u)));
 }
 
 // Exact dot products of the ranked candidates, then best / second best and
@@ -317,10 +317,10 @@ __device__ __forceinline__ int DecideFromRanked(const DeviceImageView& query, ui
   const bool valid = static_cast<int>(lane) < count;
   const uint32_t dot = valid ? static_cast<uint32_t>(my_dot) : 0u;
   const uint32_t index = ranked.key & kIndexMask;
-  const uint32_t best_dot = __reduce_max_sync(kFullWarpMask, dot);
+  const uint32_t best_dot = WarpReduceMax(dot);
   if (best_dot == 0) return -1;
-  const uint32_t best_index = __reduce_min_sync(kFullWarpMask, valid && dot == best_dot ? index : 0xffffffffu);
-  const uint32_t second_dot = __reduce_max_sync(kFullWarpMask, valid && index != best_index ? dot : 0u);
+  const uint32_t best_index = WarpReduceMin(valid && dot == best_dot ? index : 0xffffffffu);
+  const uint32_t second_dot = WarpReduceMax(valid && index != best_index ? dot : 0u);
   if (!Accept(static_cast<int>(best_dot), static_cast<int>(second_dot), params.max_ratio, params.max_distance)) {
     return -1;
   }

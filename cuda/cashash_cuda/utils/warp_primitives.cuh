@@ -21,6 +21,42 @@ __device__ __forceinline__ uint64_t WarpMaxU64(uint64_t v) {
   return v;
 }
 
+// Whole-warp reductions of 32-bit unsigned values (every lane gets the
+// result): one redux.sync instruction from 8.0 on, five xor-shuffles on 7.5
+// (the *Shuffle forms, callable on every architecture). Integer min, max,
+// or and add are exact either way.
+__device__ __forceinline__ unsigned WarpReduceOrShuffle(unsigned v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v |= __shfl_xor_sync(kFullWarpMask, v, offset);
+  return v;
+}
+__device__ __forceinline__ unsigned WarpReduceMinShuffle(unsigned v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v = min(v, __shfl_xor_sync(kFullWarpMask, v, offset));
+  return v;
+}
+__device__ __forceinline__ unsigned WarpReduceMaxShuffle(unsigned v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v = max(v, __shfl_xor_sync(kFullWarpMask, v, offset));
+  return v;
+}
+__device__ __forceinline__ unsigned WarpReduceAddShuffle(unsigned v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(kFullWarpMask, v, offset);
+  return v;
+}
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
+__device__ __forceinline__ unsigned WarpReduceOr(unsigned v) { return __reduce_or_sync(kFullWarpMask, v); }
+__device__ __forceinline__ unsigned WarpReduceMin(unsigned v) { return __reduce_min_sync(kFullWarpMask, v); }
+__device__ __forceinline__ unsigned WarpReduceMax(unsigned v) { return __reduce_max_sync(kFullWarpMask, v); }
+__device__ __forceinline__ unsigned WarpReduceAdd(unsigned v) { return __reduce_add_sync(kFullWarpMask, v); }
+#else
+__device__ __forceinline__ unsigned WarpReduceOr(unsigned v) { return WarpReduceOrShuffle(v); }
+__device__ __forceinline__ unsigned WarpReduceMin(unsigned v) { return WarpReduceMinShuffle(v); }
+__device__ __forceinline__ unsigned WarpReduceMax(unsigned v) { return WarpReduceMaxShuffle(v); }
+__device__ __forceinline__ unsigned WarpReduceAdd(unsigned v) { return WarpReduceAddShuffle(v); }
+#endif
+
 // Sum over aligned groups of `width` lanes (width a power of two <= 32).
 template <int kWidth>
 __device__ __forceinline__ int GroupSum(int v) {
