@@ -21,10 +21,10 @@ under four arrangements:
 - both.
 Device times are taken as they were: the model ignores that a rematch
 beside a verifier call shares the device with it. So it says how much of
-the run was the arrangement's; a device run says how much of that remains.
-Device run 125 (one H100, docs/BENCHMARKS.md) said: none. The model gave
--19 % at 8,192 features; the runs were no shorter, because the stages'
-kernels slowed each other once they overlapped.
+the run was the arrangement's; only a run on the GPU says how much of that
+remains. On one H100 none did: the model gave -19 % at 8,192 features, the
+runs were no shorter, because the stages' kernels slowed each other once
+they overlapped.
 """
 import argparse
 import csv
