@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Where a matching run's time went, from its pipeline trace.
 
-    CASHASH_PIPELINE_TRACE=trace.csv cashash exhaustive_matcher --database_path db.db
+    cashash exhaustive_matcher --database_path db.db --pipeline_trace_path trace.csv
     pipeline_trace_summary.py trace.csv
 
 The run's summary line gives each stage's busy and waiting time; the trace
@@ -60,7 +60,7 @@ def time_at_depth(intervals, end_of_run):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("trace", help="the CSV that CASHASH_PIPELINE_TRACE named")
+    parser.add_argument("trace", help="the CSV that --pipeline_trace_path named")
     args = parser.parse_args()
     events = read_events(args.trace)
     if not events:
