@@ -42,7 +42,7 @@ struct MatcherCommandOptions {
   // with the bucket screening shape, whose screen leaves the matching
   // thread room while verification sets the pace: the 300-image streets
   // ran 9 % (8,192 features) and 3.5 % (16,384) faster with the rematch on
-  // the matching thread (H100, docs/BENCHMARKS.md).
+  // the matching thread (H100).
   bool rematch_on_matching_thread = false;
   TwoViewGeometryOptions two_view;
   // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
