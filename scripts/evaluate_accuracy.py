@@ -2,7 +2,7 @@
 """Accuracy of cashash against ground truth, in one command.
 
   scripts/evaluate_accuracy.py --build-dir build [--data-dir ../shared/data]
-      [--out docs/accuracy] [--report docs/ACCURACY.md] [--work-dir /tmp/cashash_accuracy]
+      [--out DIR/accuracy] [--report DIR/ACCURACY.md] [--work-dir /tmp/cashash_accuracy]
       [--skip-colmap-matcher] [--colmap-matcher-scenes fountain-P11] [--skip-cameras]
       [--skip-sweeps] [--reuse] [--gpu-results DIR]
   scripts/evaluate_accuracy.py --export-gpu-inputs DIR   (for a GPU machine without COLMAP or data)
@@ -48,8 +48,10 @@ def parse_args():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--build-dir", default=os.path.join(REPO, "build"))
     parser.add_argument("--data-dir", default=os.path.join(REPO, "..", "shared", "data"))
-    parser.add_argument("--out", default=os.path.join(REPO, "docs", "accuracy"), help="folder of the PNG plots")
-    parser.add_argument("--report", default=os.path.join(REPO, "docs", "ACCURACY.md"))
+    # The full report goes beside the work, not over docs/ACCURACY.md, which
+    # states the rules it checks and quotes its figures.
+    parser.add_argument("--out", default="/tmp/cashash_accuracy/report/accuracy", help="folder of the PNG plots")
+    parser.add_argument("--report", default="/tmp/cashash_accuracy/report/ACCURACY.md")
     parser.add_argument("--work-dir", default="/tmp/cashash_accuracy")
     parser.add_argument("--feature-db-dir", default="/tmp/dbs",
                         help="COLMAP feature databases <scene>.db of the camera scenes (copied, never written); "

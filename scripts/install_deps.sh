@@ -22,7 +22,7 @@ fi
 # the COLMAP command line used for feature extraction and reconstruction.
 apt_packages=(
   cmake g++ make pkg-config
-  libeigen3-dev libceres-dev libsqlite3-dev libboost-program-options-dev
+  libeigen3-dev libsqlite3-dev libboost-program-options-dev
   googletest libgtest-dev
   colmap
   python3

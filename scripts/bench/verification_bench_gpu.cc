@@ -182,8 +182,7 @@ int main(int argc, char** argv) {
   });
   std::vector<cashash::TwoViewModelEstimate> E;
   // Once untimed, as for F and H: the first call with E grows its buffers and
-  // loads its kernel, about 0.1 s that the "E only" row used to include
-  // (device run 74).
+  // loads its kernel, about 0.1 s that would otherwise count as E's.
   ransac.Estimate(pointers, seeds, essential_pointers, &F, &H, &E);
   const cashash::cuda::GpuRansacStats before_fhe = ransac.stats();  // the stats add up over calls
   t0 = Clock::now();

@@ -6,7 +6,7 @@
 // falling with the distance, a calibrated geometry) and a share
 // `--far_with_matches` of the other pairs gets a few chance matches and a
 // degenerate geometry (the cascade matcher leaves almost every far pair
-// with some, brute force about half: see docs/BENCHMARKS.md). Pairs are
+// with some, brute force about half). Pairs are
 // written in ExhaustiveMatching blocks, one transaction per block pair,
 // as the pipeline writes them.
 //

@@ -1,4 +1,4 @@
-"""Writes docs/ACCURACY.md and the PNG plots from the evaluation results."""
+"""Writes the full accuracy report and its PNG plots from the evaluation results."""
 import datetime
 import os
 import platform

@@ -309,7 +309,7 @@ TEST(GpuEssential, RansacAgreesWithCpuOnSyntheticPairs) {
     EXPECT_EQ(mask_count, E[k].num_inliers);
     // Both stop once the decision is settled, after 100 trials or a round
     // of 256 here, short of where COLMAP's rule would have converged them:
-    // RANSAC's own spread at that point (GPU run 111: 614 against 596).
+    // RANSAC's own spread at that point (614 against 596 inliers seen).
     EXPECT_TRUE(Close(E[k].num_inliers, cpu.num_inliers, 0.05, 5)) << E[k].num_inliers << " vs " << cpu.num_inliers;
     EXPECT_GT(static_cast<double>(true_kept) / true_total, 0.95);
     EXPECT_LT(err_gpu, std::max(0.1, 2 * err_cpu));

@@ -115,7 +115,7 @@ struct Harness {
   }
 };
 
-// The H200's times per pair at 8,192 features (device run 24).
+// The H200's times per pair at 8,192 features.
 constexpr double kGpuCascadePerPair = 0.000015, kGpuBruteForcePerPair = 0.000051;
 
 // The GPU's rounds (64 pairs first, then doubling), each backend's share in
@@ -270,7 +270,7 @@ void ExpectCascadeDecidedAfterRound(const Harness& h, size_t round_pairs) {
 
 TEST(AutoFeatureMatcher, TheGpuProbeIsShortForADecisiveGapAndForACloseCall) {
   // The H200 at 8,192 features once brute force searched the reverse
-  // direction over the named rows only (device run 93): cascade 0.006 ms,
+  // direction over the named rows only: cascade 0.006 ms,
   // brute force 0.028 ms per pair (4.7x). With the GPU's settings the
   // 256-pair round's 7.2 ms of brute force decide, in the second chunk.
   Harness h(0.000006, 0.000028, GpuAutoMatcherOptions());
@@ -288,7 +288,7 @@ TEST(AutoFeatureMatcher, TheGpuProbeIsShortForADecisiveGapAndForACloseCall) {
   RunChunks(&old, 80, 1225);
   ASSERT_NO_FATAL_FAILURE(ExpectCascadeDecidedAfterRound(old, 512));
   EXPECT_GT(old.brute_force.matched.size(), h.brute_force.matched.size() + 400);
-  // A close call (2,048 features, device run 95: cascade 0.002 ms, brute
+  // A close call (2,048 features on the H200: cascade 0.002 ms, brute
   // force 0.003 ms per pair) ends after the 512-pair round, for the faster.
   Harness close(0.000002, 0.000003, GpuAutoMatcherOptions());
   RunChunks(&close, 80, 1225);

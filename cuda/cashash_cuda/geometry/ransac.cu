@@ -128,8 +128,8 @@ __device__ void BlockLocalSolve(const float* best, const float4* points, int n, 
   }
   __syncthreads();
   if constexpr (Model::kWarpLocalSolve) {
-    // E: warp 0 refits. On thread 0 alone its eigen decomposition (device
-    // run 59) and its roots (run 67) kept the block's other warps waiting here.
+    // E: warp 0 refits. On thread 0 alone its eigen decomposition and its
+    // roots kept the block's other warps waiting here.
     if (threadIdx.x < 32) {
       const int num = Model::WarpLocalSolve(s.upper, s.jacobi_a, s.jacobi_v, s.refit_solver, s.local_models);
       if (threadIdx.x == 0) {
@@ -181,12 +181,12 @@ __device__ __forceinline__ bool IsInlier(const float* f, float4 p, float thresho
 
 // Inliers among points[i, i + kCountGroup) of a Sampson model: the loads
 // first, then every residual, with one branch for the whole group (taken
-// only when a match falls in the margin's band). ncu (device run 79) put 73
-// % of the E kernel's stall samples in the scan, one point after another,
+// only when a match falls in the margin's band). ncu put 73 % of the E
+// kernel's stall samples in the scan, one point after another,
 // each ending in a branch (the division of an inlier, which the warp's
 // other lanes waited for); so a thread ran one dependent chain at a time
 // at 2 warps per scheduler. Here it has kCountGroup independent chains.
-// Measured (runs 80-81, every row the same): the division out alone gained
+// Measured (every decision the same): the division out alone gained
 // nothing, the groups E 2-12 % at 8,192 features and 3 % at 16,384; ncu
 // then put the scan at 24 % and the barrier after the trials at 52 %: the
 // round waits for its slowest warp (docs/gpu_verification.md).

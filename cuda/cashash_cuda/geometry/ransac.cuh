@@ -75,9 +75,9 @@ constexpr int kEssentialLargeBlockThreads = 256;
 constexpr int kRansacMaxSharedPoints = 3072;
 // The same for E launches: 160 KiB, since an E block of 256 holds an SM
 // alone anyway (255 registers). The scan of each model over the pair's
-// points is most of an E block's time (ncu, device run 53), and the large
-// pairs' points now come from shared memory too: verification's device time
-// on the 300-image street 0.98 s against 1.04 s.
+// points is most of an E block's time (ncu), so the large pairs' points
+// come from shared memory too: verification's device time on a 300-image
+// street 0.98 s against 1.04 s from global memory.
 constexpr int kEssentialMaxSharedPoints = 10240;
 
 // F of F.num_pairs pairs and H of H.num_pairs pairs in one grid (F blocks

@@ -345,7 +345,7 @@ class GpuBatchVerifier : public BatchVerifier {
   // lose again, because the writer then waits for a call twice as long and
   // matching stalls behind the held queue room (300 x 8,192 street on an
   // H200: 1 -> 42.1k, 2 -> 47.5k, 4 -> 38.5k pairs/s, identical geometries;
-  // docs/BENCHMARKS.md).
+  // docs/gpu_verification.md).
   size_t ChunksPerCall() const override { return 2; }
 
   std::string StatsSummary() const override {

@@ -1,17 +1,17 @@
 // The 5-point solver on a given basis by one warp: E's local refit. On one
 // lane, the Sturm isolation of the degree-10 polynomial's roots and their
 // polishing kept the E block's seven other warps waiting at the barrier
-// after the refit (ncu, device run 67: 30 % of the E kernel's stall samples;
+// after the refit (ncu: 30 % of the E kernel's stall samples;
 // on the host the roots are about half of five_point::SolveFromBasis). Here
 // - lane 0 eliminates, builds the determinant and its Sturm sequence (as
-//   before: the 10 x 20 elimination by the warp gained 2 %, run 68);
+//   on one lane: the 10 x 20 elimination by the warp gained only 2 %);
 // - every sign-variation count of the isolation evaluates the sequence's
 //   polynomials on separate lanes (lane k the k-th), which every lane then
 //   counts alike, so all lanes take the same splits;
 // - lane r polishes root r and builds its model.
 // Each value is computed by the same function as on one thread, so the
 // models are five_point::SolveFromBasis's to the bit (gpu_essential_test).
-// Device run 70: verification 7-11 % faster on the 300-image streets.
+// This made verification 7-11 % faster on 300-image streets.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -34,7 +34,7 @@ struct WarpFivePointScratch {
 // the number of models on every lane; the models go to `models` (shared
 // memory, up to five_point::kMaxSolutions) in SolveFromBasis' order.
 // Not inlined: inside the E kernel, which is at its register limit, it would
-// spill (run 68).
+// spill.
 __device__ __noinline__ inline int WarpSolveFromBasis(WarpFivePointScratch& s, double (*models)[9]) {
   const int lane = threadIdx.x % 32;
   if (lane == 0) {

@@ -3,8 +3,8 @@
 // eigenvector updates spread over 9 lanes. E's local refit (the 5-point
 // solver on the least-squares null space of a pair's inliers) runs it; one
 // thread alone took most of an E block's time while the other warps waited
-// at the barrier after it (ncu, device run 59: 60 % of the E kernel's stall
-// samples on the instruction after that barrier).
+// at the barrier after it (ncu: 60 % of the E kernel's stall samples on the
+// instruction after that barrier).
 #pragma once
 
 #include <cuda_runtime.h>

@@ -6,8 +6,7 @@
 // yet each is scored over the pair's matches until even all the matches left
 // could not beat the best (`must_reach`). With 37 % inliers that is still two
 // thirds of the matches for every wrong model, and scoring was most of E's
-// device time (ncu, device runs 53 and 67). A wrong model shows itself after a
-// few dozen matches.
+// device time (ncu). A wrong model shows itself after a few dozen matches.
 //
 // The test. Only a model with more than `must_reach` inliers can change the
 // run, i.e. one whose inlier rate is above eps = must_reach / n. Before the
@@ -28,8 +27,8 @@
 // with eps = 0.37 a model of rate 0.05 goes after about 30 matches. The
 // test runs only where that is much shorter than the scan it saves.
 //
-// Measured (device runs 72-73): 3-11 % off GPU verification on the 300-image
-// streets, every decision unchanged. Less than hoped: most of E's time is in
+// Measured: 3-11 % off GPU verification on 300-image streets, every
+// decision unchanged. Less than hoped: most of E's time is in
 // pairs of low inlier ratio that run to the trial cap, where the test is off
 // (docs/gpu_verification.md).
 //

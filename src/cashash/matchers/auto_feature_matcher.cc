@@ -35,15 +35,14 @@ AutoMatcherOptions GpuAutoMatcherOptions() {
   // Brute force searches the reverse direction over the named rows only
   // (1.7x faster): at 8,192 features its 512-pair round of far pairs took
   // under 10 ms on the H200, so the probe went on into the run's third chunk
-  // with verification held back (device run 93: auto 4-7 % behind the
-  // cascade forced). No verification shares the GPU while the probe runs,
+  // with verification held back (auto 4-7 % behind the cascade forced). No verification shares the GPU while the probe runs,
   // so 5 ms of a 3x gap is far above the jitter.
   options.min_decisive_seconds = 0.005;
   // A close call (within 1.5x, batches short of min_probe_seconds) ends
   // after the 512-pair round: on the H200 at 2,048 features (cascade 0.002,
   // brute force 0.003 ms a pair) 4,096 timed pairs each held verification
   // back for a tenth of the run and made auto 15-20 % slower than either
-  // backend forced (device run 95); 960 pairs each in interleaved turns
+  // backend forced; 960 pairs each in interleaved turns
   // measure a per-pair time well within that 1.5x.
   options.max_probe_pairs = 64 + 128 + 256 + 512;
   return options;

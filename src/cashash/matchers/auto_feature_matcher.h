@@ -69,8 +69,7 @@ struct AutoMatcherOptions {
   // while the cascade was 1.9x faster over the whole run. The untimed
   // pairs go to the cascade because they decide nothing: where brute force
   // wins, both cost microseconds a pair, and where the cascade does, brute
-  // force's half of that chunk cost the H200 about 60 ms at 16,384 features
-  // (device run 94).
+  // force's half of that chunk cost the H200 about 60 ms at 16,384 features.
   size_t first_timed_call = 1;
   // Seconds of a monotonic clock; the default is std::chrono::steady_clock.
   // Tests pass a fake one.

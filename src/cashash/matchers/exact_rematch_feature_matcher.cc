@@ -108,8 +108,8 @@ ChunkMatches ExactRematchFeatureMatcher::MatchPairsDeferred(const std::vector<Im
   std::vector<ImagePair> subset;
   subset.reserve(again.size());
   for (const size_t i : again) subset.push_back(pairs[i]);
-  // A ticket saves uploading the images again (device run 43: that upload
-  // beside the next chunk's made adding images 0.07 s slower at 300 images).
+  // A ticket saves uploading the images again: that upload, beside the next
+  // chunk's, made adding images 0.07 s slower at 300 images.
   std::unique_ptr<ExactMatchingTicket> ticket = cascade_->DeferExactMatching(subset);
   out.deferred = std::make_unique<DeferredExactRematch>(std::move(again), std::move(subset), std::move(ticket), pool_,
                                                         counts_);

@@ -21,8 +21,8 @@
 // pairs to DeferredMatching::Complete, which the pipeline runs on a
 // verification thread. The matching thread then goes on with the next
 // chunk's cascade: on the GPU the rematch was a quarter to a third of the
-// matching thread's time at 300 images (0.45 s of 1.24-1.30 s, device run
-// 42), and the verification threads were idle for a third of theirs.
+// matching thread's time at 300 images (0.45 s of 1.24-1.30 s), and the
+// verification threads were idle for a third of theirs.
 // Complete uses the cascade's ticket (FeatureMatcher::DeferExactMatching:
 // the GPU cascade lends the descriptors it holds on the device) where it
 // gives one, else a brute-force matcher from the pool, fed with the

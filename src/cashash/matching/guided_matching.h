@@ -167,7 +167,7 @@ FeatureMatches KeepMatchesInEpipolarBand(const FeatureMatches& matches, const do
 // each loaded image until Take (or Clear) for GuidedFeatureMatcher. Shared
 // loads are kept shared, not copied: the pipeline loads an image again for
 // every chunk that needs it, and copying its keypoints each time cost 3.9 s
-// of the matching thread on a 1,000-image street (device run 14).
+// of the matching thread on a 1,000-image street.
 class KeypointRecordingSource : public FeatureSource {
  public:
   explicit KeypointRecordingSource(FeatureSource* inner) : inner_(inner) {}

@@ -91,18 +91,13 @@ constexpr int kBucketScreeningRematchMinMatches = 8;
 // while its collision probability stays at kScreeningCollisionFloor or
 // above; from 8,192 on, 3 tables of buckets of about 16 features
 // (kBucketScreeningFeatures). CascadeOnlyScreens says which goal a run has.
-// Device runs 65-66, H200 streets: 8 x 8 at 8,192 features and 7 x 9 at
-// 16,384 verified the same pairs with the same inlier matches as 8 x 7 and
-// 8 x 8 (and as brute force), 3-13 % faster end to end. Device run 104:
-// 6 x 9 at 8,192 and 6 x 10 at 16,384 again the same pairs and inlier
-// matches, the cascade's matching time 15-20 % lower; at 2,048 features
-// smaller buckets were slower (more buckets per pair), so the rule starts at
-// 8,192. Device runs 129-130 (H100): 3 tables with the rematch from 8
-// matches (kBucketScreeningRematchMinMatches) in place of 6 from 12 wrote
-// brute force's two_view_geometries on both kinds of street at 8,192 and
-// 16,384 features (6 tables lost 1-2 pairs on the noisy kind), 3-14 %
-// faster, except 5 % slower on the 8,192 E street, where verification
-// sets the pace (docs/cascade_parameters.md, "Fewer screening tables").
+// The screening shapes keep brute force's verified pairs and inlier matches
+// on generated streets while the cascade's matching time falls. Buckets of
+// about 16 features start at 8,192 because at 2,048 features smaller
+// buckets were slower (more buckets per pair). Three tables need the
+// rematch from 8 matches (kBucketScreeningRematchMinMatches): from 12, six
+// tables lost 1-2 verified pairs on noisy streets, three from 8 none
+// (docs/cascade_parameters.md, "Fewer screening tables").
 enum class TableShapeGoal { kRecall, kScreening };
 
 // 1 - (1 - p^bits)^tables.

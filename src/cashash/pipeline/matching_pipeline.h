@@ -69,9 +69,8 @@ struct PipelineOptions {
   // schedule_sizing.h counts them) and verified chunks waiting for the
   // writer. Six, not two: chunks differ widely in cost (a diagonal chunk's
   // verification, a far chunk's writing), and with two the stages waited
-  // on each other in turn. Device runs 34-35 (H200): guided matching on the
-  // 1,000-image street 7.0-7.9 s -> 5.7-6.1 s; exhaustive matching at 300
-  // and 1,000 images unchanged within noise.
+  // on each other in turn (guided matching on a 1,000-image street: 7.0-7.9 s
+  // with two, 5.7-6.1 s with six; exhaustive matching unchanged).
   size_t chunks_in_queue = 6;
   size_t chunks_to_write = 6;
   // Not owned; when set, every stage's interval per chunk is recorded in it

@@ -143,7 +143,7 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   // Counting the device layout against host memory too (as before) kept
   // 2.7k of 5000 images of 8192 features under --max_host_memory 16G, and
   // the block order then re-hashed nearly every image for every block pair
-  // (184k hashings in 9.6M pairs, 41 % of the run; H200, docs/BENCHMARKS.md).
+  // (184k hashings in 9.6M pairs, 41 % of the run on an H200).
   const size_t in_use_images = images(kMatcherBlocks * bs);
   const size_t in_use = in_use_images * sizes.matcher_bytes_per_image;
   const size_t host_copy =
