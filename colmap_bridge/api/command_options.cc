@@ -117,7 +117,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
   std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
   table.Add({"CasHash.matcher"}, &matcher_name,
-            "auto (times both on the first pairs, keeps the faster) | cascade | bruteforce (exact reference)");
+            "auto (chosen from the data: on the GPU the cascade with the exact rematch, on the CPU the cascade "
+            "with the rematch of the pairs near the verification threshold) | cascade | bruteforce (exact reference)");
   table.Add({"CasHash.num_tables"}, &o.cashash.num_tables,
             "First-level hash tables; 0 = chosen with the bits from the features per image: while the exact "
             "rematch decides 8 x 8 below 8192, 3 x 9 from there, 3 x 10 from 16384; where the cascade's matches "
@@ -131,6 +132,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
             "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
             "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image");
+  table.Add({"CasHash.exact_rematch_max_matches"}, &o.cashash.exact_rematch_max_matches,
+            "When > 0, only pairs with fewer cascade matches than this are matched again exactly; 0 = no upper "
+            "bound (CasHash.matcher auto on the CPU: 12 to 63 unless either rematch option is given)");
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,

@@ -9,10 +9,10 @@
 #include <utility>
 #include <vector>
 
-#include "cashash/matchers/auto_feature_matcher.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/fallback_feature_matcher.h"
 #include "cashash/matchers/split_feature_matcher.h"
+#include "cashash/matching/matcher_choice.h"
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/matching_api.h"
 #ifdef CASHASH_WITH_CUDA
@@ -152,14 +152,26 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForOptions(const MatcherCommandOpti
   if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
   return std::make_unique<ExactRematchFeatureMatcher>(
       std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts,
-      *on_gpu ? DeferredRematchPool(options, mean) : nullptr);
+      *on_gpu ? DeferredRematchPool(options, mean) : nullptr,
+      static_cast<size_t>(std::max(0, options.cashash.exact_rematch_max_matches)));
+}
+
+// --CasHash.matcher auto decided from the run's data (matcher_choice.h).
+MatcherChoice AutoMatcherChoice(const MatcherCommandOptions& options, size_t features) {
+  MatcherChoiceInput input;
+  input.on_gpu = GpuIndexForRun(options) >= 0;
+  input.features_per_image = features;
+  input.rematch_from_rule = options.rematch_min_matches_from_shape && options.cashash.exact_rematch_max_matches == 0;
+  input.guided = options.guided.enabled;
+  return ChooseAutoMatcher(options.cashash, input);
 }
 
 }  // namespace
 
 int RunTau(const MatcherCommandOptions& options) {
   if (options.cashash.tau > 0) return options.cashash.tau;
-  return ChooseCascadeTau(options.cashash.exact_rematch_min_matches, options.guided.enabled);
+  return ChooseCascadeTau(options.cashash.exact_rematch_min_matches, options.guided.enabled,
+                          options.cashash.exact_rematch_max_matches);
 }
 
 std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOptions& given,
@@ -167,39 +179,35 @@ std::unique_ptr<FeatureMatcher> CreateMatcherForOptions(const MatcherCommandOpti
                                                         const std::function<void(const std::string&)>& warning,
                                                         const std::function<void(const std::string&)>& info,
                                                         const std::shared_ptr<ExactRematchCounts>& counts) {
-  // Options not passed through ResolveOptionsForRun get their tau here too.
+  // Options not passed through ResolveOptionsForRun get their matcher and
+  // tau here too.
   MatcherCommandOptions options = given;
-  options.cashash.tau = RunTau(given);
+  if (options.cashash.matcher == MatcherType::kAuto) {
+    options.cashash = ApplyMatcherChoice(options.cashash, AutoMatcherChoice(options, 0));
+  }
+  options.cashash.tau = RunTau(options);
   bool on_gpu = false;
   if (options.cashash.matcher == MatcherType::kCascade) {
     return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
   }
-  if (options.cashash.matcher != MatcherType::kAuto) return CreateBackendForOptions(options, mean, warning, &on_gpu);
-  // Guided matching filters candidates inside the cascade.
-  if (options.guided.enabled) return CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
-  MatcherCommandOptions brute_force = options;
-  brute_force.cashash.matcher = MatcherType::kBruteForce;
-  // Both on the same devices (or both on the CPU); the warnings once.
-  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForOptions(options, mean, warning, counts, &on_gpu);
-  bool brute_force_on_gpu = false;
-  std::unique_ptr<FeatureMatcher> brute_force_matcher =
-      CreateBackendForOptions(brute_force, mean, nullptr, &brute_force_on_gpu);
-  return std::make_unique<AutoFeatureMatcher>(std::move(cascade_matcher), std::move(brute_force_matcher),
-                                              on_gpu ? GpuAutoMatcherOptions() : CpuAutoMatcherOptions(options.sift),
-                                              info);
+  // auto was resolved above: brute force as set by the options.
+  (void)info;
+  return CreateBackendForOptions(options, mean, warning, &on_gpu);
 }
 
 MatcherCommandOptions ResolveOptionsForRun(const MatcherCommandOptions& options,
                                            const std::vector<size_t>& rows_per_image,
                                            const std::function<void(const std::string&)>& info) {
   MatcherCommandOptions resolved = options;
-  if (resolved.guided.enabled && resolved.cashash.matcher == MatcherType::kAuto) {
-    resolved.cashash.matcher = MatcherType::kCascade;
-    if (info) info("Matcher: cascade (guided matching needs it)");
-  }
   const size_t features = TypicalFeatureCount(rows_per_image, options.sift.max_num_matches);
+  if (resolved.cashash.matcher == MatcherType::kAuto) {
+    const MatcherChoice choice = AutoMatcherChoice(resolved, features);
+    resolved.cashash = ApplyMatcherChoice(resolved.cashash, choice);
+    if (info) info("Matcher: " + choice.reason);
+  }
   const TableShapeGoal goal =
-      CascadeOnlyScreens(resolved.cashash.exact_rematch_min_matches, resolved.guided.enabled)
+      CascadeOnlyScreens(resolved.cashash.exact_rematch_min_matches, resolved.guided.enabled,
+                         resolved.cashash.exact_rematch_max_matches)
           ? TableShapeGoal::kScreening
           : TableShapeGoal::kRecall;
   resolved.cashash = ResolveTableShape(resolved.cashash, features, goal);

@@ -79,9 +79,9 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 // The matcher backend the options ask for: the GPU one when use_gpu is set
 // and a device is usable, else the CPU one (reporting why through `warning`).
 //
-// --CasHash.matcher auto (the default) gives an AutoFeatureMatcher over one
-// cascade and one brute-force backend on the same device(s), which reports
-// its choice through `info`; with guided matching, the cascade alone. With
+// --CasHash.matcher auto (the default) is resolved from the run's data
+// (ChooseAutoMatcher, cashash/matching/matcher_choice.h): the cascade, with
+// the exact rematch the rule gives for the device. With
 // --CasHash.exact_rematch_min_matches > 0 (runs' default 12) the cascade
 // backend is an ExactRematchFeatureMatcher: pairs that may verify are
 // matched again by brute force, from the descriptors the cascade holds.

@@ -13,7 +13,6 @@
 #include <utility>
 #include <vector>
 
-#include "cashash/matchers/auto_feature_matcher.h"
 #include "cashash/matching/table_shape.h"
 #include "cashash_cuda/matching/brute_force_matcher.cuh"
 #include "cashash_cuda/matchers/gpu_cascade_feature_matcher.h"
@@ -161,14 +160,7 @@ std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOption
   if (cashash_options.matcher == MatcherType::kBruteForce) {
     return std::make_unique<GpuBruteForceMatcher>(sift_options, gpu_index);
   }
-  if (cashash_options.matcher == MatcherType::kAuto) {
-    CasHashOptions cascade = cashash_options, brute_force = cashash_options;
-    cascade.matcher = MatcherType::kCascade;
-    brute_force.matcher = MatcherType::kBruteForce;
-    return std::make_unique<AutoFeatureMatcher>(CreateGpuFeatureMatcher(sift_options, cascade, mean, gpu_index),
-                                                CreateGpuFeatureMatcher(sift_options, brute_force, mean, gpu_index),
-                                                GpuAutoMatcherOptions(), nullptr);
-  }
+  // kAuto is the cascade here, as the GPU rule of matcher_choice.h decides.
   // Tables still at 0 (chosen per run, table_shape.h): the shape of 8,192
   // features, as the CPU backend.
   return CreateGpuCascadeMatcher(sift_options, ResolveTableShape(cashash_options, 0), mean, gpu_index);

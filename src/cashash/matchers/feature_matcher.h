@@ -117,8 +117,8 @@ class FeatureMatcher {
   }
 };
 
-// CPU backends (multi-threaded over pairs). MatcherType::kAuto gives an
-// AutoFeatureMatcher over the CPU cascade and brute force.
+// CPU backends (multi-threaded over pairs). MatcherType::kAuto gives the
+// cascade (runs resolve auto first: matcher_choice.h).
 std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean);
