@@ -337,8 +337,10 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
   if (plan.rematch_counts->rematched > 0) {
     std::ostringstream text;
     text << "Exact rematch: " << plan.rematch_counts->rematched << " of " << plan.rematch_counts->pairs
-         << " pairs had at least " << options.cashash.exact_rematch_min_matches
-         << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
+         << " pairs had " << (options.cashash.exact_rematch_max_matches > 0 ? "" : "at least ")
+         << options.cashash.exact_rematch_min_matches;
+    if (options.cashash.exact_rematch_max_matches > 0) text << " to " << options.cashash.exact_rematch_max_matches - 1;
+    text << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
          << plan.rematch_counts->exact_us * 1e-6 << " s";
     Info(callbacks, text.str());
   }
