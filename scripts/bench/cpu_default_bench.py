@@ -7,7 +7,9 @@
 
 DB is never written: each config matches a copy of it (DIR/<config>.db, its
 matches cleared first), as one whole process, timed by wall clock from start
-to exit. Configs:
+to exit, wall clock and CPU seconds (user + system of the process and its
+threads: the cores are shared, and the CPU seconds are what another job's
+load inflates least). Configs:
 
   colmap38      colmap exhaustive_matcher --SiftMatching.use_gpu 0 (COLMAP 3.8)
   pycolmap      pycolmap.match_exhaustive on the CPU (COLMAP 4.x), in a child
@@ -28,6 +30,7 @@ rotation error.
 """
 import argparse
 import os
+import resource
 import shutil
 import sqlite3
 import subprocess
@@ -126,25 +129,29 @@ def main():
     for config in configs:
         name = config.partition("=")[0]
         database = os.path.join(args.work, name + ".db")
-        seconds = float("nan")
+        seconds = cpu_seconds = float("nan")
         if name not in args.reuse.split(","):
             copy_database(args.database, database)
             with open(os.path.join(args.work, name + ".log"), "w") as log:
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
                 start = time.perf_counter()
                 code = subprocess.run(command_for(config, args.cashash, database), stdout=log,
                                       stderr=subprocess.STDOUT, env=env).returncode
                 seconds = time.perf_counter() - start
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpu_seconds = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
             if code != 0:
                 print("%s failed (exit %d), see %s.log" % (name, code, os.path.join(args.work, name)))
                 continue
         raw, verified = read_counts(database)
-        results[name] = {"seconds": seconds, "raw": raw, "verified": verified}
+        results[name] = {"seconds": seconds, "cpu_seconds": cpu_seconds, "raw": raw, "verified": verified}
         if args.mapper:
             results[name]["model"] = map_and_score(database, args.image_path, args.gt_cameras,
                                                    os.path.join(args.work, name + "_map"))
-        print("done: %s %.1f s (load %s)" % (name, seconds, os.getloadavg()[0]), flush=True)
+        print("done: %s %.1f s, %.1f CPU s (load %.1f)" % (name, seconds, cpu_seconds, os.getloadavg()[0]),
+              flush=True)
     reference = results.get(args.reference, {}).get("verified", {})
-    header = "| run | seconds | verified pairs | of %s's %d verified, also verified | inlier matches | raw matches |" % (
+    header = "| run | seconds | CPU seconds | verified pairs | of %s's %d verified, also verified | inlier matches | raw matches |" % (
         args.reference, len(reference))
     if args.mapper:
         header += " registered | position error median / max | rotation error median (deg) |"
@@ -156,8 +163,8 @@ def main():
             continue
         r = results[name]
         both = sum(1 for p in reference if p in r["verified"])
-        row = "| %s | %.1f | %d | %d (%.1f %%) | %d | %d |" % (
-            name, r["seconds"], len(r["verified"]), both, 100.0 * both / max(1, len(reference)),
+        row = "| %s | %.1f | %.1f | %d | %d (%.1f %%) | %d | %d |" % (
+            name, r["seconds"], r["cpu_seconds"], len(r["verified"]), both, 100.0 * both / max(1, len(reference)),
             sum(r["verified"].values()), r["raw"])
         if args.mapper:
             m = r["model"]
