@@ -161,7 +161,11 @@ MatcherChoice AutoMatcherChoice(const MatcherCommandOptions& options, size_t fea
   MatcherChoiceInput input;
   input.on_gpu = GpuIndexForRun(options) >= 0;
   input.features_per_image = features;
-  input.rematch_from_rule = options.rematch_min_matches_from_shape && options.cashash.exact_rematch_max_matches == 0;
+  // The runs' threshold, not typed: a value set through the library (the
+  // Python module's options) is kept, as for the bucket screening shape.
+  input.rematch_from_rule = options.rematch_min_matches_from_shape &&
+                            options.cashash.exact_rematch_min_matches == kDefaultRematchMinMatches &&
+                            options.cashash.exact_rematch_max_matches == 0;
   input.guided = options.guided.enabled;
   return ChooseAutoMatcher(options.cashash, input);
 }

@@ -1,4 +1,5 @@
 #include "colmap_bridge/api/command_options.h"
+#include "cashash/matching/matcher_choice.h"
 #include "colmap_bridge/api/matching_api.h"
 #include "cashash/matching/table_shape.h"
 
@@ -88,6 +89,9 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(defaults.cashash.num_tables, 0);
   EXPECT_EQ(defaults.cashash.bits_per_table, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
+  // What follows is the cascade with the runs' rematch: auto's rows on a
+  // GPU, whatever device runs the test (matcher_choice.h).
+  defaults.cashash.matcher = MatcherType::kCascade;
   // Given on the command line, the tables are kept for any image size.
   MatcherCommandOptions set;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "8", "--CasHash.bits_per_table", "7",
@@ -120,7 +124,7 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
 
 TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
   MatcherCommandOptions defaults;
-  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_EQ(defaults.cashash.tau, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
   std::vector<std::string> said;
@@ -153,7 +157,7 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
     return ResolveOptionsForRun(options, {features, features}, nullptr).cashash.exact_rematch_min_matches;
   };
   MatcherCommandOptions defaults;
-  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_EQ(defaults.cashash.exact_rematch_min_matches, kDefaultRematchMinMatches);
   EXPECT_TRUE(defaults.rematch_min_matches_from_shape);
   // Three screening tables from 8,192 features find fewer of a pair's true
@@ -173,6 +177,7 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
   EXPECT_EQ(threshold(typed, 8192), 12);
   // Set through the library (the Python module's options), another value is kept.
   MatcherCommandOptions api;
+  api.cashash.matcher = MatcherType::kCascade;
   api.cashash.exact_rematch_min_matches = 10;
   EXPECT_EQ(threshold(api, 8192), 10);
   // Tables or bits given: the shape is the user's, so is the threshold.
@@ -195,7 +200,7 @@ TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
     return ResolveOptionsForRun(options, {features, features}, nullptr).rematch_on_matching_thread;
   };
   MatcherCommandOptions defaults;
-  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_FALSE(defaults.rematch_on_matching_thread);
   EXPECT_TRUE(on_matching_thread(defaults, 8192));
   EXPECT_TRUE(on_matching_thread(defaults, 16384));
@@ -211,6 +216,36 @@ TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
   EXPECT_FALSE(on_matching_thread(guided, 8192));
+}
+
+// auto on the CPU (matcher_choice.h): the cascade's own matches, tables and
+// tau for them, and the exact rematch of the pairs in the window only; a
+// threshold set through the library (not the runs' 12) is kept.
+TEST(CommandOptions, AutoOnTheCpuKeepsTheCascadesMatchesAndRematchesTheWindow) {
+  MatcherCommandOptions cpu;
+  ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0"}, &cpu), ParseOutcome::kRun);
+  std::vector<std::string> said;
+  const MatcherCommandOptions run =
+      ResolveOptionsForRun(cpu, {8192, 8192}, [&](const std::string& text) { said.push_back(text); });
+  EXPECT_EQ(run.cashash.matcher, MatcherType::kCascade);
+  EXPECT_EQ(run.cashash.exact_rematch_min_matches, kCpuRematchWindowMin);
+  EXPECT_EQ(run.cashash.exact_rematch_max_matches, kCpuRematchWindowMax);
+  EXPECT_EQ(run.cashash.tau, kCascadeTauForPrecision);
+  EXPECT_EQ(run.cashash.num_tables, 8);
+  EXPECT_EQ(run.cashash.bits_per_table, 7);
+  ASSERT_FALSE(said.empty());
+  EXPECT_EQ(said.front(), "Matcher: cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)");
+  MatcherCommandOptions api = cpu;
+  api.cashash.exact_rematch_min_matches = 10;
+  const MatcherCommandOptions kept = ResolveOptionsForRun(api, {8192, 8192}, nullptr);
+  EXPECT_EQ(kept.cashash.exact_rematch_min_matches, 10);
+  EXPECT_EQ(kept.cashash.exact_rematch_max_matches, 0);
+  MatcherCommandOptions off;
+  ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0", "--CasHash.exact_rematch_min_matches",
+                   "0"},
+                  &off),
+            ParseOutcome::kRun);
+  EXPECT_EQ(ResolveOptionsForRun(off, {8192, 8192}, nullptr).cashash.exact_rematch_min_matches, 0);
 }
 
 TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {
