@@ -93,6 +93,7 @@ py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   run["bits_per_table"] = s.run.options.cashash.bits_per_table;
   run["tau"] = s.run.options.cashash.tau;
   run["exact_rematch_min_matches"] = s.run.options.cashash.exact_rematch_min_matches;
+  run["exact_rematch_max_matches"] = s.run.options.cashash.exact_rematch_max_matches;
   run["rematch_on_matching_thread"] = s.run.rematch_on_matching_thread;
   run["block_size"] = s.run.options.block_size;
   run["blocks_per_group"] = s.run.schedule.blocks_per_group;
@@ -174,7 +175,10 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   // cascade's matches (no exact rematch), so its tables and tau are the
   // ones for recall and precision.
   MatcherCommandOptions requested = options;
-  if (!options.use_gpu) requested.cashash.exact_rematch_min_matches = 0;
+  if (!options.use_gpu) {
+    requested.cashash.exact_rematch_min_matches = 0;
+    requested.cashash.exact_rematch_max_matches = 0;
+  }
   colmap::RunFacts facts;
   facts.rows_per_image = {d1.rows(), d2.rows()};
   facts.exhaustive = false;
@@ -234,6 +238,7 @@ void BindOptions(py::module_& m) {
       .def_readwrite("tau", &CasHashOptions::tau)
       .def_readwrite("top_k", &CasHashOptions::top_k)
       .def_readwrite("exact_rematch_min_matches", &CasHashOptions::exact_rematch_min_matches)
+      .def_readwrite("exact_rematch_max_matches", &CasHashOptions::exact_rematch_max_matches)
       .def_readwrite("random_seed", &CasHashOptions::random_seed);
   py::class_<TwoViewGeometryOptions>(m, "TwoViewGeometryOptions")
       .def(py::init<>())

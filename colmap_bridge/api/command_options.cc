@@ -128,7 +128,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
   std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
   table.Add({"CasHash.matcher"}, &matcher_name,
-            "auto (times both on the first pairs, keeps the faster) | cascade | bruteforce (exact reference)");
+            "auto (chosen from the data: on the GPU the cascade with the exact rematch, on the CPU the cascade "
+            "with the rematch of the pairs near the verification threshold) | cascade | bruteforce (exact reference)");
   table.Add({"CasHash.num_tables"}, &o.cashash.num_tables,
             "First-level hash tables; 0 = chosen with the bits from the features per image: while the exact "
             "rematch decides 8 x 8 below 8192, 3 x 9 from there, 3 x 10 from 16384; where the cascade's matches "
@@ -143,6 +144,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
             "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image",
             std::to_string(kDefaultRematchMinMatches));
+  table.Add({"CasHash.exact_rematch_max_matches"}, &o.cashash.exact_rematch_max_matches,
+            "When > 0, only pairs with fewer cascade matches than this are matched again exactly; 0 = no upper "
+            "bound (CasHash.matcher auto on the CPU: 12 to 95 unless either rematch option is given)");
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
@@ -214,7 +218,7 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.guided.enabled) {
     message = o.guided.Check();
     if (!message.empty()) return message;
-    // auto resolves to the cascade (MatcherTypeRule).
+    // auto resolves to the cascade (MatcherRule).
     if (o.cashash.matcher == MatcherType::kBruteForce) {
       return "--GuidedMatching.enabled needs --CasHash.matcher cascade or auto (the band filter is part of the "
              "cascade)";

@@ -30,9 +30,10 @@ constexpr int kRematchMinMatchesChosen = -1;
 struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
-  // --CasHash.matcher defaults to auto here: a run measures both matchers;
-  // and the pairs that may verify are matched again exactly (threshold
-  // chosen for the run). tau 0: chosen for the run (ChooseCascadeTau), 32
+  // --CasHash.matcher defaults to auto here: decided for the run from its
+  // data (MatcherRule, run_resolution.h): the cascade, whose pairs that may
+  // verify are matched again exactly (threshold chosen for the run; on the
+  // CPU only those in a window of cascade match counts). tau 0: chosen for the run (ChooseCascadeTau), 32
   // while the rematch decides. (A CasHashOptions of its own, as the
   // library's matcher factories take it, is the cascade alone.)
   CasHashOptions cashash = [] {

@@ -8,7 +8,6 @@
 #include <utility>
 #include <vector>
 
-#include "cashash/matchers/auto_feature_matcher.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/fallback_feature_matcher.h"
 #include "cashash/matchers/split_feature_matcher.h"
@@ -149,31 +148,23 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForRun(const ResolvedRun& run, cons
   if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
   return std::make_unique<ExactRematchFeatureMatcher>(
       std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts,
-      *on_gpu ? DeferredRematchPool(run, mean) : nullptr);
+      *on_gpu ? DeferredRematchPool(run, mean) : nullptr,
+      static_cast<size_t>(std::max(0, options.cashash.exact_rematch_max_matches)));
 }
 
 }  // namespace
 
 std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                     const std::function<void(const std::string&)>& warning,
-                                                    const std::function<void(const std::string&)>& info,
                                                     const std::shared_ptr<ExactRematchCounts>& counts) {
   const MatcherCommandOptions& options = run.options;
+  // ResolveRun decides auto (MatcherRule); a ResolvedRun is built by it only.
+  if (options.cashash.matcher == MatcherType::kAuto) {
+    throw std::logic_error("CreateMatcherForRun: CasHash.matcher auto was not resolved (ResolveRun decides it)");
+  }
   bool on_gpu = false;
   if (options.cashash.matcher == MatcherType::kCascade) return CreateCascadeForRun(run, mean, warning, counts, &on_gpu);
-  if (options.cashash.matcher != MatcherType::kAuto) {
-    return CreateBackendForOptions(options, run.gpu_memory_budget_bytes, mean, warning, &on_gpu);
-  }
-  MatcherCommandOptions brute_force = options;
-  brute_force.cashash.matcher = MatcherType::kBruteForce;
-  // Both on the same devices (or both on the CPU); the warnings once.
-  std::unique_ptr<FeatureMatcher> cascade_matcher = CreateCascadeForRun(run, mean, warning, counts, &on_gpu);
-  bool brute_force_on_gpu = false;
-  std::unique_ptr<FeatureMatcher> brute_force_matcher =
-      CreateBackendForOptions(brute_force, run.gpu_memory_budget_bytes, mean, nullptr, &brute_force_on_gpu);
-  return std::make_unique<AutoFeatureMatcher>(std::move(cascade_matcher), std::move(brute_force_matcher),
-                                              on_gpu ? GpuAutoMatcherOptions() : CpuAutoMatcherOptions(options.sift),
-                                              info);
+  return CreateBackendForOptions(options, run.gpu_memory_budget_bytes, mean, warning, &on_gpu);
 }
 
 }  // namespace colmap

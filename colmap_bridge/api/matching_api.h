@@ -85,16 +85,17 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 // run.gpu_memory_budget_bytes), else the CPU one (reporting why through
 // `warning`).
 //
-// --CasHash.matcher auto (the default) gives an AutoFeatureMatcher over one
-// cascade and one brute-force backend on the same device(s), which reports
-// its choice through `info`; with guided matching the run has resolved auto
-// to the cascade. With an exact rematch threshold > 0 the cascade backend is
-// an ExactRematchFeatureMatcher: pairs that may verify are matched again by
-// brute force, from the descriptors the cascade holds, on the matching
-// thread or deferred as run.rematch_on_matching_thread says.
+// --CasHash.matcher auto (the default) never gets here: ResolveRun has
+// decided it from the run's data (MatcherRule, run_resolution.h, over
+// ChooseAutoMatcher, cashash/matching/matcher_choice.h), and a run still
+// naming auto is refused (std::logic_error). With an exact rematch threshold
+// > 0 the cascade backend is an ExactRematchFeatureMatcher: pairs that may
+// verify (with fewer cascade matches than the window's upper bound
+// exact_rematch_max_matches, where that is set) are matched again by brute
+// force, from the descriptors the cascade holds, on the matching thread or
+// deferred as run.rematch_on_matching_thread says.
 std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                     const std::function<void(const std::string&)>& warning,
-                                                    const std::function<void(const std::string&)>& info = nullptr,
                                                     const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
 
 }  // namespace colmap

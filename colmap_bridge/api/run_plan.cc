@@ -208,7 +208,7 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
   const MatcherCommandOptions& options = plan->run.options;
   plan->rematch_counts = std::make_shared<ExactRematchCounts>();
   plan->matcher = CreateMatcherForRun(plan->run, mean, [&](const std::string& text) { Warn(callbacks, text); },
-                                      [&](const std::string& text) { Info(callbacks, text); }, plan->rematch_counts);
+                                      plan->rematch_counts);
   // Guided matching (Ga-CasHash, cashash/matching/guided_matching.h): a
   // second matcher for the top-scale subsets, the stage-1 F estimator, and
   // the pipeline's features read through a source that keeps the keypoints.
@@ -336,8 +336,10 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
   if (plan.rematch_counts->rematched > 0) {
     std::ostringstream text;
     text << "Exact rematch: " << plan.rematch_counts->rematched << " of " << plan.rematch_counts->pairs
-         << " pairs had at least " << options.cashash.exact_rematch_min_matches
-         << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
+         << " pairs had " << (options.cashash.exact_rematch_max_matches > 0 ? "" : "at least ")
+         << options.cashash.exact_rematch_min_matches;
+    if (options.cashash.exact_rematch_max_matches > 0) text << " to " << options.cashash.exact_rematch_max_matches - 1;
+    text << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
          << plan.rematch_counts->exact_us * 1e-6 << " s";
     Info(callbacks, text.str());
   }

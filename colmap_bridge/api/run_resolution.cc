@@ -64,10 +64,17 @@ int RematchMinMatchesRule(int requested, bool bucket_screen) {
   return bucket_screen ? kBucketScreeningRematchMinMatches : kDefaultRematchMinMatches;
 }
 
-MatcherType MatcherTypeRule(const MatcherCommandOptions& options, bool on_gpu) {
-  (void)on_gpu;  // the CPU and the GPU resolve alike today
-  if (options.guided.enabled && options.cashash.matcher == MatcherType::kAuto) return MatcherType::kCascade;
-  return options.cashash.matcher;
+MatcherChoice MatcherRule(const MatcherCommandOptions& options, bool on_gpu, size_t features_per_image,
+                          int runs_threshold) {
+  MatcherChoiceInput input;
+  input.on_gpu = on_gpu;
+  input.features_per_image = features_per_image;
+  input.rematch_from_rule = options.cashash.exact_rematch_min_matches == kRematchMinMatchesChosen &&
+                            options.cashash.exact_rematch_max_matches == 0;
+  input.guided = options.guided.enabled;
+  CasHashOptions cashash = options.cashash;
+  if (cashash.exact_rematch_min_matches == kRematchMinMatchesChosen) cashash.exact_rematch_min_matches = runs_threshold;
+  return ChooseAutoMatcher(cashash, input);
 }
 
 ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& facts) {
@@ -75,30 +82,40 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   run.options = options;
   CasHashOptions& cashash = run.options.cashash;
   const bool guided = options.guided.enabled;
-  cashash.matcher = MatcherTypeRule(options, facts.gpu_index >= 0);
-  if (cashash.matcher != options.cashash.matcher) run.notes.push_back("Matcher: cascade (guided matching needs it)");
-
-  // The tables: for recall where the cascade's matches are kept, one bit
-  // coarser where the exact rematch decides and the cascade only screens.
+  const bool on_gpu = facts.gpu_index >= 0;
   const size_t features = TypicalFeatureCount(facts.rows_per_image, options.sift.max_num_matches);
-  const int requested_rematch = options.cashash.exact_rematch_min_matches;
-  const TableShapeGoal goal = CascadeOnlyScreens(RematchMinMatchesRule(requested_rematch, false), guided)
-                                  ? TableShapeGoal::kScreening
-                                  : TableShapeGoal::kRecall;
+
+  // The matcher and, for auto, the rematch threshold and window; then the
+  // tables: for recall where the cascade's matches are kept (no rematch, a
+  // window with an upper bound, guided matching), one bit coarser where the
+  // exact rematch decides and the cascade only screens.
+  MatcherChoice choice = MatcherRule(options, on_gpu, features);
+  const TableShapeGoal goal =
+      CascadeOnlyScreens(choice.exact_rematch_min_matches, guided, choice.exact_rematch_max_matches)
+          ? TableShapeGoal::kScreening
+          : TableShapeGoal::kRecall;
   const int requested_tau = cashash.tau;
   cashash = ResolveTableShape(cashash, features, goal);
-  // Fewer tables find fewer of a pair's true matches: the threshold the
-  // bucket screening shape was measured with (table_shape.h); its screen is
-  // light, so the matching thread has room for the rematch.
+  // Fewer tables find fewer of a pair's true matches: a threshold left to
+  // the run is the one the bucket screening shape was measured with
+  // (table_shape.h); its screen is light, so the matching thread has room
+  // for the rematch.
   const bool bucket_screen =
       IsBucketScreeningShape(features, options.cashash.num_tables, options.cashash.bits_per_table, goal);
-  cashash.exact_rematch_min_matches = RematchMinMatchesRule(requested_rematch, bucket_screen);
-  const bool rematch_from_shape =
-      requested_rematch < 0 && cashash.exact_rematch_min_matches != kDefaultRematchMinMatches;
+  const int runs_threshold = RematchMinMatchesRule(kRematchMinMatchesChosen, bucket_screen);
+  if (runs_threshold != kDefaultRematchMinMatches) choice = MatcherRule(options, on_gpu, features, runs_threshold);
+  cashash.matcher = choice.matcher;
+  cashash.exact_rematch_min_matches = choice.exact_rematch_min_matches;
+  cashash.exact_rematch_max_matches = choice.exact_rematch_max_matches;
+  const bool rematch_from_shape = options.cashash.exact_rematch_min_matches == kRematchMinMatchesChosen &&
+                                  cashash.exact_rematch_min_matches != kDefaultRematchMinMatches;
   run.rematch_on_matching_thread = bucket_screen;
+  if (options.cashash.matcher == MatcherType::kAuto) run.notes.push_back("Matcher: " + choice.reason);
   // tau: where not given, for screening while the exact rematch decides the
   // pairs that may verify, for precision where the cascade's matches are kept.
-  if (cashash.tau <= 0) cashash.tau = ChooseCascadeTau(cashash.exact_rematch_min_matches, guided);
+  if (cashash.tau <= 0) {
+    cashash.tau = ChooseCascadeTau(cashash.exact_rematch_min_matches, guided, cashash.exact_rematch_max_matches);
+  }
   if (cashash.matcher != MatcherType::kBruteForce) {
     std::string text = DescribeTableShape(options.cashash, cashash, features, facts.rows_per_image.size(), goal);
     text += "; tau " + std::to_string(cashash.tau);

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "cashash/matching/matcher_choice.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/command_options.h"
 
@@ -41,8 +42,9 @@ struct RunFacts {
 // The run as it will be carried out. Built by ResolveRun only.
 struct ResolvedRun {
   // The user's options with every "chosen" value decided: the matcher (auto
-  // becomes the cascade for guided matching), the table shape, tau, the
-  // exact rematch threshold, and the block size.
+  // never stays auto: MatcherRule), the table shape, tau, the exact rematch
+  // threshold and its window's upper bound (cashash.exact_rematch_max_matches,
+  // 0: none), and the block size.
   MatcherCommandOptions options;
   // Where a single GPU's exact rematch runs: on the matching thread (the
   // bucket screen leaves it room) or deferred to the verification threads.
@@ -79,10 +81,19 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
 // matches).
 int RematchMinMatchesRule(int requested, bool bucket_screen);
 
-// Which matcher the run builds on the CPU or the GPU: the user's, except
-// that guided matching needs the cascade for auto. On the CPU this is where
-// a policy of its own would go; today the CPU and the GPU resolve alike.
-MatcherType MatcherTypeRule(const MatcherCommandOptions& options, bool on_gpu);
+// Which matcher the run builds, and for --CasHash.matcher auto its exact
+// rematch: ChooseAutoMatcher (cashash/matching/matcher_choice.h) over where
+// the run matches and its features per image. Auto is the cascade; on the
+// GPU with the runs' rematch threshold, on the CPU with the rematch of the
+// pairs in the window [kCpuRematchWindowMin, kCpuRematchWindowMax) of
+// cascade matches; guided matching keeps the cascade's matches. The rule
+// applies only where the threshold and the window are left to the run
+// (threshold kRematchMinMatchesChosen, window max 0); a typed value of
+// either is kept on both devices. `runs_threshold` stands for a threshold
+// left to the run (RematchMinMatchesRule). Options naming a matcher come
+// back unchanged. The reason is the run's "Matcher: " line.
+MatcherChoice MatcherRule(const MatcherCommandOptions& options, bool on_gpu, size_t features_per_image,
+                          int runs_threshold = kDefaultRematchMinMatches);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -64,8 +64,9 @@ def test_exact_rematch_is_the_runs_default_and_can_be_turned_off(scene_database)
 
 def test_match_exhaustive_writes_every_pair_and_resumes(scene_database):
     calls = []
-    # Runs default to matcher="auto" (3 pairs: too few to decide); the name
-    # checked here is the cascade's.
+    # Runs default to matcher="auto" (on the CPU the cascade with the
+    # rematch of a window of pairs); the name checked here is the cascade's
+    # with the rematch of every pair that may verify.
     summary = cashash.match_exhaustive(scene_database, matcher="cascade",
                                        progress=lambda done, total: calls.append((done, total)))
     assert summary["pairs_requested"] == 3 and summary["pairs_done"] == 3

@@ -1,5 +1,7 @@
 #include "colmap_bridge/api/command_options.h"
+#include "cashash/matching/matcher_choice.h"
 #include "colmap_bridge/api/matching_api.h"
+#include "colmap_bridge/api/run_resolution.h"
 #include "cashash/matching/table_shape.h"
 
 #include <gtest/gtest.h>
@@ -100,6 +102,9 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(defaults.cashash.num_tables, 0);
   EXPECT_EQ(defaults.cashash.bits_per_table, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
+  // What follows is the cascade with the runs' rematch: auto's rows on a
+  // GPU, whatever device runs the test (matcher_choice.h).
+  defaults.cashash.matcher = MatcherType::kCascade;
   // Given on the command line, the tables are kept for any image size.
   MatcherCommandOptions set;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "8", "--CasHash.bits_per_table", "7",
@@ -132,7 +137,7 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
 
 TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
   MatcherCommandOptions defaults;
-  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_EQ(defaults.cashash.tau, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
   std::vector<std::string> said;
@@ -163,8 +168,9 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
     return Resolve(options, {features, features}).options.cashash.exact_rematch_min_matches;
   };
   MatcherCommandOptions defaults;
-  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_EQ(defaults.cashash.exact_rematch_min_matches, kRematchMinMatchesChosen);
+  EXPECT_EQ(defaults.cashash.exact_rematch_max_matches, 0);
   // Three screening tables from 8,192 features find fewer of a pair's true
   // matches: the threshold measured for them. Below, the 8 x 8 screen keeps 12.
   EXPECT_EQ(threshold(defaults, 8192), kBucketScreeningRematchMinMatches);
@@ -183,6 +189,7 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
   // Set through the library (the Python module's options), any value is
   // kept, 12 included.
   MatcherCommandOptions api;
+  api.cashash.matcher = MatcherType::kCascade;
   api.cashash.exact_rematch_min_matches = 10;
   EXPECT_EQ(threshold(api, 8192), 10);
   api.cashash.exact_rematch_min_matches = 12;
@@ -207,7 +214,7 @@ TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
     return Resolve(options, {features, features}).rematch_on_matching_thread;
   };
   MatcherCommandOptions defaults;
-  ASSERT_EQ(Parse({"--database_path", "x"}, &defaults), ParseOutcome::kRun);
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_TRUE(on_matching_thread(defaults, 8192));
   EXPECT_TRUE(on_matching_thread(defaults, 16384));
   EXPECT_FALSE(on_matching_thread(defaults, 4096));  // 8 x 8 tables: deferred
@@ -222,6 +229,48 @@ TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
   EXPECT_FALSE(on_matching_thread(guided, 8192));
+}
+
+// auto on the CPU (matcher_choice.h): the cascade's own matches, tables and
+// tau for them, and the exact rematch of the pairs in the window only; a
+// threshold or window set through the library or typed is kept.
+TEST(CommandOptions, AutoOnTheCpuKeepsTheCascadesMatchesAndRematchesTheWindow) {
+  MatcherCommandOptions cpu;
+  ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0"}, &cpu), ParseOutcome::kRun);
+  std::vector<std::string> said;
+  const MatcherCommandOptions run = Resolve(cpu, {8192, 8192}, &said).options;
+  EXPECT_EQ(run.cashash.matcher, MatcherType::kCascade);
+  EXPECT_EQ(run.cashash.exact_rematch_min_matches, kCpuRematchWindowMin);
+  EXPECT_EQ(run.cashash.exact_rematch_max_matches, kCpuRematchWindowMax);
+  EXPECT_EQ(run.cashash.tau, kCascadeTauForPrecision);
+  EXPECT_EQ(run.cashash.num_tables, 8);
+  EXPECT_EQ(run.cashash.bits_per_table, 7);
+  ASSERT_FALSE(said.empty());
+  EXPECT_EQ(said.front(), "Matcher: cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)");
+  MatcherCommandOptions api = cpu;
+  api.cashash.exact_rematch_min_matches = 10;
+  const MatcherCommandOptions kept = Resolve(api, {8192, 8192}).options;
+  EXPECT_EQ(kept.cashash.exact_rematch_min_matches, 10);
+  EXPECT_EQ(kept.cashash.exact_rematch_max_matches, 0);
+  MatcherCommandOptions window;
+  ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0", "--CasHash.exact_rematch_max_matches",
+                   "64"},
+                  &window),
+            ParseOutcome::kRun);
+  EXPECT_EQ(CheckMatcherCommandOptions(window), "");
+  const MatcherCommandOptions typed_window = Resolve(window, {8192, 8192}).options;
+  EXPECT_EQ(typed_window.cashash.exact_rematch_min_matches, kDefaultRematchMinMatches);
+  EXPECT_EQ(typed_window.cashash.exact_rematch_max_matches, 64);
+  MatcherCommandOptions off;
+  ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0", "--CasHash.exact_rematch_min_matches",
+                   "0"},
+                  &off),
+            ParseOutcome::kRun);
+  EXPECT_EQ(Resolve(off, {8192, 8192}).options.cashash.exact_rematch_min_matches, 0);
+  // A window whose top is not above the threshold is refused, naming it.
+  MatcherCommandOptions below;
+  ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_max_matches", "12"}, &below), ParseOutcome::kRun);
+  EXPECT_NE(CheckMatcherCommandOptions(below).find("CasHash.exact_rematch_max_matches"), std::string::npos);
 }
 
 TEST(CommandOptions, GuidedMatchingResolvesAutoToTheCascadeAndRefusesBruteForce) {

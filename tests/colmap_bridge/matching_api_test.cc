@@ -143,6 +143,24 @@ TEST(MatchImagePair, DescriptorsOnlyGiveRawMatches) {
   EXPECT_GE(CorrectMatches(result.matches, a, b), 150u);
 }
 
+// Auto is decided as for a run (ChooseAutoMatcher): MatchImagePair's own
+// matcher keeps the cascade's matches, so auto is the cascade; the CPU
+// factory itself refuses an undecided auto.
+TEST(MatchImagePair, AutoIsTheCascadeAndTheFactoryRefusesItUndecided) {
+  const Scene scene = MakeScene(300, 4);
+  const View a = MakeView(scene, 0, 5), b = MakeView(scene, 1, 6);
+  PairMatchingOptions cascade, automatic;
+  cascade.cashash.matcher = MatcherType::kCascade;
+  automatic.cashash.matcher = MatcherType::kAuto;
+  const PairMatchingResult by_cascade = MatchImagePair(a.keypoints, a.descriptors, b.keypoints, b.descriptors, cascade);
+  const PairMatchingResult by_auto = MatchImagePair(a.keypoints, a.descriptors, b.keypoints, b.descriptors, automatic);
+  EXPECT_GT(by_cascade.matches.size(), 100u);
+  EXPECT_EQ(by_auto.matches, by_cascade.matches);
+  EXPECT_THROW(CreateCpuFeatureMatcher(SiftMatchingOptions(), automatic.cashash,
+                                       ComputeMeanDescriptor({&a.descriptors, &b.descriptors})),
+               std::invalid_argument);
+}
+
 TEST(MatchImagePair, RejectsMismatchedRowsAndBadOptions) {
   const Scene scene = MakeScene(100, 7);
   View a = MakeView(scene, 0, 8);
@@ -275,12 +293,58 @@ TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
     return std::find_if(notes.begin(), notes.end(),
                         [&](const std::string& n) { return n.rfind(prefix, 0) == 0; }) != notes.end();
   };
-  // Hundreds of features per image: the reference's 8 x 7, and a bit more
-  // while the exact rematch decides (the default).
-  EXPECT_TRUE(starts("Hash tables: 8 x 8 bits (chosen for ")) << testing::PrintToString(notes);
-  // Three images make one chunk, and a run's first chunk is never timed
-  // (CpuAutoMatcherOptions): the choice is still open when the run ends.
-  EXPECT_EQ(summary.matcher_name, "auto(cpu-cascade+exact-rematch|cpu-bruteforce)");
+  // Hundreds of features per image: the reference's 8 x 7. On the CPU auto
+  // is the cascade with the rematch of the pairs near the threshold only,
+  // so the tables are chosen for the cascade's own matches.
+  EXPECT_TRUE(starts("Hash tables: 8 x 7 bits (chosen for ")) << testing::PrintToString(notes);
+  EXPECT_TRUE(starts("Matcher: cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)"))
+      << testing::PrintToString(notes);
+  EXPECT_EQ(summary.matcher_name, "cpu-cascade+exact-rematch");
+  // The resolved run carries the window.
+  EXPECT_EQ(summary.run.options.cashash.matcher, MatcherType::kCascade);
+  EXPECT_EQ(summary.run.options.cashash.exact_rematch_min_matches, kCpuRematchWindowMin);
+  EXPECT_EQ(summary.run.options.cashash.exact_rematch_max_matches, kCpuRematchWindowMax);
+  EXPECT_EQ(summary.run.options.cashash.tau, kCascadeTauForPrecision);
+}
+
+// Every column of every row of `table`, in pair order, as text.
+std::vector<std::string> TableRows(const std::string& path, const std::string& table) {
+  sqlite3* db = nullptr;
+  EXPECT_EQ(sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
+  sqlite3_stmt* stmt = nullptr;
+  const std::string sql = "SELECT * FROM " + table + " ORDER BY pair_id";
+  EXPECT_EQ(sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt, nullptr), SQLITE_OK) << sql;
+  std::vector<std::string> rows;
+  while (sqlite3_step(stmt) == SQLITE_ROW) {
+    std::string row;
+    for (int c = 0; c < sqlite3_column_count(stmt); ++c) {
+      const void* bytes = sqlite3_column_blob(stmt, c);
+      row += std::to_string(sqlite3_column_bytes(stmt, c)) + ":";
+      if (bytes != nullptr) row.append(static_cast<const char*>(bytes), sqlite3_column_bytes(stmt, c));
+      row += "|";
+    }
+    rows.push_back(row);
+  }
+  sqlite3_finalize(stmt);
+  sqlite3_close(db);
+  return rows;
+}
+
+// The default decides from the data, not the clock: two runs over the
+// same database write the same rows.
+TEST_F(SceneDatabase, TheDefaultWritesTheSameRowsOnEveryRun) {
+  colmap::MatchExhaustive(path_, options_);
+  const std::vector<std::string> matches = TableRows(path_, "matches");
+  const std::vector<std::string> geometries = TableRows(path_, "two_view_geometries");
+  ASSERT_EQ(matches.size(), 3u);
+  ASSERT_EQ(geometries.size(), 3u);
+  colmap::MatcherCommandOptions again = options_;
+  again.overwrite = true;
+  for (int run = 0; run < 2; ++run) {
+    colmap::MatchExhaustive(path_, again);
+    EXPECT_EQ(TableRows(path_, "matches"), matches) << "run " << run;
+    EXPECT_EQ(TableRows(path_, "two_view_geometries"), geometries) << "run " << run;
+  }
 }
 
 TEST_F(SceneDatabase, TimeOutsideThePipelineIsReportedPhaseByPhase) {

@@ -34,7 +34,8 @@ std::string Decisions(const ResolvedRun& run) {
   const CasHashOptions& c = run.options.cashash;
   std::ostringstream out;
   out << MatcherTypeToString(c.matcher) << " " << c.num_tables << "x" << c.bits_per_table << " tau " << c.tau
-      << " rematch " << c.exact_rematch_min_matches << (run.rematch_on_matching_thread ? " on-matching" : " deferred")
+      << " rematch " << c.exact_rematch_min_matches << " to " << c.exact_rematch_max_matches
+      << (run.rematch_on_matching_thread ? " on-matching" : " deferred")
       << " block " << run.options.block_size << " groups " << run.schedule.blocks_per_group << " keep "
       << run.schedule.matcher_keep_bytes << " host " << run.max_host_bytes << " gpu " << run.max_gpu_bytes
       << " budget " << run.gpu_memory_budget_bytes << " device " << run.gpu_index;
@@ -57,63 +58,112 @@ struct Row {
   std::vector<std::string> args;  // command-line arguments
   void (*set)(MatcherCommandOptions*);  // the same, as Python's keywords set them
   RunFacts facts;
-  // Expected: matcher, tables, tau, rematch threshold and placement, block size.
+  // Expected: matcher, tables, tau, rematch threshold, the window's upper
+  // bound (0: none) and the rematch's placement, block size.
   const char* matcher;
-  int num_tables, bits_per_table, tau, rematch;
+  int num_tables, bits_per_table, tau, rematch, rematch_max;
   bool on_matching_thread;
   int block_size;
   size_t budget;
   const char* command = "exhaustive_matcher";
 };
 
+// A run on device 0 (a pair list; for an exhaustive run `images` images).
+RunFacts GpuFacts(size_t images, size_t rows, bool exhaustive, size_t physical = 16 * kGiB) {
+  return Facts(images, rows, exhaustive, physical, 0, 80 * kGiB);
+}
+
 const std::vector<Row>& Table() {
+  constexpr int kCascade = kCascadeTauForScreening;
+  constexpr int kPrecision = kCascadeTauForPrecision;
+  constexpr int kBucket = kBucketScreeningRematchMinMatches;
+  constexpr int kRuns = kDefaultRematchMinMatches;
+  const auto none = [](MatcherCommandOptions*) {};
   static const std::vector<Row> rows = {
-      {"defaults, 8,192 features: the bucket screen and its threshold", {}, [](MatcherCommandOptions*) {},
-       Facts(2, 8192, false), "auto", 3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true,
-       kDefaultBlockSize, 0},
-      {"defaults, 16,384 features", {}, [](MatcherCommandOptions*) {}, Facts(2, 16384, false), "auto", 3, 10,
-       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, kDefaultBlockSize, 0},
-      {"defaults, 4,096 features: 8 x 8, deferred rematch from 12", {}, [](MatcherCommandOptions*) {},
-       Facts(2, 4096, false), "auto", 8, 8, kCascadeTauForScreening, kDefaultRematchMinMatches, false,
-       kDefaultBlockSize, 0},
-      {"an explicit 12 stays 12", {"--CasHash.exact_rematch_min_matches", "12"},
-       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, Facts(2, 8192, false), "auto", 3,
-       9, kCascadeTauForScreening, 12, true, kDefaultBlockSize, 0},
-      {"no rematch: tables for recall, tau for precision", {"--CasHash.exact_rematch_min_matches", "0"},
-       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 0; }, Facts(2, 8192, false), "auto", 8,
-       7, kCascadeTauForPrecision, 0, false, kDefaultBlockSize, 0},
-      {"tables given: the user's shape and 12", {"--CasHash.num_tables", "6"},
-       [](MatcherCommandOptions* o) { o->cashash.num_tables = 6; }, Facts(2, 8192, false), "auto", 6, 8,
-       kCascadeTauForScreening, kDefaultRematchMinMatches, false, kDefaultBlockSize, 0},
+      // On the GPU auto is the cascade with the runs' rematch of every pair
+      // that may verify: tables that screen, the bucket screen's threshold.
+      {"GPU defaults, 8,192 features: the bucket screen and its threshold", {}, none, GpuFacts(2, 8192, false),
+       "cascade", 3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
+      {"GPU defaults, 16,384 features", {}, none, GpuFacts(2, 16384, false), "cascade", 3, 10, kCascade, kBucket, 0,
+       true, kDefaultBlockSize, 0},
+      {"GPU defaults, 4,096 features: 8 x 8, deferred rematch from 12", {}, none, GpuFacts(2, 4096, false), "cascade",
+       8, 8, kCascade, kRuns, 0, false, kDefaultBlockSize, 0},
+      {"GPU, an explicit 12 stays 12", {"--CasHash.exact_rematch_min_matches", "12"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, GpuFacts(2, 8192, false),
+       "cascade", 3, 9, kCascade, 12, 0, true, kDefaultBlockSize, 0},
+      {"GPU, no rematch: tables for recall, tau for precision", {"--CasHash.exact_rematch_min_matches", "0"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 0; }, GpuFacts(2, 8192, false),
+       "cascade", 8, 7, kPrecision, 0, 0, false, kDefaultBlockSize, 0},
+      {"GPU, tables given: the user's shape and 12", {"--CasHash.num_tables", "6"},
+       [](MatcherCommandOptions* o) { o->cashash.num_tables = 6; }, GpuFacts(2, 8192, false), "cascade", 6, 8,
+       kCascade, kRuns, 0, false, kDefaultBlockSize, 0},
+      {"GPU, a typed window is kept: tables and tau for the cascade's matches",
+       {"--CasHash.exact_rematch_max_matches", "64"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 64; }, GpuFacts(2, 8192, false),
+       "cascade", 8, 7, kPrecision, kRuns, 64, false, kDefaultBlockSize, 0},
       {"tau given", {"--CasHash.tau", "40", "--CasHash.matcher", "cascade"},
        [](MatcherCommandOptions* o) {
          o->cashash.tau = 40;
          o->cashash.matcher = MatcherType::kCascade;
        },
-       Facts(2, 8192, false), "cascade", 3, 9, 40, kBucketScreeningRematchMinMatches, true, kDefaultBlockSize, 0},
+       GpuFacts(2, 8192, false), "cascade", 3, 9, 40, kBucket, 0, true, kDefaultBlockSize, 0},
+      {"the cascade named on the CPU: the runs' rematch, as on the GPU", {"--CasHash.matcher", "cascade"},
+       [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kCascade; }, Facts(2, 8192, false), "cascade",
+       3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
+      // On the CPU auto is the cascade's own matches (tables for recall,
+      // tau for precision) and the exact rematch of the window [12, 96).
+      {"CPU defaults, 8,192 features: the rematch window, the cascade for recall", {}, none, Facts(2, 8192, false),
+       "cascade", 8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+      {"CPU defaults, 16,384 features", {}, none, Facts(2, 16384, false), "cascade", 8, 8, kPrecision,
+       kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+      {"CPU defaults, 4,096 features", {}, none, Facts(2, 4096, false), "cascade", 8, 7, kPrecision,
+       kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+      {"CPU, a typed threshold is kept: no window, the bucket screen", {"--CasHash.exact_rematch_min_matches", "12"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, Facts(2, 8192, false), "cascade",
+       3, 9, kCascade, 12, 0, true, kDefaultBlockSize, 0},
+      {"CPU, a typed window is kept", {"--CasHash.exact_rematch_max_matches", "64"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 64; }, Facts(2, 8192, false), "cascade",
+       8, 7, kPrecision, kRuns, 64, false, kDefaultBlockSize, 0},
+      {"CPU, a typed threshold and window are kept",
+       {"--CasHash.exact_rematch_min_matches", "20", "--CasHash.exact_rematch_max_matches", "48"},
+       [](MatcherCommandOptions* o) {
+         o->cashash.exact_rematch_min_matches = 20;
+         o->cashash.exact_rematch_max_matches = 48;
+       },
+       Facts(2, 8192, false), "cascade", 8, 7, kPrecision, 20, 48, false, kDefaultBlockSize, 0},
+      {"CPU, no rematch", {"--CasHash.exact_rematch_min_matches", "0"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 0; }, Facts(2, 8192, false), "cascade",
+       8, 7, kPrecision, 0, 0, false, kDefaultBlockSize, 0},
+      {"CPU, brute force named", {"--CasHash.matcher", "bruteforce"},
+       [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kBruteForce; }, Facts(2, 8192, false),
+       "bruteforce", 3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
       {"guided matching: the cascade for auto, recall, no screen", {}, [](MatcherCommandOptions* o) {
          o->guided.enabled = true;
        },
-       Facts(2, 8192, false), "cascade", 8, 7, kCascadeTauForPrecision, kDefaultRematchMinMatches, false,
-       kDefaultBlockSize, 0, "guided_matcher"},
+       Facts(2, 8192, false), "cascade", 8, 7, kPrecision, kRuns, 0, false, kDefaultBlockSize, 0, "guided_matcher"},
+      {"guided matching on the GPU", {}, [](MatcherCommandOptions* o) { o->guided.enabled = true; },
+       GpuFacts(2, 8192, false), "cascade", 8, 7, kPrecision, kRuns, 0, false, kDefaultBlockSize, 0,
+       "guided_matcher"},
       {"a pair list keeps a given block size", {"--ExhaustiveMatching.block_size", "20"},
-       [](MatcherCommandOptions* o) { o->block_size = 20; }, Facts(2, 8192, false), "auto", 3, 9,
-       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, 20, 0},
+       [](MatcherCommandOptions* o) { o->block_size = 20; }, Facts(2, 8192, false), "cascade", 8, 7, kPrecision,
+       kCpuRematchWindowMin, kCpuRematchWindowMax, false, 20, 0},
       {"--max_gpu_memory is every GPU matcher's budget, pair lists too", {"--max_gpu_memory", "512M"},
-       [](MatcherCommandOptions* o) { o->max_gpu_memory = "512M"; }, Facts(2, 8192, false, 0, 0, 80 * kGiB), "auto",
-       3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, kDefaultBlockSize, 512 * kMiB},
-      {"exhaustive: the block size from memory, at most 50", {}, [](MatcherCommandOptions*) {},
-       Facts(300, 8192, true, 16 * kGiB), "auto", 3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches,
-       true, 50, 0},
+       [](MatcherCommandOptions* o) { o->max_gpu_memory = "512M"; }, Facts(2, 8192, false, 0, 0, 80 * kGiB),
+       "cascade", 3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 512 * kMiB},
+      {"exhaustive: the block size from memory, at most 50", {}, none, Facts(300, 8192, true, 16 * kGiB), "cascade",
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, 50, 0},
       {"exhaustive with little host memory: smaller blocks", {"--max_host_memory", "200M"},
-       [](MatcherCommandOptions* o) { o->max_host_memory = "200M"; }, Facts(300, 8192, true, 16 * kGiB), "auto", 3, 9,
-       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, -1, 0},
+       [](MatcherCommandOptions* o) { o->max_host_memory = "200M"; }, Facts(300, 8192, true, 16 * kGiB), "cascade",
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, -1, 0},
       {"exhaustive, a given block size", {"--ExhaustiveMatching.block_size", "30"},
-       [](MatcherCommandOptions* o) { o->block_size = 30; }, Facts(300, 8192, true, 16 * kGiB), "auto", 3, 9,
-       kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, 30, 0},
+       [](MatcherCommandOptions* o) { o->block_size = 30; }, Facts(300, 8192, true, 16 * kGiB), "cascade", 8, 7,
+       kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, 30, 0},
       {"exhaustive on a GPU with a budget", {"--max_gpu_memory", "8G"},
-       [](MatcherCommandOptions* o) { o->max_gpu_memory = "8G"; }, Facts(300, 8192, true, 16 * kGiB, 0, 80 * kGiB),
-       "auto", 3, 9, kCascadeTauForScreening, kBucketScreeningRematchMinMatches, true, 50, 8 * kGiB},
+       [](MatcherCommandOptions* o) { o->max_gpu_memory = "8G"; }, GpuFacts(300, 8192, true), "cascade", 3, 9,
+       kCascade, kBucket, 0, true, 50, 8 * kGiB},
+      {"exhaustive on a GPU, little host memory", {"--max_host_memory", "200M"},
+       [](MatcherCommandOptions* o) { o->max_host_memory = "200M"; }, GpuFacts(300, 8192, true), "cascade", 3, 9,
+       kCascade, kBucket, 0, true, -1, 0},
   };
   return rows;
 }
@@ -127,6 +177,7 @@ TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
     EXPECT_EQ(run.options.cashash.bits_per_table, row.bits_per_table);
     EXPECT_EQ(run.options.cashash.tau, row.tau);
     EXPECT_EQ(run.options.cashash.exact_rematch_min_matches, row.rematch);
+    EXPECT_EQ(run.options.cashash.exact_rematch_max_matches, row.rematch_max);
     EXPECT_EQ(run.rematch_on_matching_thread, row.on_matching_thread);
     if (row.block_size > 0) {
       EXPECT_EQ(run.options.block_size, row.block_size);
@@ -185,12 +236,38 @@ TEST(RunResolution, RulesOfTheRematchThresholdAndTheMatcher) {
   EXPECT_EQ(RematchMinMatchesRule(kRematchMinMatchesChosen, true), kBucketScreeningRematchMinMatches);
   EXPECT_EQ(RematchMinMatchesRule(12, true), 12);
   EXPECT_EQ(RematchMinMatchesRule(0, true), 0);
+  // Auto: the cascade, with a rule for the rematch on each device; named
+  // matchers and typed rematch settings are kept.
   MatcherCommandOptions options;
+  const MatcherChoice cpu = MatcherRule(options, false, 8192);
+  EXPECT_EQ(cpu.matcher, MatcherType::kCascade);
+  EXPECT_EQ(cpu.exact_rematch_min_matches, kCpuRematchWindowMin);
+  EXPECT_EQ(cpu.exact_rematch_max_matches, kCpuRematchWindowMax);
+  EXPECT_EQ(cpu.reason, "cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)");
+  const MatcherChoice gpu = MatcherRule(options, true, 8192, kBucketScreeningRematchMinMatches);
+  EXPECT_EQ(gpu.matcher, MatcherType::kCascade);
+  EXPECT_EQ(gpu.exact_rematch_min_matches, kBucketScreeningRematchMinMatches);
+  EXPECT_EQ(gpu.exact_rematch_max_matches, 0);
+  EXPECT_EQ(gpu.reason, "cascade, exact rematch of pairs with at least 8 cascade matches (GPU rule)");
+  MatcherCommandOptions typed = options;
+  typed.cashash.exact_rematch_min_matches = 12;
   for (const bool on_gpu : {false, true}) {
-    EXPECT_EQ(MatcherTypeRule(options, on_gpu), MatcherType::kAuto);
-    options.guided.enabled = true;
-    EXPECT_EQ(MatcherTypeRule(options, on_gpu), MatcherType::kCascade);
-    options.guided.enabled = false;
+    const MatcherChoice kept = MatcherRule(typed, on_gpu, 8192);
+    EXPECT_EQ(kept.exact_rematch_min_matches, 12);
+    EXPECT_EQ(kept.exact_rematch_max_matches, 0);
+  }
+  MatcherCommandOptions window = options;
+  window.cashash.exact_rematch_max_matches = 64;
+  EXPECT_EQ(MatcherRule(window, false, 8192).exact_rematch_min_matches, kDefaultRematchMinMatches);
+  EXPECT_EQ(MatcherRule(window, false, 8192).exact_rematch_max_matches, 64);
+  MatcherCommandOptions guided = options;
+  guided.guided.enabled = true;
+  MatcherCommandOptions brute_force = options;
+  brute_force.cashash.matcher = MatcherType::kBruteForce;
+  for (const bool on_gpu : {false, true}) {
+    EXPECT_EQ(MatcherRule(guided, on_gpu, 8192).matcher, MatcherType::kCascade);
+    EXPECT_EQ(MatcherRule(guided, on_gpu, 8192).exact_rematch_max_matches, 0);
+    EXPECT_EQ(MatcherRule(brute_force, on_gpu, 8192).matcher, MatcherType::kBruteForce);
   }
 }
 

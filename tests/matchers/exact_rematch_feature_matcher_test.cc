@@ -81,6 +81,25 @@ TEST(ExactRematchFeatureMatcher, PairsThatMayVerifyGetTheExactMatches) {
   EXPECT_EQ(matcher.Name(), "canned+exact-rematch");
 }
 
+// A window [min, max): only the pairs near the verification threshold are
+// matched again; those above it keep the cascade's matches.
+TEST(ExactRematchFeatureMatcher, AWindowRematchesOnlyThePairsInsideIt) {
+  auto cascade = std::make_unique<CannedMatcher>();
+  CannedMatcher* c = cascade.get();
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 3, nullptr, nullptr, 5);
+  for (image_t id = 0; id < 5; ++id) matcher.AddImage(id, FeatureDescriptors{});
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 4}, {0, 2}, {2, 3}, {0, 4}, {1, 2}};
+  const std::vector<FeatureMatches> results = matcher.MatchPairs(pairs);
+  // Cascade counts: 1, 5, 2, 5, 4, 3 -> (0,4) and (1,2) lie in [3, 5).
+  EXPECT_EQ(c->asked_exact, (std::vector<ImagePair>{{0, 4}, {1, 2}}));
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const size_t cascade_count = pairs[i].first + pairs[i].second;
+    const bool again = cascade_count >= 3 && cascade_count < 5;
+    ASSERT_EQ(results[i].size(), again ? cascade_count + 1 : cascade_count) << i;
+  }
+  EXPECT_EQ(matcher.pairs_rematched(), 2u);
+}
+
 TEST(ExactRematchFeatureMatcher, GuidedMatchingStaysWithTheCascade) {
   auto cascade = std::make_unique<CannedMatcher>();
   CannedMatcher* c = cascade.get();
@@ -95,6 +114,8 @@ TEST(ExactRematchFeatureMatcher, RejectsABackendWithoutExactMatchingOrAZeroThres
   EXPECT_THROW(ExactRematchFeatureMatcher(nullptr, 5), std::invalid_argument);
   EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(false), 5), std::invalid_argument);
   EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(), 0), std::invalid_argument);
+  EXPECT_THROW(ExactRematchFeatureMatcher(std::make_unique<CannedMatcher>(), 5, nullptr, nullptr, 5),
+               std::invalid_argument);
 }
 
 // With the CPU cascade the rematched pairs' matches are brute force's, match

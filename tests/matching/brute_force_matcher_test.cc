@@ -91,10 +91,12 @@ FeatureMatches NaiveMatch(const FeatureDescriptors& a, const FeatureDescriptors&
   return matches;
 }
 
-FeatureMatches Match(const FeatureDescriptors& a, const FeatureDescriptors& b,
-                     const SiftMatchingOptions& o) {
-  return BruteForceMatchPair(WidenDescriptors(a, a.rows()), WidenDescriptors(b, b.rows()), o);
+FeatureMatches Match(const FeatureDescriptors& a, const FeatureDescriptors& b, const SiftMatchingOptions& o,
+                     DotKernel kernel = BestDotKernel()) {
+  return BruteForceMatchPair(WidenDescriptors(a, a.rows(), kernel), WidenDescriptors(b, b.rows(), kernel), o);
 }
+
+const DotKernel kAllKernels[] = {DotKernel::kInt16Avx2, DotKernel::kInt8AvxVnni, DotKernel::kInt8Vnni512};
 
 struct Toggle {
   double max_ratio;
@@ -115,7 +117,12 @@ TEST_P(BruteForceAgainstNaive, SameMatches) {
     FeatureDescriptors a, b;
     MakePair(sizes[s].first, sizes[s].second, 12, uint32_t(100 + s), &a, &b);
     const FeatureMatches expected = NaiveMatch(a, b, o);
-    EXPECT_EQ(Match(a, b, o), expected) << "sizes " << sizes[s].first << " x " << sizes[s].second;
+    // Every kernel this processor runs gives the same, exact matches.
+    for (const DotKernel kernel : kAllKernels) {
+      if (!DotKernelAvailable(kernel)) continue;
+      EXPECT_EQ(Match(a, b, o, kernel), expected)
+          << DotKernelName(kernel) << ", sizes " << sizes[s].first << " x " << sizes[s].second;
+    }
     if (s == 1) {
       EXPECT_GT(expected.size(), 50u);  // the test data does produce matches
     }
@@ -155,14 +162,17 @@ TEST(BruteForce, TiesGoToTheLowestIndexAndFailTheRatioTest) {
   SiftMatchingOptions o;
   o.cross_check = false;
   EXPECT_TRUE(Match(a, b, o).empty());  // best == second best: ratio test fails
-  BestTwo ab, ba;
-  ComputeBestTwoBothWays(WidenDescriptors(a, 1), WidenDescriptors(b, 3), &ab, &ba);
-  ASSERT_EQ(ab.best_index.size(), 1u);
-  EXPECT_EQ(ab.best_index[0], 1);
-  EXPECT_EQ(ab.best_dot[0], ab.second_dot[0]);
-  ASSERT_EQ(ba.best_index.size(), 3u);
-  EXPECT_EQ(ba.best_index[1], 0);
-  EXPECT_EQ(ba.second_dot[1], 0);  // one feature in a: second best defaults to 0
+  for (const DotKernel kernel : kAllKernels) {
+    if (!DotKernelAvailable(kernel)) continue;
+    BestTwo ab, ba;
+    ComputeBestTwoBothWays(WidenDescriptors(a, 1, kernel), WidenDescriptors(b, 3, kernel), &ab, &ba);
+    ASSERT_EQ(ab.best_index.size(), 1u) << DotKernelName(kernel);
+    EXPECT_EQ(ab.best_index[0], 1) << DotKernelName(kernel);
+    EXPECT_EQ(ab.best_dot[0], ab.second_dot[0]) << DotKernelName(kernel);
+    ASSERT_EQ(ba.best_index.size(), 3u) << DotKernelName(kernel);
+    EXPECT_EQ(ba.best_index[1], 0) << DotKernelName(kernel);
+    EXPECT_EQ(ba.second_dot[1], 0) << DotKernelName(kernel);  // one feature in a: second best defaults to 0
+  }
   EXPECT_EQ(NaiveMatch(a, b, o), Match(a, b, o));
 }
 
@@ -205,13 +215,44 @@ TEST(BruteForce, WidenTruncatesAndPads) {
     const auto r = RandomSift(&rng);
     a.data.insert(a.data.end(), r.begin(), r.end());
   }
-  const WideDescriptors w = WidenDescriptors(a, 5);
+  const WideDescriptors w = WidenDescriptors(a, 5, DotKernel::kInt16Avx2);
   EXPECT_EQ(w.rows, 5u);
   EXPECT_EQ(w.padded_rows(), 8u);
   for (int d = 0; d < kDescriptorDim; ++d) {
     EXPECT_EQ(w.row(4)[d], a.row(4)[d]);
     EXPECT_EQ(w.row(5)[d], 0);
   }
+}
+
+// The int8 layout: rows as d - 128 padded with -128 rows, columns in groups
+// of 16 features, 4 bytes of each per 4 dimensions, with 128 * sum(d).
+TEST(BruteForce, Int8LayoutPadsRowsAndColumnsToDotZero) {
+  std::mt19937 rng(6);
+  FeatureDescriptors a;
+  for (int i = 0; i < 18; ++i) {
+    const auto r = RandomSift(&rng);
+    a.data.insert(a.data.end(), r.begin(), r.end());
+  }
+  const WideDescriptors w = WidenDescriptors(a, 17, DotKernel::kInt8Vnni512);
+  EXPECT_EQ(w.rows, 17u);
+  EXPECT_EQ(w.signed_rows.size(), 20u * kDescriptorDim);
+  EXPECT_EQ(w.column_sums.size(), 32u);
+  EXPECT_EQ(w.columns.size(), 32u * kDescriptorDim);
+  int sum = 0;
+  for (int d = 0; d < kDescriptorDim; ++d) {
+    EXPECT_EQ(w.signed_rows[16 * kDescriptorDim + d], int(a.row(16)[d]) - 128);
+    EXPECT_EQ(w.signed_rows[17 * kDescriptorDim + d], -128);
+    // Feature 16 is lane 0 of the second group.
+    EXPECT_EQ(w.columns[16 * kDescriptorDim + (d / 4) * 64 + d % 4], a.row(16)[d]);
+    sum += a.row(16)[d];
+  }
+  EXPECT_EQ(w.column_sums[16], 128 * sum);
+  EXPECT_EQ(w.column_sums[17], 0);
+}
+
+TEST(BruteForce, TheBestKernelIsAvailable) {
+  EXPECT_TRUE(DotKernelAvailable(BestDotKernel())) << DotKernelName(BestDotKernel());
+  EXPECT_TRUE(DotKernelAvailable(DotKernel::kInt16Avx2));
 }
 
 }  // namespace

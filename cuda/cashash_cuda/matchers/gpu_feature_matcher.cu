@@ -13,7 +13,6 @@
 #include <utility>
 #include <vector>
 
-#include "cashash/matchers/auto_feature_matcher.h"
 #include "cashash/matching/table_shape.h"
 #include "cashash_cuda/matching/brute_force_matcher.cuh"
 #include "cashash_cuda/matchers/gpu_cascade_feature_matcher.h"
@@ -187,16 +186,13 @@ bool CudaDeviceUsable(int gpu_index, std::string* reason) {
 std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean, const GpuMatcherConfig& config) {
+  // Auto is decided from the run's data before any matcher is built
+  // (ChooseAutoMatcher, cashash/matching/matcher_choice.h).
+  if (cashash_options.matcher == MatcherType::kAuto) {
+    throw std::invalid_argument("CasHash.matcher auto must be resolved (ChooseAutoMatcher) before a matcher is built");
+  }
   if (cashash_options.matcher == MatcherType::kBruteForce) {
     return std::make_unique<GpuBruteForceMatcher>(sift_options, config);
-  }
-  if (cashash_options.matcher == MatcherType::kAuto) {
-    CasHashOptions cascade = cashash_options, brute_force = cashash_options;
-    cascade.matcher = MatcherType::kCascade;
-    brute_force.matcher = MatcherType::kBruteForce;
-    return std::make_unique<AutoFeatureMatcher>(CreateGpuFeatureMatcher(sift_options, cascade, mean, config),
-                                                CreateGpuFeatureMatcher(sift_options, brute_force, mean, config),
-                                                GpuAutoMatcherOptions(), nullptr);
   }
   // Tables still at 0 (chosen per run, table_shape.h): the shape of 8,192
   // features, as the CPU backend.

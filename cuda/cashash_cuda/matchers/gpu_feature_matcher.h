@@ -17,7 +17,9 @@ int NumCudaDevices();
 // True if device gpu_index can be used; otherwise *reason says why.
 bool CudaDeviceUsable(int gpu_index, std::string* reason);
 
-// Throws std::runtime_error when the device cannot be used.
+// Throws std::runtime_error when the device cannot be used, and
+// std::invalid_argument for MatcherType::kAuto (decided first:
+// ChooseAutoMatcher, cashash/matching/matcher_choice.h).
 std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean, const GpuMatcherConfig& config);

@@ -7,7 +7,6 @@
 #include <stdexcept>
 #include <string>
 
-#include "cashash/matchers/auto_feature_matcher.h"
 #include "cashash/matching/brute_force_matcher.h"
 #include "cashash/matching/cascade_hashing.h"
 #include "cashash/matching/cascade_matcher.h"
@@ -156,13 +155,10 @@ class CpuFeatureMatcher : public FeatureMatcher {
 std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean) {
+  // Auto is decided from the run's data before any matcher is built
+  // (ChooseAutoMatcher, matcher_choice.h).
   if (cashash_options.matcher == MatcherType::kAuto) {
-    CasHashOptions cascade = cashash_options, brute_force = cashash_options;
-    cascade.matcher = MatcherType::kCascade;
-    brute_force.matcher = MatcherType::kBruteForce;
-    return std::make_unique<AutoFeatureMatcher>(std::make_unique<CpuFeatureMatcher>(sift_options, cascade, mean),
-                                                std::make_unique<CpuFeatureMatcher>(sift_options, brute_force, mean),
-                                                CpuAutoMatcherOptions(sift_options), nullptr);
+    throw std::invalid_argument("CasHash.matcher auto must be resolved (ChooseAutoMatcher) before a matcher is built");
   }
   return std::make_unique<CpuFeatureMatcher>(sift_options, cashash_options, mean);
 }

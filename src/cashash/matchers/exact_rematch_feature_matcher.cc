@@ -66,9 +66,10 @@ class DeferredExactRematch : public DeferredMatching {
 
 ExactRematchFeatureMatcher::ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
                                                        std::shared_ptr<ExactRematchCounts> counts,
-                                                       std::shared_ptr<ExactMatcherPool> pool)
+                                                       std::shared_ptr<ExactMatcherPool> pool, size_t max_matches)
     : cascade_(std::move(cascade)),
       min_matches_(min_matches),
+      max_matches_(max_matches),
       counts_(counts ? std::move(counts) : std::make_shared<ExactRematchCounts>()),
       pool_(std::move(pool)) {
   if (!cascade_) throw std::invalid_argument("ExactRematchFeatureMatcher needs a matcher");
@@ -77,6 +78,9 @@ ExactRematchFeatureMatcher::ExactRematchFeatureMatcher(std::unique_ptr<FeatureMa
                                 " matcher cannot match exactly from its own descriptors");
   }
   if (min_matches_ == 0) throw std::invalid_argument("ExactRematchFeatureMatcher needs min_matches > 0");
+  if (max_matches_ != 0 && max_matches_ <= min_matches_) {
+    throw std::invalid_argument("ExactRematchFeatureMatcher needs max_matches 0 or above min_matches");
+  }
 }
 
 void ExactRematchFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
@@ -93,7 +97,8 @@ void ExactRematchFeatureMatcher::RemoveImage(image_t image_id) { cascade_->Remov
 std::vector<size_t> ExactRematchFeatureMatcher::PairsToRematch(const std::vector<FeatureMatches>& results) const {
   std::vector<size_t> again;
   for (size_t i = 0; i < results.size(); ++i) {
-    if (results[i].size() >= min_matches_) again.push_back(i);
+    const size_t found = results[i].size();
+    if (found >= min_matches_ && (max_matches_ == 0 || found < max_matches_)) again.push_back(i);
   }
   return again;
 }

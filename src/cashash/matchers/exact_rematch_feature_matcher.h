@@ -55,13 +55,16 @@ using ExactMatcherPool = ObjectPool<FeatureMatcher>;
 
 class ExactRematchFeatureMatcher : public FeatureMatcher {
  public:
-  // `cascade` must support MatchPairsExact; `min_matches` > 0. `counts` may
+  // `cascade` must support MatchPairsExact; `min_matches` > 0; `max_matches`
+  // 0 (no upper bound) or above min_matches: then only pairs with fewer
+  // cascade matches are matched again (CasHashOptions::
+  // exact_rematch_max_matches). `counts` may
   // be null (the matcher then keeps its own). With a `pool`,
   // MatchPairsDeferred leaves the rematch to its caller (see above);
   // MatchPairs always rematches at once, from the cascade's descriptors.
   ExactRematchFeatureMatcher(std::unique_ptr<FeatureMatcher> cascade, size_t min_matches,
                              std::shared_ptr<ExactRematchCounts> counts = nullptr,
-                             std::shared_ptr<ExactMatcherPool> pool = nullptr);
+                             std::shared_ptr<ExactMatcherPool> pool = nullptr, size_t max_matches = 0);
 
   void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
   void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
@@ -82,11 +85,13 @@ class ExactRematchFeatureMatcher : public FeatureMatcher {
   size_t pairs_rematched() const { return counts_->rematched; }
 
  private:
-  // Indices of the pairs whose cascade matches reach min_matches.
+  // Indices of the pairs whose cascade matches reach min_matches (and stay
+  // below max_matches where that is set).
   std::vector<size_t> PairsToRematch(const std::vector<FeatureMatches>& cascade_matches) const;
 
   std::unique_ptr<FeatureMatcher> cascade_;
   size_t min_matches_;
+  size_t max_matches_;
   std::shared_ptr<ExactRematchCounts> counts_;
   std::shared_ptr<ExactMatcherPool> pool_;
 };

@@ -117,8 +117,9 @@ class FeatureMatcher {
   }
 };
 
-// CPU backends (multi-threaded over pairs). MatcherType::kAuto gives an
-// AutoFeatureMatcher over the CPU cascade and brute force.
+// CPU backends (multi-threaded over pairs). MatcherType::kAuto is refused
+// (std::invalid_argument): it is decided first (ChooseAutoMatcher,
+// matcher_choice.h), as are the GPU backends'.
 std::unique_ptr<FeatureMatcher> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                         const CasHashOptions& cashash_options,
                                                         const MeanDescriptor& mean);

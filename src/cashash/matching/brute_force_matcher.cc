@@ -1,7 +1,9 @@
 #include "cashash/matching/brute_force_matcher.h"
 
 #include <algorithm>
+#include <stdexcept>
 
+#include "cashash/matching/best_two_tracker.h"
 #include "cashash/matching/descriptor_distance.h"
 
 #if defined(__AVX2__)
@@ -10,37 +12,86 @@
 
 namespace cashash {
 
-WideDescriptors WidenDescriptors(const FeatureDescriptors& descriptors, size_t num_rows) {
-  num_rows = std::min(num_rows, descriptors.rows());
-  WideDescriptors wide;
-  wide.rows = num_rows;
-  const size_t padded = (num_rows + WideDescriptors::kRowPadding - 1) /
-                        WideDescriptors::kRowPadding * WideDescriptors::kRowPadding;
-  wide.data.assign(padded * kDescriptorDim, 0);
-  for (size_t i = 0; i < num_rows * kDescriptorDim; ++i) wide.data[i] = descriptors.data[i];
-  return wide;
+bool DotKernelAvailable(DotKernel kernel) {
+  switch (kernel) {
+    case DotKernel::kInt16Avx2:
+      return true;  // the build's baseline (a scalar loop without AVX2)
+    case DotKernel::kInt8AvxVnni:
+      return ProcessorHasAvxVnni();
+    case DotKernel::kInt8Vnni512:
+      return ProcessorHasVnni512();
+  }
+  return false;
+}
+
+DotKernel BestDotKernel() {
+  static const DotKernel best = [] {
+    if (DotKernelAvailable(DotKernel::kInt8Vnni512)) return DotKernel::kInt8Vnni512;
+    if (DotKernelAvailable(DotKernel::kInt8AvxVnni)) return DotKernel::kInt8AvxVnni;
+    return DotKernel::kInt16Avx2;
+  }();
+  return best;
+}
+
+std::string DotKernelName(DotKernel kernel) {
+  switch (kernel) {
+    case DotKernel::kInt16Avx2:
+      return "int16-avx2";
+    case DotKernel::kInt8AvxVnni:
+      return "int8-avx-vnni";
+    case DotKernel::kInt8Vnni512:
+      return "int8-avx512-vnni";
+  }
+  return "unknown";
 }
 
 namespace {
 
-// Running best / second best of one feature. Candidates arrive in ascending
-// index order and only a strictly larger dot replaces the best, so ties keep
-// the lowest index (COLMAP's loop does the same).
-inline void Update(int dot, int index, int* best_dot, int* best_index, int* second_dot) {
-  if (dot > *best_dot) {
-    *second_dot = *best_dot;
-    *best_dot = dot;
-    *best_index = index;
-  } else if (dot > *second_dot) {
-    *second_dot = dot;
+size_t RoundUp(size_t n, size_t multiple) { return (n + multiple - 1) / multiple * multiple; }
+
+void LayOutInt16(const FeatureDescriptors& descriptors, WideDescriptors* wide) {
+  wide->data.assign(RoundUp(wide->rows, WideDescriptors::kRowPadding) * kDescriptorDim, 0);
+  for (size_t i = 0; i < wide->rows * kDescriptorDim; ++i) wide->data[i] = descriptors.data[i];
+}
+
+void LayOutInt8(const FeatureDescriptors& descriptors, WideDescriptors* wide) {
+  const size_t rows = wide->rows;
+  wide->signed_rows.assign(RoundUp(rows, WideDescriptors::kRowPadding) * kDescriptorDim, static_cast<int8_t>(-128));
+  for (size_t i = 0; i < rows * kDescriptorDim; ++i) {
+    wide->signed_rows[i] = static_cast<int8_t>(static_cast<int>(descriptors.data[i]) - 128);
+  }
+  const size_t padded_columns = RoundUp(rows, WideDescriptors::kColumnPadding);
+  wide->columns.assign(padded_columns * kDescriptorDim, 0);
+  wide->column_sums.assign(padded_columns, 0);
+  constexpr size_t kGroup = WideDescriptors::kColumnGroup;
+  for (size_t j = 0; j < rows; ++j) {
+    const uint8_t* row = descriptors.row(j);
+    uint8_t* group = wide->columns.data() + (j / kGroup) * kGroup * kDescriptorDim;
+    const size_t lane = j % kGroup;
+    int32_t sum = 0;
+    for (int d = 0; d < kDescriptorDim; ++d) {
+      group[(d / 4) * kGroup * 4 + lane * 4 + d % 4] = row[d];
+      sum += row[d];
+    }
+    wide->column_sums[j] = 128 * sum;
   }
 }
 
-void InitBestTwo(size_t n, BestTwo* best) {
-  best->best_dot.assign(n, 0);
-  best->best_index.assign(n, -1);
-  best->second_dot.assign(n, 0);
+}  // namespace
+
+WideDescriptors WidenDescriptors(const FeatureDescriptors& descriptors, size_t num_rows, DotKernel kernel) {
+  WideDescriptors wide;
+  wide.kernel = kernel;
+  wide.rows = std::min(num_rows, descriptors.rows());
+  if (kernel == DotKernel::kInt16Avx2) {
+    LayOutInt16(descriptors, &wide);
+  } else {
+    LayOutInt8(descriptors, &wide);
+  }
+  return wide;
 }
+
+namespace {
 
 // Rows of a per block: the block of a (kBlockA x 256 bytes) stays in L2 while
 // all of b streams past it.
@@ -91,8 +142,7 @@ inline void Fold(__m128i dots, int i, int j, BestTwo* rows, BestTwo* cols) {
   alignas(16) int d[4];
   _mm_store_si128(reinterpret_cast<__m128i*>(d), dots);
   for (int c = 0; c < 4; ++c) {
-    Update(d[c], j + c, &rows->best_dot[i], &rows->best_index[i], &rows->second_dot[i]);
-    Update(d[c], i, &cols->best_dot[j + c], &cols->best_index[j + c], &cols->second_dot[j + c]);
+    UpdateBothWays(d[c], static_cast<size_t>(i), static_cast<size_t>(j + c), rows, cols);
   }
 }
 
@@ -108,14 +158,11 @@ int ScalarDot(const int16_t* a, const int16_t* b) {
 
 }  // namespace
 
-void ComputeBestTwoBothWays(const WideDescriptors& a, const WideDescriptors& b, BestTwo* a_to_b,
-                            BestTwo* b_to_a) {
-  // Trackers sized to the padded rows; padding rows/columns only ever see
-  // dot 0 and never update anything, and are cut off at the end.
+namespace {
+
+void BestTwoInt16(const WideDescriptors& a, const WideDescriptors& b, BestTwo* a_to_b, BestTwo* b_to_a) {
   const size_t na = a.padded_rows();
   const size_t nb = b.padded_rows();
-  InitBestTwo(na, a_to_b);
-  InitBestTwo(nb, b_to_a);
   for (size_t i0 = 0; i0 < na; i0 += kBlockA) {
     const size_t i1 = std::min(na, i0 + kBlockA);
     // For every column the rows arrive in ascending order: blocks of a are
@@ -133,13 +180,32 @@ void ComputeBestTwoBothWays(const WideDescriptors& a, const WideDescriptors& b, 
       for (size_t i = i0; i < i1; ++i) {
         for (size_t c = j; c < j + 4; ++c) {
           const int dot = ScalarDot(a.row(i), b.row(c));
-          Update(dot, static_cast<int>(c), &a_to_b->best_dot[i], &a_to_b->best_index[i],
-                 &a_to_b->second_dot[i]);
-          Update(dot, static_cast<int>(i), &b_to_a->best_dot[c], &b_to_a->best_index[c],
-                 &b_to_a->second_dot[c]);
+          UpdateBothWays(dot, i, c, a_to_b, b_to_a);
         }
       }
 #endif
+    }
+  }
+}
+
+}  // namespace
+
+void ComputeBestTwoBothWays(const WideDescriptors& a, const WideDescriptors& b, BestTwo* a_to_b,
+                            BestTwo* b_to_a) {
+  if (a.kernel != b.kernel) throw std::invalid_argument("ComputeBestTwoBothWays: a and b laid out for two kernels");
+  // Trackers sized to the padded rows and columns; padding only ever sees
+  // dot 0 and never updates anything, and is cut off at the end.
+  if (a.kernel == DotKernel::kInt16Avx2) {
+    InitBestTwo(a.padded_rows(), a_to_b);
+    InitBestTwo(b.padded_rows(), b_to_a);
+    BestTwoInt16(a, b, a_to_b, b_to_a);
+  } else {
+    InitBestTwo(a.signed_rows.size() / kDescriptorDim, a_to_b);
+    InitBestTwo(b.column_sums.size(), b_to_a);
+    if (a.kernel == DotKernel::kInt8Vnni512) {
+      BestTwoInt8Vnni512(a, b, a_to_b, b_to_a);
+    } else {
+      BestTwoInt8AvxVnni(a, b, a_to_b, b_to_a);
     }
   }
   for (BestTwo* best : {a_to_b, b_to_a}) {

@@ -37,16 +37,23 @@ std::string CasHashOptions::Check() const {
     error << "CasHash.top_k must be >= 1, got " << top_k;
   } else if (exact_rematch_min_matches < 0) {
     error << "CasHash.exact_rematch_min_matches must be >= 0 (0 = off), got " << exact_rematch_min_matches;
+  } else if (exact_rematch_max_matches < 0) {
+    error << "CasHash.exact_rematch_max_matches must be >= 0 (0 = no upper bound), got "
+          << exact_rematch_max_matches;
+  } else if (exact_rematch_max_matches > 0 && exact_rematch_max_matches <= exact_rematch_min_matches) {
+    error << "CasHash.exact_rematch_max_matches must be 0 or above CasHash.exact_rematch_min_matches ("
+          << exact_rematch_min_matches << "), got " << exact_rematch_max_matches;
   }
   return error.str();
 }
 
-bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided) {
-  return exact_rematch_min_matches > 0 && !guided;
+bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches) {
+  return exact_rematch_min_matches > 0 && exact_rematch_max_matches == 0 && !guided;
 }
 
-int ChooseCascadeTau(int exact_rematch_min_matches, bool guided) {
-  return CascadeOnlyScreens(exact_rematch_min_matches, guided) ? kCascadeTauForScreening : kCascadeTauForPrecision;
+int ChooseCascadeTau(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches) {
+  return CascadeOnlyScreens(exact_rematch_min_matches, guided, exact_rematch_max_matches) ? kCascadeTauForScreening
+                                                                                          : kCascadeTauForPrecision;
 }
 
 std::string MatcherTypeToString(MatcherType type) {

@@ -26,8 +26,9 @@ struct SiftMatchingOptions {
   std::string Check() const;
 };
 
-// kAuto measures both on the run's first pairs and keeps the faster
-// (auto_feature_matcher.h).
+// kAuto is resolved from the run's data before any pair is matched
+// (ChooseAutoMatcher, matcher_choice.h): never from timings, so that the
+// same database and options write the same rows on every run.
 enum class MatcherType { kCascade, kBruteForce, kAuto };
 
 struct CasHashOptions {
@@ -87,6 +88,13 @@ struct CasHashOptions {
   // min_num_inliers = 15 exact matches falls below 12 cascade matches with
   // probability about 1 %. Unused by brute force and guided matching.
   int exact_rematch_min_matches = 0;
+  // When > 0, only pairs with fewer cascade matches than this are matched
+  // again exactly (a window [exact_rematch_min_matches, this)): the pairs
+  // near min_num_inliers, whose verification a few missed matches can
+  // decide. Pairs above keep the cascade's matches, so the cascade's tables
+  // and tau are then chosen for recall and precision (CascadeOnlyScreens).
+  // 0 = no upper bound. The CPU's auto rule sets it (matcher_choice.h).
+  int exact_rematch_max_matches = 0;
 
   std::string Check() const;
 };
@@ -111,12 +119,14 @@ constexpr int kCascadeTauForScreening = 32;
 // rematch, not fed to guided matching's stage-1 model). Its tau and its
 // tables (TableShapeGoal) are chosen for screening then, for precision and
 // recall otherwise.
-bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided);
+// A rematch window with an upper bound (exact_rematch_max_matches > 0)
+// keeps the cascade's matches above it: the cascade does not only screen.
+bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches = 0);
 
 // The tau a run uses when its options leave it at 0 (the commands'
 // default): kCascadeTauForScreening where CascadeOnlyScreens, else
 // kCascadeTauForPrecision.
-int ChooseCascadeTau(int exact_rematch_min_matches, bool guided);
+int ChooseCascadeTau(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches = 0);
 
 std::string MatcherTypeToString(MatcherType type);
 // Returns false on an unknown name.

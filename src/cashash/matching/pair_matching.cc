@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 
+#include "cashash/matching/matcher_choice.h"
 #include "cashash/matching/table_shape.h"
 
 namespace cashash {
@@ -73,10 +74,18 @@ PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDesc
 
   std::unique_ptr<FeatureMatcher> own_matcher;
   if (matcher == nullptr) {
-    // Tables at 0: chosen for the larger of the two images.
-    const CasHashOptions cashash = ResolveTableShape(
-        options.cashash,
-        TypicalFeatureCount({descriptors1.rows(), descriptors2.rows()}, options.sift.max_num_matches));
+    // Auto decided as a run's is (ChooseAutoMatcher): this matcher keeps the
+    // cascade's own matches, so the rematch counts as set (to none) and
+    // auto is the cascade. Tables at 0: chosen for the larger of the two
+    // images.
+    const size_t features =
+        TypicalFeatureCount({descriptors1.rows(), descriptors2.rows()}, options.sift.max_num_matches);
+    MatcherChoiceInput input;
+    input.on_gpu = false;
+    input.features_per_image = features;
+    input.rematch_from_rule = false;
+    const CasHashOptions cashash =
+        ResolveTableShape(ApplyMatcherChoice(options.cashash, ChooseAutoMatcher(options.cashash, input)), features);
     own_matcher = CreateCpuFeatureMatcher(options.sift, cashash, ComputeMeanDescriptor({&descriptors1, &descriptors2}));
     matcher = own_matcher.get();
   }

@@ -39,7 +39,8 @@ Camera GuessCamera(const Keypoints& keypoints, uint64_t width = 0, uint64_t heig
 // per descriptor row), verifies the matches geometrically. A null camera is
 // guessed with GuessCamera. `matcher` may be a backend the caller keeps (a
 // GPU one, or one reused over many pairs); its image ids 0 and 1 are
-// replaced. Null: a CPU matcher hashing with the mean of the two images.
+// replaced. Null: a CPU matcher hashing with the mean of the two images
+// (MatcherType::kAuto decided by ChooseAutoMatcher: the cascade).
 // Throws std::invalid_argument for bad options or mismatched row counts.
 PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDescriptors& descriptors1,
                                   const Keypoints& keypoints2, const FeatureDescriptors& descriptors2,
