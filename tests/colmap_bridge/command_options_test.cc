@@ -234,7 +234,7 @@ TEST(CommandOptions, AutoOnTheCpuKeepsTheCascadesMatchesAndRematchesTheWindow) {
   EXPECT_EQ(run.cashash.num_tables, 8);
   EXPECT_EQ(run.cashash.bits_per_table, 7);
   ASSERT_FALSE(said.empty());
-  EXPECT_EQ(said.front(), "Matcher: cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)");
+  EXPECT_EQ(said.front(), "Matcher: cascade, exact rematch of pairs with 12 to 63 cascade matches (CPU rule)");
   MatcherCommandOptions api = cpu;
   api.cashash.exact_rematch_min_matches = 10;
   const MatcherCommandOptions kept = ResolveOptionsForRun(api, {8192, 8192}, nullptr);
