@@ -146,7 +146,7 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
             std::to_string(kDefaultRematchMinMatches));
   table.Add({"CasHash.exact_rematch_max_matches"}, &o.cashash.exact_rematch_max_matches,
             "When > 0, only pairs with fewer cascade matches than this are matched again exactly; 0 = no upper "
-            "bound (CasHash.matcher auto on the CPU: 12 to 95 unless either rematch option is given)");
+            "bound (CasHash.matcher auto on the CPU: 12 to 63 unless either rematch option is given)");
 
   if (command == "guided_matcher") o.guided.enabled = true;
   table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,

@@ -246,7 +246,7 @@ TEST(CommandOptions, AutoOnTheCpuKeepsTheCascadesMatchesAndRematchesTheWindow) {
   EXPECT_EQ(run.cashash.num_tables, 8);
   EXPECT_EQ(run.cashash.bits_per_table, 7);
   ASSERT_FALSE(said.empty());
-  EXPECT_EQ(said.front(), "Matcher: cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)");
+  EXPECT_EQ(said.front(), "Matcher: cascade, exact rematch of pairs with 12 to 63 cascade matches (CPU rule)");
   MatcherCommandOptions api = cpu;
   api.cashash.exact_rematch_min_matches = 10;
   const MatcherCommandOptions kept = Resolve(api, {8192, 8192}).options;
@@ -254,13 +254,13 @@ TEST(CommandOptions, AutoOnTheCpuKeepsTheCascadesMatchesAndRematchesTheWindow) {
   EXPECT_EQ(kept.cashash.exact_rematch_max_matches, 0);
   MatcherCommandOptions window;
   ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0", "--CasHash.exact_rematch_max_matches",
-                   "64"},
+                   "96"},
                   &window),
             ParseOutcome::kRun);
   EXPECT_EQ(CheckMatcherCommandOptions(window), "");
   const MatcherCommandOptions typed_window = Resolve(window, {8192, 8192}).options;
   EXPECT_EQ(typed_window.cashash.exact_rematch_min_matches, kDefaultRematchMinMatches);
-  EXPECT_EQ(typed_window.cashash.exact_rematch_max_matches, 64);
+  EXPECT_EQ(typed_window.cashash.exact_rematch_max_matches, 96);
   MatcherCommandOptions off;
   ASSERT_EQ(Parse({"--database_path", "x", "--FeatureMatching.use_gpu", "0", "--CasHash.exact_rematch_min_matches",
                    "0"},

@@ -297,7 +297,7 @@ TEST_F(SceneDatabase, DefaultsChooseTablesAndMatcherAndSaySo) {
   // is the cascade with the rematch of the pairs near the threshold only,
   // so the tables are chosen for the cascade's own matches.
   EXPECT_TRUE(starts("Hash tables: 8 x 7 bits (chosen for ")) << testing::PrintToString(notes);
-  EXPECT_TRUE(starts("Matcher: cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)"))
+  EXPECT_TRUE(starts("Matcher: cascade, exact rematch of pairs with 12 to 63 cascade matches (CPU rule)"))
       << testing::PrintToString(notes);
   EXPECT_EQ(summary.matcher_name, "cpu-cascade+exact-rematch");
   // The resolved run carries the window.

@@ -98,9 +98,9 @@ const std::vector<Row>& Table() {
        [](MatcherCommandOptions* o) { o->cashash.num_tables = 6; }, GpuFacts(2, 8192, false), "cascade", 6, 8,
        kCascade, kRuns, 0, false, kDefaultBlockSize, 0},
       {"GPU, a typed window is kept: tables and tau for the cascade's matches",
-       {"--CasHash.exact_rematch_max_matches", "64"},
-       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 64; }, GpuFacts(2, 8192, false),
-       "cascade", 8, 7, kPrecision, kRuns, 64, false, kDefaultBlockSize, 0},
+       {"--CasHash.exact_rematch_max_matches", "96"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 96; }, GpuFacts(2, 8192, false),
+       "cascade", 8, 7, kPrecision, kRuns, 96, false, kDefaultBlockSize, 0},
       {"tau given", {"--CasHash.tau", "40", "--CasHash.matcher", "cascade"},
        [](MatcherCommandOptions* o) {
          o->cashash.tau = 40;
@@ -111,7 +111,7 @@ const std::vector<Row>& Table() {
        [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kCascade; }, Facts(2, 8192, false), "cascade",
        3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
       // On the CPU auto is the cascade's own matches (tables for recall,
-      // tau for precision) and the exact rematch of the window [12, 96).
+      // tau for precision) and the exact rematch of the window [12, 64).
       {"CPU defaults, 8,192 features: the rematch window, the cascade for recall", {}, none, Facts(2, 8192, false),
        "cascade", 8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
       {"CPU defaults, 16,384 features", {}, none, Facts(2, 16384, false), "cascade", 8, 8, kPrecision,
@@ -121,9 +121,9 @@ const std::vector<Row>& Table() {
       {"CPU, a typed threshold is kept: no window, the bucket screen", {"--CasHash.exact_rematch_min_matches", "12"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, Facts(2, 8192, false), "cascade",
        3, 9, kCascade, 12, 0, true, kDefaultBlockSize, 0},
-      {"CPU, a typed window is kept", {"--CasHash.exact_rematch_max_matches", "64"},
-       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 64; }, Facts(2, 8192, false), "cascade",
-       8, 7, kPrecision, kRuns, 64, false, kDefaultBlockSize, 0},
+      {"CPU, a typed window is kept", {"--CasHash.exact_rematch_max_matches", "96"},
+       [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 96; }, Facts(2, 8192, false), "cascade",
+       8, 7, kPrecision, kRuns, 96, false, kDefaultBlockSize, 0},
       {"CPU, a typed threshold and window are kept",
        {"--CasHash.exact_rematch_min_matches", "20", "--CasHash.exact_rematch_max_matches", "48"},
        [](MatcherCommandOptions* o) {
@@ -243,7 +243,7 @@ TEST(RunResolution, RulesOfTheRematchThresholdAndTheMatcher) {
   EXPECT_EQ(cpu.matcher, MatcherType::kCascade);
   EXPECT_EQ(cpu.exact_rematch_min_matches, kCpuRematchWindowMin);
   EXPECT_EQ(cpu.exact_rematch_max_matches, kCpuRematchWindowMax);
-  EXPECT_EQ(cpu.reason, "cascade, exact rematch of pairs with 12 to 95 cascade matches (CPU rule)");
+  EXPECT_EQ(cpu.reason, "cascade, exact rematch of pairs with 12 to 63 cascade matches (CPU rule)");
   const MatcherChoice gpu = MatcherRule(options, true, 8192, kBucketScreeningRematchMinMatches);
   EXPECT_EQ(gpu.matcher, MatcherType::kCascade);
   EXPECT_EQ(gpu.exact_rematch_min_matches, kBucketScreeningRematchMinMatches);
@@ -257,9 +257,9 @@ TEST(RunResolution, RulesOfTheRematchThresholdAndTheMatcher) {
     EXPECT_EQ(kept.exact_rematch_max_matches, 0);
   }
   MatcherCommandOptions window = options;
-  window.cashash.exact_rematch_max_matches = 64;
+  window.cashash.exact_rematch_max_matches = 96;
   EXPECT_EQ(MatcherRule(window, false, 8192).exact_rematch_min_matches, kDefaultRematchMinMatches);
-  EXPECT_EQ(MatcherRule(window, false, 8192).exact_rematch_max_matches, 64);
+  EXPECT_EQ(MatcherRule(window, false, 8192).exact_rematch_max_matches, 96);
   MatcherCommandOptions guided = options;
   guided.guided.enabled = true;
   MatcherCommandOptions brute_force = options;
