@@ -56,20 +56,14 @@ class IdentityMatcher : public FeatureMatcher {
   std::string Name() const override { return "identity"; }
 };
 
-// An IdentityMatcher that is still choosing its backend during its first
-// `choosing_calls` MatchPairs calls (auto probing) and counts its calls.
-class ChoosingMatcher : public IdentityMatcher {
+// An IdentityMatcher that counts its MatchPairs calls.
+class CountingMatcher : public IdentityMatcher {
  public:
-  explicit ChoosingMatcher(int choosing_calls) : choosing_calls_(choosing_calls) {}
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
     ++calls;
     return IdentityMatcher::MatchPairs(pairs);
   }
-  bool ChoosingBackend() const override { return calls < choosing_calls_; }
   std::atomic<int> calls{0};
-
- private:
-  const int choosing_calls_;
 };
 
 // Marks every pair UNCALIBRATED with its first match as the only inlier and
@@ -257,64 +251,17 @@ TEST(BatchVerifierPipeline, FailedConcurrentChunkStopsTheRunAndWritesNoLaterChun
   }
 }
 
-// While the matcher times its backends nothing is verified: the probe has
-// the device to itself. Verification starts after the call that chose.
-TEST(BatchVerifierPipeline, NothingIsVerifiedWhileTheMatcherChooses) {
-  const std::vector<PairChunk> chunks = Chunks(12, 3);  // 10 chunks
-  ASSERT_GE(chunks.size(), 4u);
-  ChoosingMatcher matcher(2);
-  Sink sink;
-  std::vector<int> matcher_calls_at_verify;
-  std::mutex mutex;
-  class GatedVerifier : public RecordingVerifier {
-   public:
-    GatedVerifier(ChoosingMatcher* m, std::vector<int>* seen, std::mutex* mu) : m_(m), seen_(seen), mu_(mu) {}
-    std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
-      {
-        std::lock_guard<std::mutex> lock(*mu_);
-        seen_->push_back(m_->calls.load());
-      }
-      return RecordingVerifier::Verify(pairs);
-    }
-
-   private:
-    ChoosingMatcher* m_;
-    std::vector<int>* seen_;
-    std::mutex* mu_;
-  } verifier(&matcher, &matcher_calls_at_verify, &mutex);
-  const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
-  EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
-  ASSERT_EQ(matcher_calls_at_verify.size(), chunks.size());
-  for (int calls : matcher_calls_at_verify) EXPECT_GE(calls, 2);
-  EXPECT_EQ(sink.first_pairs, FirstPairs(chunks));
-}
-
-// A matcher that never chooses (one pair, or a run too short to time)
-// cannot stall the run: the gate opens before the queue would block
-// matching, and when matching ends.
-TEST(BatchVerifierPipeline, AMatcherThatNeverChoosesStillFinishes) {
-  for (const size_t block : {size_t{2}, size_t{20}}) {
-    const std::vector<PairChunk> chunks = Chunks(12, block);
-    ChoosingMatcher matcher(1 << 30);
-    Sink sink;
-    ConcurrentVerifier verifier;
-    const PipelineStats stats = RunPipeline(chunks, &matcher, &verifier, &sink);
-    EXPECT_EQ(stats.pairs_done, NumPairs(chunks));
-    EXPECT_EQ(sink.configs.size(), NumPairs(chunks));
-  }
-}
-
 // Chunks differ in cost, so matching may run ahead of a slow verification
 // by the queue's depth, and no further: the first chunk's verification is
 // held until matching has stopped, then released.
 TEST(BatchVerifierPipeline, MatchingRunsAheadOfASlowChunkByTheQueueDepth) {
   const std::vector<PairChunk> chunks = Chunks(40, 4);  // 55 chunks
   for (const size_t depth : {size_t{2}, size_t{6}}) {
-    ChoosingMatcher matcher(0);
+    CountingMatcher matcher;
     Sink sink;
     class HeldVerifier : public RecordingVerifier {
      public:
-      HeldVerifier(ChoosingMatcher* m, int expected) : m_(m), expected_(expected) {}
+      HeldVerifier(CountingMatcher* m, int expected) : m_(m), expected_(expected) {}
       std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
         if (first_) {
           first_ = false;
@@ -332,7 +279,7 @@ TEST(BatchVerifierPipeline, MatchingRunsAheadOfASlowChunkByTheQueueDepth) {
       int calls_while_held = 0;
 
      private:
-      ChoosingMatcher* m_;
+      CountingMatcher* m_;
       const int expected_;
       bool first_ = true;
     } verifier(&matcher, static_cast<int>(depth) + 2);
@@ -409,10 +356,10 @@ TEST(BatchVerifierPipeline, ASecondVerifierWaitsWhileMatchingKeepsUp) {
 // another call starts, which only the second thread can make.
 TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
   const std::vector<PairChunk> chunks = Chunks(24, 3);  // 36 chunks
-  ChoosingMatcher matcher(0);
+  CountingMatcher matcher;
   class HeldFirstVerifier : public TwoAtOnceVerifier {
    public:
-    explicit HeldFirstVerifier(ChoosingMatcher* m) : m_(m) {}
+    explicit HeldFirstVerifier(CountingMatcher* m) : m_(m) {}
     void Hold() override {
       if (!held_.exchange(true)) {
         holding_ = true;
@@ -430,7 +377,7 @@ TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
     std::atomic<int> matched_when_second{0};
 
    private:
-    ChoosingMatcher* m_;
+    CountingMatcher* m_;
     std::atomic<bool> held_{false}, holding_{false};
   } verifier(&matcher);
   Sink sink;
@@ -452,14 +399,14 @@ TEST(BatchVerifierPipeline, ASecondVerifierStartsOnceTheQueueIsFull) {
 TEST(BatchVerifierPipeline, ChunksThatWaitTogetherShareOneCall) {
   const std::vector<PairChunk> chunks = Chunks(40, 4);  // 55 chunks
   const size_t depth = 6;
-  ChoosingMatcher matcher(0);
+  CountingMatcher matcher;
   Sink sink;
   // The first call is held until matching has filled the queue, the second
   // long enough to see how far matching then goes. A pair's configuration
   // follows its seed, so a geometry handed to the wrong pair shows.
   class HeldCallsVerifier : public BatchVerifier {
    public:
-    explicit HeldCallsVerifier(ChoosingMatcher* m) : m_(m) {}
+    explicit HeldCallsVerifier(CountingMatcher* m) : m_(m) {}
     std::string Name() const override { return "held"; }
     size_t ChunksPerCall() const override { return 4; }
     std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
@@ -486,7 +433,7 @@ TEST(BatchVerifierPipeline, ChunksThatWaitTogetherShareOneCall) {
     int calls_during_second = 0;
 
    private:
-    ChoosingMatcher* m_;
+    CountingMatcher* m_;
   } verifier(&matcher);
   PipelineOptions options;
   options.chunks_in_queue = depth;

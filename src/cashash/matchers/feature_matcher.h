@@ -86,10 +86,6 @@ class FeatureMatcher {
   }
   // A short name for logs: "cpu-cascade", "gpu-bruteforce", ...
   virtual std::string Name() const = 0;
-  // True while the matcher still times its backends to choose one (auto):
-  // other work on the same device would distort the timing, so the
-  // pipeline holds verification back meanwhile. Wrappers forward it.
-  virtual bool ChoosingBackend() const { return false; }
 
   // Whether MatchPairsGuided is implemented (the cascade backends).
   virtual bool SupportsEpipolarGuidance() const { return false; }

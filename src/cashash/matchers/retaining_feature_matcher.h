@@ -40,7 +40,6 @@ class RetainingFeatureMatcher : public FeatureMatcher {
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override;
   std::string Name() const override;
-  bool ChoosingBackend() const override { return inner_->ChoosingBackend(); }
 
   const RetainingStats& stats() const { return stats_; }
 

@@ -229,7 +229,6 @@ class GuidedFeatureMatcher : public FeatureMatcher {
   std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
   // "guided(<full matcher>, F on <estimator>)"
   std::string Name() const override;
-  bool ChoosingBackend() const override { return full_->ChoosingBackend() || top_scale_->ChoosingBackend(); }
 
   const GuidedMatchingStats& stats() const { return stats_; }
   // Stage-1 outcome of each pair of the last MatchPairs call.

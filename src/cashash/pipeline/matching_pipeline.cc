@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <exception>
 #include <mutex>
 #include <thread>
@@ -47,31 +46,7 @@ class FirstError {
   std::atomic<bool> failed_{false};
 };
 
-// Holds verification back while the matcher chooses its backend (see
-// FeatureMatcher::ChoosingBackend): RANSAC on the same GPU slows the
-// cascade's short launches far more than brute force's long one (0.56 ms
-// per pair instead of 0.016), which would make auto keep brute force, 3x
-// slower over the run. Verification has time to spare at the start, and
-// the queue keeps the chunks.
-class VerificationGate {
- public:
-  void Open() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    open_ = true;
-    opened_.notify_all();
-  }
-  void Wait() {
-    std::unique_lock<std::mutex> lock(mutex_);
-    opened_.wait(lock, [&] { return open_; });
-  }
-
- private:
-  std::mutex mutex_;
-  std::condition_variable opened_;
-  bool open_ = false;
-};
-
-// One run of the pipeline: the queues, the turnstile, the gate, the first
+// One run of the pipeline: the queues, the turnstile, the first
 // error and the stats that its stages share, and the stages themselves, one
 // function each:
 //   Match   this thread: load what a chunk needs, match it;
@@ -148,12 +123,9 @@ class PipelineRun {
     options_.trace->Record(std::move(event));
   }
 
-  // Stage 1, on the caller's thread: load what the chunk needs, match. The
-  // gate opens once the matcher has chosen, or before a push that could
-  // wait for verification (the queue full), or when matching ends.
+  // Stage 1, on the caller's thread: load what the chunk needs, match.
   void Match(const std::vector<PairChunk>& chunks) {
     BlockingQueue<MatchedChunk>& after_matching = to_verify_;
-    size_t pushed_while_gated = 0;
     try {
       std::unordered_map<image_t, FeaturesPtr> loaded;
       for (size_t c = 0; c < chunks.size(); ++c) {
@@ -206,8 +178,6 @@ class PipelineRun {
         Trace("load", c, 0, 0, chunk_start, t_match, chunk.pairs.size());
         Trace("match", c, 0, 0, t_match, t_matched, chunk.pairs.size());
         for (image_t image_id : chunk.images) item.features.emplace(image_id, loaded.at(image_id));
-        if (!matcher_->ChoosingBackend() || pushed_while_gated >= chunks_in_queue_) gate_.Open();
-        ++pushed_while_gated;
         const Clock::time_point t_push = Clock::now();
         const bool pushed = after_matching.Push(std::move(item));
         AddSeconds(&PipelineStats::seconds_matching_wait_queue, t_push);
@@ -216,7 +186,6 @@ class PipelineRun {
     } catch (...) {
       error_.Set(std::current_exception());
     }
-    gate_.Open();
     after_matching.Close();
   }
 
@@ -233,7 +202,6 @@ class PipelineRun {
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
-        gate_.Wait();
         std::vector<MatchedChunk> items = to_verify_.PopBatch(backlog, chunks_per_call_);
         AddSeconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (items.empty()) break;
@@ -326,7 +294,6 @@ class PipelineRun {
   BlockingQueue<MatchedChunk> to_verify_;
   BlockingQueue<VerifiedChunk> to_write_;
   InOrderTurnstile to_writer_in_order_;
-  VerificationGate gate_;
   FirstError error_;
 
   std::unique_ptr<BatchVerifier> default_verifier_;
