@@ -11,6 +11,7 @@
 #include "cashash/matching/best_two_tracker.h"
 
 #if defined(__x86_64__) && defined(__GNUC__)
+#include <cpuid.h>
 #include <immintrin.h>
 #define CASHASH_INT8_KERNELS 1
 #endif
@@ -163,7 +164,13 @@ bool ProcessorHasVnni512() {
          __builtin_cpu_supports("avx512vnni");
 }
 
-bool ProcessorHasAvxVnni() { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avxvnni"); }
+// AVX-VNNI is CPUID leaf 7, sub-leaf 1, EAX bit 4. Read directly: clang 14's
+// __builtin_cpu_supports does not know the name "avxvnni" (gcc 12 does).
+bool ProcessorHasAvxVnni() {
+  unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+  if (!__builtin_cpu_supports("avx2") || !__get_cpuid_count(7, 1, &eax, &ebx, &ecx, &edx)) return false;
+  return (eax >> 4) & 1u;
+}
 
 #else
 
