@@ -21,7 +21,7 @@ fi
 # Debian packages: the build toolchain, the libraries the C++ code links, and
 # the COLMAP command line used for feature extraction and reconstruction.
 apt_packages=(
-  cmake g++ make pkg-config
+  cmake g++ make ninja-build pkg-config
   libeigen3-dev libsqlite3-dev libboost-program-options-dev
   googletest libgtest-dev
   colmap

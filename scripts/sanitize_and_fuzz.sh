@@ -29,16 +29,19 @@ log() { echo "[sanitize_and_fuzz] $*"; }
 LAUNCHER=()
 if command -v ccache >/dev/null; then LAUNCHER=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
 # -O1: sanitized code at -O3 takes several times longer to compile for little
-# gain in test speed.
-COMMON=(-DCASHASH_CUDA=OFF -DCMAKE_BUILD_TYPE=Release "-DCMAKE_CXX_FLAGS_RELEASE=-O1 -DNDEBUG"
-        -DCASHASH_SHARED_DATA="$SHARED" "${LAUNCHER[@]}")
+# gain in test speed. No Python module: it would need the sanitizer runtime
+# preloaded into Python.
+COMMON=(-DCASHASH_CUDA=OFF -DCASHASH_BUILD_PYTHON=OFF -DCMAKE_BUILD_TYPE=Release
+        "-DCMAKE_CXX_FLAGS_RELEASE=-O1 -DNDEBUG" -DCASHASH_SHARED_DATA="$SHARED" "${LAUNCHER[@]}")
+# Ninja for a new build folder (see scripts/test.sh).
+generator_for() { if [[ ! -f "$1/CMakeCache.txt" ]] && command -v ninja >/dev/null; then echo "-GNinja"; fi; }
 
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 
 if [[ "${CASHASH_SKIP_SANITIZE:-0}" != 1 ]]; then
   log "CPU suite with -fsanitize=address,undefined in $SANITIZE_BUILD"
-  cmake -S "$REPO" -B "$SANITIZE_BUILD" -DCASHASH_SANITIZE=ON "${COMMON[@]}" >/dev/null
+  cmake -S "$REPO" -B "$SANITIZE_BUILD" $(generator_for "$SANITIZE_BUILD") -DCASHASH_SANITIZE=ON "${COMMON[@]}" >/dev/null
   cmake --build "$SANITIZE_BUILD" -j"$JOBS"
   (cd "$SANITIZE_BUILD" && ctest --output-on-failure -j"$JOBS" -E integration)
   # The one integration test that is all error paths, on the sanitized binary.
@@ -58,7 +61,7 @@ if ! command -v clang++ >/dev/null || ! clang++ -fsanitize=fuzzer "$probe/p.cc" 
 fi
 
 log "fuzz targets with clang in $FUZZ_BUILD"
-CC=clang CXX=clang++ cmake -S "$REPO" -B "$FUZZ_BUILD" -DCASHASH_FUZZ=ON "${COMMON[@]}" >/dev/null
+CC=clang CXX=clang++ cmake -S "$REPO" -B "$FUZZ_BUILD" $(generator_for "$FUZZ_BUILD") -DCASHASH_FUZZ=ON "${COMMON[@]}" >/dev/null
 targets=()
 for source in "$REPO"/tests/fuzz/*_fuzz.cc; do targets+=("$(basename "$source" .cc)"); done
 cmake --build "$FUZZ_BUILD" -j"$JOBS" --target "${targets[@]}"

@@ -29,7 +29,12 @@ fi
 # CUDA code is checked to build even on machines without a GPU; without one
 # that is the portable list (SASS 7.5, 8.0, 8.6, 8.9, 9.0 and PTX 9.0), so a
 # change that breaks one architecture fails here.
-cmake -S "$REPO" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DCASHASH_SHARED_DATA="$SHARED"
+# Ninja where it exists, for a new build folder: it compiles a target's
+# sources while the libraries it links are still being built, which make
+# does not, and so keeps both cores busy.
+GENERATOR=()
+if [[ ! -f "$BUILD/CMakeCache.txt" ]] && command -v ninja >/dev/null; then GENERATOR=(-G Ninja); fi
+cmake -S "$REPO" -B "$BUILD" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release -DCASHASH_SHARED_DATA="$SHARED"
 cmake --build "$BUILD" -j"$JOBS"
 
 cd "$BUILD"
