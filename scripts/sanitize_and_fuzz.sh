@@ -13,14 +13,16 @@
 # Environment:
 #   CASHASH_SANITIZE_BUILD_DIR  (default build-sanitize/ in the repo)
 #   CASHASH_FUZZ_BUILD_DIR      (default build-fuzz/ in the repo)
-#   CASHASH_FUZZ_SECONDS        seconds per fuzz target (default 50)
+#   CASHASH_FUZZ_SECONDS        seconds of wall time of the fuzz targets, which run
+#                               side by side (default 75: about 50 s of a core each
+#                               on two cores)
 #   CASHASH_SKIP_SANITIZE=1, CASHASH_SKIP_FUZZ=1  leave a part out
 set -euo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 SANITIZE_BUILD="${CASHASH_SANITIZE_BUILD_DIR:-$REPO/build-sanitize}"
 FUZZ_BUILD="${CASHASH_FUZZ_BUILD_DIR:-$REPO/build-fuzz}"
-FUZZ_SECONDS="${CASHASH_FUZZ_SECONDS:-50}"
+FUZZ_SECONDS="${CASHASH_FUZZ_SECONDS:-75}"
 SHARED="${CASHASH_SHARED_DATA:-$REPO/../shared/data}"
 JOBS="$(nproc)"
 
@@ -95,7 +97,10 @@ rm -f "$SEEDS"/*-wal "$SEEDS"/*-shm "$SEEDS"/*-journal "$FUZZ_BUILD"/tests/casha
 
 # database_fuzz writes each input to a scratch file: in memory where possible.
 if [[ -d /dev/shm && -w /dev/shm ]]; then export TMPDIR=/dev/shm; fi
-status=0
+# The targets run side by side (libFuzzer runs one thread each), for
+# FUZZ_SECONDS of wall time each: on two cores three of them get about two
+# thirds of a core each.
+pids=()
 for target in "${targets[@]}"; do
   name="${target%_fuzz}"
   corpus="$FUZZ_BUILD/corpus/$target"  # grows from run to run
@@ -104,13 +109,20 @@ for target in "${targets[@]}"; do
   [[ -d "$REPO/tests/fuzz/corpus/$name" ]] && seed_dirs+=("$REPO/tests/fuzz/corpus/$name")
   [[ -d "$FUZZ_BUILD/seeds/$target" ]] && seed_dirs+=("$FUZZ_BUILD/seeds/$target")
   log "$target for ${FUZZ_SECONDS}s (seeds: ${seed_dirs[*]:-none})"
-  if ! (cd "$FUZZ_BUILD" && "$FUZZ_BUILD/tests/$target" -max_total_time="$FUZZ_SECONDS" -timeout=20 \
-        -rss_limit_mb=2560 -max_len=65536 -print_final_stats=1 "$corpus" "${seed_dirs[@]}" \
-        >"$FUZZ_BUILD/$target.log" 2>&1); then
+  (cd "$FUZZ_BUILD" && "$FUZZ_BUILD/tests/$target" -max_total_time="$FUZZ_SECONDS" -timeout=20 \
+     -rss_limit_mb=2560 -max_len=65536 -print_final_stats=1 "$corpus" "${seed_dirs[@]}" \
+     >"$FUZZ_BUILD/$target.log" 2>&1) &
+  pids+=($!)
+done
+status=0
+for index in "${!targets[@]}"; do
+  target="${targets[$index]}"
+  if ! wait "${pids[$index]}"; then
     tail -60 "$FUZZ_BUILD/$target.log"
     log "FAIL: $target found a problem (input saved as $FUZZ_BUILD/crash-* / timeout-* / oom-*)"
     status=1
   else
+    log "$target:"
     grep -E "^stat::number_of_executed_units|^stat::peak_rss_mb|^#[0-9]+ *DONE" "$FUZZ_BUILD/$target.log" || true
   fi
 done
