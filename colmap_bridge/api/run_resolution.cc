@@ -95,7 +95,8 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
           ? TableShapeGoal::kScreening
           : TableShapeGoal::kRecall;
   const int requested_tau = cashash.tau;
-  cashash = ResolveTableShape(cashash, features, goal);
+  const TableShapeBackend backend = on_gpu ? TableShapeBackend::kAny : TableShapeBackend::kCpu;
+  cashash = ResolveTableShape(cashash, features, goal, backend);
   // Fewer tables find fewer of a pair's true matches: a threshold left to
   // the run is the one the bucket screening shape was measured with
   // (table_shape.h); its screen is light, so the matching thread has room
@@ -117,7 +118,8 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
     cashash.tau = ChooseCascadeTau(cashash.exact_rematch_min_matches, guided, cashash.exact_rematch_max_matches);
   }
   if (cashash.matcher != MatcherType::kBruteForce) {
-    std::string text = DescribeTableShape(options.cashash, cashash, features, facts.rows_per_image.size(), goal);
+    std::string text =
+        DescribeTableShape(options.cashash, cashash, features, facts.rows_per_image.size(), goal, backend);
     text += "; tau " + std::to_string(cashash.tau);
     if (requested_tau == 0) {
       text += cashash.tau == kCascadeTauForScreening ? " (chosen: the exact rematch decides the pairs that may verify)"

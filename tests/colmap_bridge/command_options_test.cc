@@ -115,17 +115,18 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   const MatcherCommandOptions run = Resolve(set, {32768, 32768, 32768}).options;
   EXPECT_EQ(run.cashash.num_tables, 8);
   EXPECT_EQ(run.cashash.bits_per_table, 7);
-  // Left at 0, they follow the images: at 32,768 features 8 x 8 for
-  // recall, and 3 x 10 while the exact rematch decides (the default), since
-  // the cascade then only screens the pairs (TableShapeGoal).
+  // Left at 0, they follow the images: at 32,768 features on the CPU
+  // 22 x 13 for recall (buckets of about 4 features, kCpuFineBucketFeatures),
+  // and 3 x 10 while the exact rematch decides (the default), since the
+  // cascade then only screens the pairs (TableShapeGoal).
   const MatcherCommandOptions chosen = Resolve(defaults, {32768, 32768, 32768}).options;
   EXPECT_EQ(chosen.cashash.num_tables, 3);
   EXPECT_EQ(chosen.cashash.bits_per_table, 10);
   MatcherCommandOptions kept;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "0"}, &kept), ParseOutcome::kRun);
   const MatcherCommandOptions for_recall = Resolve(kept, {32768, 32768, 32768}).options;
-  EXPECT_EQ(for_recall.cashash.num_tables, 8);
-  EXPECT_EQ(for_recall.cashash.bits_per_table, 8);
+  EXPECT_EQ(for_recall.cashash.num_tables, 22);
+  EXPECT_EQ(for_recall.cashash.bits_per_table, 13);
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
   EXPECT_EQ(Resolve(guided, {8192, 8192}).options.cashash.bits_per_table, 7);

@@ -114,8 +114,24 @@ const std::vector<Row>& Table() {
       // tau for precision) and the exact rematch of the window [12, 64).
       {"CPU defaults, 8,192 features: the rematch window, the cascade for recall", {}, none, Facts(2, 8192, false),
        "cascade", 8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
-      {"CPU defaults, 16,384 features", {}, none, Facts(2, 16384, false), "cascade", 8, 8, kPrecision,
-       kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+      // From 16,384 features the CPU's recall tables have buckets of about 4
+      // features (no 64-bit signature); the GPU keeps 8 x 8.
+      {"CPU defaults, 16,384 features: buckets of about 4 features", {}, none, Facts(2, 16384, false), "cascade", 19,
+       12, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+      {"GPU, the same window at 16,384 features: 8 x 8",
+       {"--CasHash.exact_rematch_min_matches", "12", "--CasHash.exact_rematch_max_matches", "64"},
+       [](MatcherCommandOptions* o) {
+         o->cashash.exact_rematch_min_matches = 12;
+         o->cashash.exact_rematch_max_matches = 64;
+       },
+       GpuFacts(2, 16384, false), "cascade", 8, 8, kPrecision, 12, 64, false, kDefaultBlockSize, 0},
+      {"CPU, tables given at 16,384 features: the user's", {"--CasHash.num_tables", "8", "--CasHash.bits_per_table", "8"},
+       [](MatcherCommandOptions* o) {
+         o->cashash.num_tables = 8;
+         o->cashash.bits_per_table = 8;
+       },
+       Facts(2, 16384, false), "cascade", 8, 8, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false,
+       kDefaultBlockSize, 0},
       {"CPU defaults, 4,096 features", {}, none, Facts(2, 4096, false), "cascade", 8, 7, kPrecision,
        kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
       {"CPU, a typed threshold is kept: no window, the bucket screen", {"--CasHash.exact_rematch_min_matches", "12"},

@@ -436,9 +436,10 @@ TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {
   EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);
 }
 
-// The shape the table rule gives 16,384 features and more (table_shape.h):
-// 8 tables of 8 bits fill the 64-bit signature exactly. Same matches as the
-// CPU, as for every other shape.
+// The shape the table rule gives the GPU at 16,384 features and more
+// (table_shape.h; the CPU alone takes finer buckets there): 8 tables of 8
+// bits fill the 64-bit signature exactly. Same matches as the CPU with the
+// same shape, as for every other shape.
 TEST(GpuCascadeTest, SixtyFourSignatureBitsOfTheTableRuleAgreeWithCpu) {
   SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(5);

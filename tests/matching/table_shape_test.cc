@@ -70,6 +70,41 @@ TEST(TableShape, CandidatesPerQueryStayAtMostTheDefaultsUpTo32768Features) {
   EXPECT_DOUBLE_EQ(entries(16384), reference);  // 8 x 16384 / 256
 }
 
+TEST(TableShape, OnTheCpuLargeImagesGetBucketsOfAboutFourFeatures) {
+  const double reference = TableCollisionProbability(8, 7);
+  auto cpu = [](size_t features, TableShapeGoal goal = TableShapeGoal::kRecall) {
+    return ChooseTableShape(features, 0, 0, goal, TableShapeBackend::kCpu);
+  };
+  // 16,384 features: 19 x 12, 76 bucket entries a query against 8 x 8's 512.
+  EXPECT_EQ(cpu(16384).num_tables, 19);
+  EXPECT_EQ(cpu(16384).bits_per_table, 12);
+  EXPECT_EQ(cpu(32768).num_tables, 22);
+  EXPECT_EQ(cpu(32768).bits_per_table, 13);
+  for (size_t features : {16384, 20000, 32768, 65536, 1 << 20}) {
+    const TableShape shape = cpu(features);
+    // The fewest tables that hold the reference's collision probability.
+    EXPECT_GE(TableCollisionProbability(shape.num_tables, shape.bits_per_table), reference - 1e-12) << features;
+    EXPECT_LT(TableCollisionProbability(shape.num_tables - 1, shape.bits_per_table), reference - 1e-12) << features;
+    // Buckets of kCpuFineBucket to 2 kCpuFineBucket features.
+    const double bucket = static_cast<double>(features) / double(size_t{1} << shape.bits_per_table);
+    EXPECT_GE(bucket, kCpuFineBucket) << features;
+    EXPECT_LT(bucket, 2.0 * kCpuFineBucket) << features;
+  }
+  // Below 16,384 features, for screening, or with tables or bits given, the
+  // CPU takes the shapes the GPU can run.
+  for (size_t features : {2048, 4096, 8192, 16383}) {
+    EXPECT_EQ(cpu(features).num_tables, ChooseTableShape(features).num_tables) << features;
+    EXPECT_EQ(cpu(features).bits_per_table, ChooseTableShape(features).bits_per_table) << features;
+  }
+  const TableShape screening = cpu(16384, TableShapeGoal::kScreening);
+  EXPECT_EQ(screening.num_tables, ChooseTableShape(16384, 0, 0, TableShapeGoal::kScreening).num_tables);
+  EXPECT_EQ(ChooseTableShape(16384, 8, 0, TableShapeGoal::kRecall, TableShapeBackend::kCpu).num_tables, 8);
+  EXPECT_EQ(ChooseTableShape(16384, 8, 0, TableShapeGoal::kRecall, TableShapeBackend::kCpu).bits_per_table, 8);
+  EXPECT_EQ(ChooseTableShape(16384, 0, 8, TableShapeGoal::kRecall, TableShapeBackend::kCpu).bits_per_table, 8);
+  EXPECT_EQ(ChooseTableShape(16384).num_tables, 8);  // the GPU's shape is unchanged
+  EXPECT_EQ(ChooseTableShape(16384).bits_per_table, 8);
+}
+
 TEST(TableShape, EveryShapeFitsTheGpuLimits) {
   for (size_t features = 1; features <= (size_t{1} << 24); features = features * 3 / 2 + 1) {
     const TableShape shape = ChooseTableShape(features);

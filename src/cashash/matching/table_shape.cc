@@ -42,6 +42,22 @@ TableShape BucketScreeningShape(size_t features_per_image) {
   return shape;
 }
 
+// The CPU's recall shape from kCpuFineBucketFeatures: buckets of about
+// kCpuFineBucket features, and the fewest tables that reach the reference's
+// collision probability, without the GPU's limits.
+TableShape CpuFineBucketShape(size_t features_per_image) {
+  constexpr int kMaxCpuTables = 64;  // far above any size's need (22 at 32,768 features)
+  const double target = TargetCollisionProbability();
+  TableShape shape;
+  shape.bits_per_table = FloorLog2(SizeOrReference(features_per_image) / kCpuFineBucket);
+  shape.num_tables = 1;
+  while (shape.num_tables < kMaxCpuTables &&
+         TableCollisionProbability(shape.num_tables, shape.bits_per_table) < target - 1e-12) {
+    ++shape.num_tables;
+  }
+  return shape;
+}
+
 // The recall shape for the size, with the bits chosen (bits_per_table 0).
 TableShape ChooseRecallShape(size_t features_per_image, int num_tables) {
   TableShape shape;
@@ -75,7 +91,11 @@ int TablesForBits(int bits_per_table) {
   return tables;
 }
 
-TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal) {
+TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal,
+                            TableShapeBackend backend) {
+  if (IsCpuFineBucketShape(features_per_image, num_tables, bits_per_table, goal, backend)) {
+    return CpuFineBucketShape(features_per_image);
+  }
   TableShape shape;
   if (num_tables > 0 && bits_per_table > 0) {
     shape.num_tables = num_tables;
@@ -106,6 +126,12 @@ bool IsBucketScreeningShape(size_t features_per_image, int num_tables, int bits_
          SizeOrReference(features_per_image) >= kBucketScreeningFeatures;
 }
 
+bool IsCpuFineBucketShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal,
+                          TableShapeBackend backend) {
+  return backend == TableShapeBackend::kCpu && goal == TableShapeGoal::kRecall && num_tables == 0 &&
+         bits_per_table == 0 && SizeOrReference(features_per_image) >= kCpuFineBucketFeatures;
+}
+
 size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_matches) {
   if (rows_per_image.empty()) return 0;
   const size_t cap = static_cast<size_t>(std::max(1, max_num_matches));
@@ -115,16 +141,19 @@ size_t TypicalFeatureCount(std::vector<size_t> rows_per_image, int max_num_match
   return rows_per_image[middle];
 }
 
-CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image, TableShapeGoal goal) {
+CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image, TableShapeGoal goal,
+                                 TableShapeBackend backend) {
   CasHashOptions resolved = options;
-  const TableShape shape = ChooseTableShape(features_per_image, options.num_tables, options.bits_per_table, goal);
+  const TableShape shape =
+      ChooseTableShape(features_per_image, options.num_tables, options.bits_per_table, goal, backend);
   resolved.num_tables = shape.num_tables;
   resolved.bits_per_table = shape.bits_per_table;
   return resolved;
 }
 
 std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOptions& resolved,
-                               size_t features_per_image, size_t num_images, TableShapeGoal goal) {
+                               size_t features_per_image, size_t num_images, TableShapeGoal goal,
+                               TableShapeBackend backend) {
   std::ostringstream text;
   text << "Hash tables: " << resolved.num_tables << " x " << resolved.bits_per_table << " bits";
   if (requested.num_tables > 0 && requested.bits_per_table > 0) {
@@ -136,6 +165,9 @@ std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOpt
   if (requested.bits_per_table > 0) text << "bits as set, tables ";
   text << "chosen for " << features_per_image << " features per image, the median of " << num_images << " image"
        << (num_images == 1 ? "" : "s");
+  if (IsCpuFineBucketShape(features_per_image, requested.num_tables, requested.bits_per_table, goal, backend)) {
+    text << ", buckets of about " << kCpuFineBucket << " features on the CPU";
+  }
   if (goal == TableShapeGoal::kScreening && requested.bits_per_table == 0) {
     if (IsBucketScreeningShape(features_per_image, requested.num_tables, requested.bits_per_table, goal)) {
       text << ", buckets of about " << kBucketScreeningBucket << " features: the exact rematch decides";

@@ -100,6 +100,28 @@ constexpr int kBucketScreeningRematchMinMatches = 8;
 // (docs/cascade_parameters.md, "Fewer screening tables").
 enum class TableShapeGoal { kRecall, kScreening };
 
+// Which backend will match with the shape. kAny: shapes the GPU can run
+// (a 64-bit bucket signature, at most 32 tables), which the CPU matches
+// identically; the default wherever the backend is not known. kCpu: the
+// CPU, which has neither limit (kCpuFineBucketFeatures).
+enum class TableShapeBackend { kAny, kCpu };
+
+// On the CPU, from this size on, the recall shape has buckets of about
+// kCpuFineBucket features: bits = log2(n / kCpuFineBucket) and the fewest
+// tables that hold the reference's collision probability (19 x 12 at
+// 16,384 features, 22 x 13 at 32,768). Why: the CPU's bucket scan costs
+// about one table lookup per 26 bucket entries visited, and the 64-bit
+// signature leaves 8 x 8 at 16,384 features, whose 512 entries a query
+// (twice 4,096 features' 8 x 7) made 4x the features cost 7.6x the
+// matching time. Of the shapes at the reference's collision probability
+// (8 x 8, 12 x 9, 14 x 10, 16 x 11, 19 x 12, 24 x 13) on a 16-image street
+// of 16,384 features, 19 x 12 was the fastest: 5.6-5.8x the time of 4,096
+// features, at 0.985 of brute force's raw matches (8 x 8: 0.974)
+// (docs/cpu_matching.md, "Linear cost in the features"). Such a run's
+// matches differ from the GPU's, which keeps 8 x 8.
+constexpr size_t kCpuFineBucketFeatures = 16384;
+constexpr size_t kCpuFineBucket = 4;
+
 // 1 - (1 - p^bits)^tables.
 double TableCollisionProbability(int num_tables, int bits_per_table, double p = kTableShapeBitAgreement);
 
@@ -113,7 +135,13 @@ int TablesForBits(int bits_per_table);
 // within 64 / num_tables; tables from the bits.
 // An explicit bits_per_table is never changed by the goal.
 TableShape ChooseTableShape(size_t features_per_image, int num_tables = 0, int bits_per_table = 0,
-                            TableShapeGoal goal = TableShapeGoal::kRecall);
+                            TableShapeGoal goal = TableShapeGoal::kRecall,
+                            TableShapeBackend backend = TableShapeBackend::kAny);
+
+// Whether ChooseTableShape gives the CPU's fine-bucket recall shape
+// (kCpuFineBucketFeatures) for these options.
+bool IsCpuFineBucketShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal,
+                          TableShapeBackend backend);
 
 // The feature count a run's rule is decided from: the median over its
 // images of min(rows, max_num_matches) (the upper one of the two middle
@@ -129,12 +157,14 @@ bool IsBucketScreeningShape(size_t features_per_image, int num_tables, int bits_
 // `options` with num_tables and bits_per_table chosen for the size where
 // they are 0 (the defaults), unchanged where set.
 CasHashOptions ResolveTableShape(const CasHashOptions& options, size_t features_per_image,
-                                 TableShapeGoal goal = TableShapeGoal::kRecall);
+                                 TableShapeGoal goal = TableShapeGoal::kRecall,
+                                 TableShapeBackend backend = TableShapeBackend::kAny);
 
 // One line for the run's log, e.g. "Hash tables: 8 x 8 bits (chosen for
 // 16384 features per image, the median of 300 images)".
 std::string DescribeTableShape(const CasHashOptions& requested, const CasHashOptions& resolved,
                                size_t features_per_image, size_t num_images,
-                               TableShapeGoal goal = TableShapeGoal::kRecall);
+                               TableShapeGoal goal = TableShapeGoal::kRecall,
+                               TableShapeBackend backend = TableShapeBackend::kAny);
 
 }  // namespace cashash
