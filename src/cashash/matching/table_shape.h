@@ -112,10 +112,10 @@ enum class TableShapeBackend { kAny, kCpu };
 // 16,384 features, 22 x 13 at 32,768). Why: the CPU's bucket scan costs
 // about one table lookup per 26 bucket entries visited, and the 64-bit
 // signature leaves 8 x 8 at 16,384 features, whose 512 entries a query
-// (twice 4,096 features' 8 x 7) made 4x the features cost 7.6x the
+// (twice 4,096 features' 8 x 7) made 4x the features cost 7.9x the
 // matching time. Of the shapes at the reference's collision probability
 // (8 x 8, 12 x 9, 14 x 10, 16 x 11, 19 x 12, 24 x 13) on a 16-image street
-// of 16,384 features, 19 x 12 was the fastest: 5.6-5.8x the time of 4,096
+// of 16,384 features, 19 x 12 was the fastest: 5.9x the time of 4,096
 // features, at 0.985 of brute force's raw matches (8 x 8: 0.974)
 // (docs/cpu_matching.md, "Linear cost in the features"). Such a run's
 // matches differ from the GPU's, which keeps 8 x 8.
