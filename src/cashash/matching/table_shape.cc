@@ -15,6 +15,16 @@ int MaxTablesForBits(int bits_per_table) {
   return std::max(1, std::min(kMaxShapeTables, kMaxSignatureBits / bits_per_table));
 }
 
+// The fewest tables of `bits_per_table` bits, at most max_tables, whose
+// collision probability reaches the reference's. The small tolerance keeps
+// 8 x 7 itself from rounding up to 9 tables.
+int FewestTablesReachingReference(int bits_per_table, int max_tables) {
+  const double target = TargetCollisionProbability();
+  int tables = 1;
+  while (tables < max_tables && TableCollisionProbability(tables, bits_per_table) < target - 1e-12) ++tables;
+  return tables;
+}
+
 // The size a rule decides from: 0 (unknown) stands for the reference size.
 size_t SizeOrReference(size_t features_per_image) {
   return features_per_image == 0 ? kTableShapeReferenceFeatures : features_per_image;
@@ -47,14 +57,9 @@ TableShape BucketScreeningShape(size_t features_per_image) {
 // collision probability, without the GPU's limits.
 TableShape CpuFineBucketShape(size_t features_per_image) {
   constexpr int kMaxCpuTables = 64;  // far above any size's need (22 at 32,768 features)
-  const double target = TargetCollisionProbability();
   TableShape shape;
   shape.bits_per_table = FloorLog2(SizeOrReference(features_per_image) / kCpuFineBucket);
-  shape.num_tables = 1;
-  while (shape.num_tables < kMaxCpuTables &&
-         TableCollisionProbability(shape.num_tables, shape.bits_per_table) < target - 1e-12) {
-    ++shape.num_tables;
-  }
+  shape.num_tables = FewestTablesReachingReference(shape.bits_per_table, kMaxCpuTables);
   return shape;
 }
 
@@ -83,12 +88,7 @@ double TableCollisionProbability(int num_tables, int bits_per_table, double p) {
 }
 
 int TablesForBits(int bits_per_table) {
-  const double target = TargetCollisionProbability();
-  const int max_tables = MaxTablesForBits(bits_per_table);
-  int tables = 1;
-  // The small tolerance keeps 8 x 7 itself from rounding up to 9 tables.
-  while (tables < max_tables && TableCollisionProbability(tables, bits_per_table) < target - 1e-12) ++tables;
-  return tables;
+  return FewestTablesReachingReference(bits_per_table, MaxTablesForBits(bits_per_table));
 }
 
 TableShape ChooseTableShape(size_t features_per_image, int num_tables, int bits_per_table, TableShapeGoal goal,
