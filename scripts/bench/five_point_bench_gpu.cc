@@ -85,7 +85,7 @@ int main(int argc, char** argv) {
       if (ms < best_ms) best_ms = ms;
     }
   } catch (const std::exception& error) {
-    std::fprintf(stderr, "no device run: %s\n", error.what());
+    std::fprintf(stderr, "the GPU solver failed: %s\n", error.what());
   }
   long long solutions = 0;
   for (int c : counts) solutions += c;

@@ -103,7 +103,7 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(defaults.cashash.bits_per_table, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
   // What follows is the cascade with the runs' rematch: auto's rows on a
-  // GPU, whatever device runs the test (matcher_choice.h).
+  // GPU, on whichever machine the test runs (matcher_choice.h).
   defaults.cashash.matcher = MatcherType::kCascade;
   // Given on the command line, the tables are kept for any image size.
   MatcherCommandOptions set;
