@@ -89,8 +89,13 @@ Eigen::Matrix3d SyntheticStreetScene::Rotation(int image_index) const {
 Eigen::Vector3d SyntheticStreetScene::Centre(int image_index) const {
   // A stream of its own, so that changing the rotation jitter keeps centres.
   SplitMix64 rng(DeriveSeed(options_.random_seed ^ kCameraTag, ~static_cast<uint64_t>(image_index)));
-  return Eigen::Vector3d(image_index * kCameraSpacing + Uniform(rng, -kPositionJitter, kPositionJitter),
-                         Uniform(rng, -kPositionJitter, kPositionJitter), Uniform(rng, -kDepthJitter, kDepthJitter));
+  // One draw a statement: the order of a call's arguments is unspecified, and
+  // clang and g++ differ. Depth, then height, then along the street keeps
+  // the streets g++ builds have always had.
+  const double depth_jitter = Uniform(rng, -kDepthJitter, kDepthJitter);
+  const double height_jitter = Uniform(rng, -kPositionJitter, kPositionJitter);
+  const double along_jitter = Uniform(rng, -kPositionJitter, kPositionJitter);
+  return Eigen::Vector3d(image_index * kCameraSpacing + along_jitter, height_jitter, depth_jitter);
 }
 
 Eigen::Vector3d SyntheticStreetScene::DrawPoint(int64_t cell, SplitMix64& rng) const {

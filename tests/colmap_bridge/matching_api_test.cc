@@ -50,7 +50,10 @@ Scene MakeScene(int num_points, unsigned seed) {
   std::uniform_real_distribution<double> xy(-2.5, 2.5), depth(5.0, 9.0);
   std::uniform_int_distribution<int> value(0, 60);
   for (int i = 0; i < num_points; ++i) {
-    scene.points.emplace_back(xy(rng), xy(rng), depth(rng));
+    // The depth, then y, then x, one draw a statement (ordered_draws.h).
+    const double z = depth(rng);
+    const double y = xy(rng);
+    scene.points.emplace_back(xy(rng), y, z);
     // SIFT descriptors have an L2 norm of about 512; the matcher's distance
     // threshold is an angle that assumes it.
     std::vector<double> raw(kDescriptorDim);

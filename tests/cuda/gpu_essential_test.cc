@@ -21,6 +21,7 @@
 
 #include <Eigen/Dense>
 
+#include "ordered_draws.h"
 #include "synthetic_two_view.h"
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/geometry/five_point_solver.h"
@@ -214,19 +215,24 @@ TEST(GpuEssential, WarpRefitSolveGivesTheOneThreadModelsBitForBit) {
   SKIP_WITHOUT_CUDA_DEVICE();
   std::mt19937 rng(5);
   std::normal_distribution<double> noise(0, 1);
+  auto draw_noise = [&] { return noise(rng); };
   const int num = 2000;
   std::vector<double> bases(36 * num);
   for (int b = 0; b < num; ++b) {
     double basis[4][9];
     if (b % 2 == 0) {  // a minimal sample's basis
       double rows[5][9];
-      for (auto& row : rows) five_point::EpipolarCoefficients(noise(rng), noise(rng), noise(rng), noise(rng), row);
+      for (auto& row : rows) {
+        const auto n = testing_support::DrawLastFirst<4>(draw_noise);
+        five_point::EpipolarCoefficients(n[0], n[1], n[2], n[3], row);
+      }
       ASSERT_TRUE(five_point::MinimalNullSpace(rows, basis));
     } else {  // a least-squares basis of 12 to 60 rows
       double upper[45] = {0};
       for (int r = 0; r < 12 + b % 49; ++r) {
         double row[9];
-        five_point::EpipolarCoefficients(noise(rng), noise(rng), noise(rng), noise(rng), row);
+        const auto n = testing_support::DrawLastFirst<4>(draw_noise);
+        five_point::EpipolarCoefficients(n[0], n[1], n[2], n[3], row);
         int k = 0;
         for (int i = 0; i < 9; ++i)
           for (int j = i; j < 9; ++j) upper[k++] += row[i] * row[j];

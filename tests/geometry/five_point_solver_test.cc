@@ -17,6 +17,7 @@
 #include "cashash/geometry/essential_matrix.h"
 #include "cashash/geometry/ransac.h"
 #include "cashash/geometry/two_view_geometry.h"
+#include "ordered_draws.h"
 #include "synthetic_two_view.h"
 
 namespace cashash {
@@ -193,7 +194,10 @@ TEST(FivePointSolver, NullSpaceIsOrthonormalAndAnnihilatesTheRows) {
   std::uniform_real_distribution<double> uni(-1, 1);
   for (int trial = 0; trial < 50; ++trial) {
     double rows[5][9], basis[4][9];
-    for (auto& row : rows) five_point::EpipolarCoefficients(uni(rng), uni(rng), uni(rng), uni(rng), row);
+    for (auto& row : rows) {
+      const auto u = testing_support::DrawLastFirst<4>([&] { return uni(rng); });
+      five_point::EpipolarCoefficients(u[0], u[1], u[2], u[3], row);
+    }
     ASSERT_TRUE(five_point::MinimalNullSpace(rows, basis));
     for (int a = 0; a < 4; ++a) {
       for (int b = 0; b < 4; ++b) {

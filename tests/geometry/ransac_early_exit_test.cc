@@ -75,8 +75,11 @@ SyntheticScene ChanceScene(int num_matches, unsigned seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> x(0, scene.width), y(0, scene.height);
   for (int i = 0; i < num_matches; ++i) {
-    scene.points1.emplace_back(x(rng), y(rng));
-    scene.points2.emplace_back(x(rng), y(rng));
+    // y before x, one draw a statement (ordered_draws.h).
+    const double y1 = y(rng);
+    scene.points1.emplace_back(x(rng), y1);
+    const double y2 = y(rng);
+    scene.points2.emplace_back(x(rng), y2);
     scene.matches.push_back({static_cast<point2D_t>(i), static_cast<point2D_t>(i)});
     scene.is_inlier.push_back(false);
   }

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 
 #include "cashash/geometry/camera_projection.h"
+#include "ordered_draws.h"
 #include "synthetic_two_view.h"
 
 namespace cashash {
@@ -143,7 +144,8 @@ TEST(TwoViewGeometry, BorderTranslationIsWatermark) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> corner(10.0, 150.0);
   for (int i = 0; i < 60; ++i) {
-    const Eigen::Vector2d p(corner(rng), 960 - corner(rng));
+    const auto c = testing_support::DrawLastFirst<2>([&] { return corner(rng); });
+    const Eigen::Vector2d p(c[0], 960 - c[1]);
     scene.points1.push_back(p);
     scene.points2.push_back(p + Eigen::Vector2d(0.2, -0.1));
     FeatureMatch m;

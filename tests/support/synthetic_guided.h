@@ -15,6 +15,7 @@
 
 #include "cashash/matching/epipolar_band.h"
 #include "cashash/base/types.h"
+#include "ordered_draws.h"
 #include "synthetic_sift.h"
 #include "synthetic_two_view.h"
 
@@ -168,7 +169,10 @@ inline ImageFeatures MakeUnrelatedImage(int num_features, unsigned seed) {
   for (int i = 0; i < num_features; ++i) {
     const std::vector<uint8_t> d = RandomSift(&rng);
     image.descriptors.data.insert(image.descriptors.data.end(), d.begin(), d.end());
-    image.keypoints.push_back(MakeKeypoint(Eigen::Vector2d(unit(rng) * 1280, unit(rng) * 960), scale(rng)));
+    // The scale, then y, then x (ordered_draws.h).
+    const float s = scale(rng);
+    const auto u = DrawLastFirst<2>([&] { return unit(rng); });
+    image.keypoints.push_back(MakeKeypoint(Eigen::Vector2d(u[0] * 1280, u[1] * 960), s));
   }
   return image;
 }

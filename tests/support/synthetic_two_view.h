@@ -12,6 +12,7 @@
 
 #include "cashash/geometry/point_pairs.h"
 #include "cashash/base/types.h"
+#include "ordered_draws.h"
 
 namespace cashash {
 namespace testing_support {
@@ -71,9 +72,13 @@ inline SyntheticScene MakeScene(const SceneOptions& options) {
   std::uniform_real_distribution<double> uni(-1.0, 1.0);
   std::normal_distribution<double> noise(0.0, options.noise_px);
   s.K << 1000, 0, 640, 0, 1000, 480, 0, 0, 1;
-  const Eigen::Vector3d axis = Eigen::Vector3d(uni(rng), uni(rng), uni(rng)).normalized();
+  auto draw_uni = [&] { return uni(rng); };
+  auto draw_noise = [&] { return noise(rng); };
+  const auto a = DrawLastFirst<3>(draw_uni);
+  const Eigen::Vector3d axis = Eigen::Vector3d(a[0], a[1], a[2]).normalized();
   s.R = Eigen::AngleAxisd(0.15 + 0.05 * uni(rng), axis).toRotationMatrix();
-  s.t = options.baseline * Eigen::Vector3d(1.0, 0.2 * uni(rng), 0.2 * uni(rng)).normalized();
+  const auto side = DrawLastFirst<2>(draw_uni);
+  s.t = options.baseline * Eigen::Vector3d(1.0, 0.2 * side[0], 0.2 * side[1]).normalized();
   // Plane for planar scenes: z = 6 + 0.3 x + 0.2 y in camera 1.
   auto project = [&](const Eigen::Vector3d& X) -> Eigen::Vector2d {
     const Eigen::Vector3d p = s.K * X;
@@ -83,7 +88,8 @@ inline SyntheticScene MakeScene(const SceneOptions& options) {
     return p.x() >= 0 && p.x() < s.width && p.y() >= 0 && p.y() < s.height;
   };
   while (static_cast<int>(s.points1.size()) < options.num_inliers) {
-    const Eigen::Vector2d px((uni(rng) + 1) * 0.5 * s.width, (uni(rng) + 1) * 0.5 * s.height);
+    const auto u = DrawLastFirst<2>(draw_uni);
+    const Eigen::Vector2d px((u[0] + 1) * 0.5 * s.width, (u[1] + 1) * 0.5 * s.height);
     const Eigen::Vector3d ray = s.K.inverse() * px.homogeneous();
     double depth;
     if (options.planar) {
@@ -97,15 +103,19 @@ inline SyntheticScene MakeScene(const SceneOptions& options) {
     if (X2.z() <= 0.1) continue;
     const Eigen::Vector2d p2 = project(X2);
     if (!inside(p2)) continue;
-    s.points1.push_back(px + Eigen::Vector2d(noise(rng), noise(rng)));
-    s.points2.push_back(p2 + Eigen::Vector2d(noise(rng), noise(rng)));
+    const auto n1 = DrawLastFirst<2>(draw_noise);
+    s.points1.push_back(px + Eigen::Vector2d(n1[0], n1[1]));
+    const auto n2 = DrawLastFirst<2>(draw_noise);
+    s.points2.push_back(p2 + Eigen::Vector2d(n2[0], n2[1]));
   }
   const int num_outliers = static_cast<int>(
       options.outlier_ratio / (1.0 - options.outlier_ratio) * options.num_inliers + 0.5);
   std::vector<bool> inlier(s.points1.size(), true);
   for (int i = 0; i < num_outliers; ++i) {
-    s.points1.emplace_back((uni(rng) + 1) * 0.5 * s.width, (uni(rng) + 1) * 0.5 * s.height);
-    s.points2.emplace_back((uni(rng) + 1) * 0.5 * s.width, (uni(rng) + 1) * 0.5 * s.height);
+    const auto u1 = DrawLastFirst<2>(draw_uni);
+    s.points1.emplace_back((u1[0] + 1) * 0.5 * s.width, (u1[1] + 1) * 0.5 * s.height);
+    const auto u2 = DrawLastFirst<2>(draw_uni);
+    s.points2.emplace_back((u2[0] + 1) * 0.5 * s.width, (u2[1] + 1) * 0.5 * s.height);
     inlier.push_back(false);
   }
   // Interleave inliers and outliers in a random but fixed order.
