@@ -3,16 +3,20 @@
 #  1. the CPU test suite built with AddressSanitizer + UndefinedBehaviorSanitizer
 #     in its own build folder, run without the integration tests, then the
 #     bad-input integration test on the sanitized binary;
-#  2. the libFuzzer targets of tests/fuzz built with clang and each run for a
-#     bounded time, seeded from small real-schema databases.
+#  2. the libFuzzer targets of tests/fuzz, each run for a bounded time, seeded
+#     from small real-schema databases.
+# Where clang has libFuzzer, one clang build serves both, and the suite also
+# runs under a second compiler (scripts/test.sh builds with the default one,
+# g++ on Debian). Without it: a sanitized build with the default compiler,
+# and no fuzzing.
 # No CUDA, no benchmarks. A finding fails the script; libFuzzer leaves the
-# crashing input in the fuzz build folder (crash-*), to replay with
-# `build-fuzz/tests/NAME_fuzz crash-...`.
+# crashing input in the build folder (crash-*), to replay with
+# `build-sanitize-clang/tests/NAME_fuzz crash-...`.
 #
 # Usage: scripts/sanitize_and_fuzz.sh
 # Environment:
-#   CASHASH_SANITIZE_BUILD_DIR  (default build-sanitize/ in the repo)
-#   CASHASH_FUZZ_BUILD_DIR      (default build-fuzz/ in the repo)
+#   CASHASH_SANITIZE_BUILD_DIR  (default build-sanitize-clang/ in the repo, or
+#                               build-sanitize/ without clang's libFuzzer)
 #   CASHASH_FUZZ_SECONDS        seconds of wall time of the fuzz targets, which run
 #                               side by side (default 60: about 40 s of a core each
 #                               on two cores)
@@ -20,8 +24,6 @@
 set -euo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-SANITIZE_BUILD="${CASHASH_SANITIZE_BUILD_DIR:-$REPO/build-sanitize}"
-FUZZ_BUILD="${CASHASH_FUZZ_BUILD_DIR:-$REPO/build-fuzz}"
 FUZZ_SECONDS="${CASHASH_FUZZ_SECONDS:-60}"
 SHARED="${CASHASH_SHARED_DATA:-$REPO/../shared/data}"
 JOBS="$(nproc)"
@@ -38,50 +40,61 @@ COMMON=(-DCASHASH_CUDA=OFF -DCASHASH_BUILD_PYTHON=OFF -DCMAKE_BUILD_TYPE=Release
 # Ninja for a new build folder (see scripts/test.sh).
 generator_for() { if [[ ! -f "$1/CMakeCache.txt" ]] && command -v ninja >/dev/null; then echo "-GNinja"; fi; }
 
-export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1}"
-export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
-
-if [[ "${CASHASH_SKIP_SANITIZE:-0}" != 1 ]]; then
-  log "CPU suite with -fsanitize=address,undefined in $SANITIZE_BUILD"
-  cmake -S "$REPO" -B "$SANITIZE_BUILD" $(generator_for "$SANITIZE_BUILD") -DCASHASH_SANITIZE=ON "${COMMON[@]}" >/dev/null
-  cmake --build "$SANITIZE_BUILD" -j"$JOBS"
-  # Left to the Release suite: the one unit test that runs COLMAP's full
-  # RANSAC budget for E eight times (7 s in Release, 100 s sanitized); the
-  # same estimators run sanitized in every other geometry test.
-  (cd "$SANITIZE_BUILD" && ctest --output-on-failure -j"$JOBS" \
-     -E "integration|RansacEarlyExit.EssentialStopsOnceTheDecisionIsSettled")
-  # The one integration test that is all error paths, on the sanitized binary.
-  log "reliability_bad_input.sh on the sanitized cashash"
-  bash "$REPO/tests/integration/reliability_bad_input.sh" "$SANITIZE_BUILD/colmap_bridge/cashash" "$SHARED"
-fi
-
-if [[ "${CASHASH_SKIP_FUZZ:-0}" == 1 ]]; then exit 0; fi
-
 # libFuzzer ships with clang (Debian: clang and libclang-rt-NN-dev).
 probe="$(mktemp -d)"
 trap 'rm -rf "$probe"' EXIT
 echo 'extern "C" int LLVMFuzzerTestOneInput(const char*, unsigned long) { return 0; }' >"$probe/p.cc"
-if ! command -v clang++ >/dev/null || ! clang++ -fsanitize=fuzzer "$probe/p.cc" -o "$probe/p" 2>/dev/null; then
+FUZZ=1
+if [[ "${CASHASH_SKIP_FUZZ:-0}" == 1 ]]; then
+  FUZZ=0
+elif ! command -v clang++ >/dev/null || ! clang++ -fsanitize=fuzzer "$probe/p.cc" -o "$probe/p" 2>/dev/null; then
   log "SKIP fuzzing: clang++ with libFuzzer not found (apt-get install clang libclang-rt-14-dev)"
-  exit 0
+  FUZZ=0
+fi
+if [[ "$FUZZ" == 1 ]]; then
+  BUILD="${CASHASH_SANITIZE_BUILD_DIR:-$REPO/build-sanitize-clang}"
+  COMPILER=(env CC=clang CXX=clang++)
+  COMMON+=(-DCASHASH_FUZZ=ON)
+else
+  BUILD="${CASHASH_SANITIZE_BUILD_DIR:-$REPO/build-sanitize}"
+  COMPILER=()
 fi
 
-log "fuzz targets with clang in $FUZZ_BUILD"
-CC=clang CXX=clang++ cmake -S "$REPO" -B "$FUZZ_BUILD" $(generator_for "$FUZZ_BUILD") -DCASHASH_FUZZ=ON "${COMMON[@]}" >/dev/null
+if [[ "$FUZZ" != 1 && "${CASHASH_SKIP_SANITIZE:-0}" == 1 ]]; then exit 0; fi
+
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1}"
+export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+
+log "ASan+UBSan build${COMPILER:+ with clang} in $BUILD"
+"${COMPILER[@]}" cmake -S "$REPO" -B "$BUILD" $(generator_for "$BUILD") -DCASHASH_SANITIZE=ON "${COMMON[@]}" >/dev/null
+cmake --build "$BUILD" -j"$JOBS"
+
+if [[ "${CASHASH_SKIP_SANITIZE:-0}" != 1 ]]; then
+  log "CPU suite with -fsanitize=address,undefined"
+  # Left to the Release suite: the one unit test that runs COLMAP's full
+  # RANSAC budget for E eight times (7 s in Release, 100 s sanitized); the
+  # same estimators run sanitized in every other geometry test.
+  (cd "$BUILD" && ctest --output-on-failure -j"$JOBS" \
+     -E "integration|RansacEarlyExit.EssentialStopsOnceTheDecisionIsSettled")
+  # The one integration test that is all error paths, on the sanitized binary.
+  log "reliability_bad_input.sh on the sanitized cashash"
+  bash "$REPO/tests/integration/reliability_bad_input.sh" "$BUILD/colmap_bridge/cashash" "$SHARED"
+fi
+
+if [[ "$FUZZ" != 1 ]]; then exit 0; fi
 targets=()
 for source in "$REPO"/tests/fuzz/*_fuzz.cc; do targets+=("$(basename "$source" .cc)"); done
-cmake --build "$FUZZ_BUILD" -j"$JOBS" --target "${targets[@]}"
 
 # Seeds for the database target: small databases (512-byte pages, rollback
 # journal) in COLMAP 3.8's layout with features and matches, and, where the
 # tools exist, empty ones made by COLMAP itself and by pycolmap (4.x).
-SEEDS="$FUZZ_BUILD/seeds/database_fuzz"
+SEEDS="$BUILD/seeds/database_fuzz"
 rm -rf "$SEEDS" && mkdir -p "$SEEDS"
 TOOL="$REPO/tests/integration/reliability_db_tool.py"
 if python3 -c "import numpy" 2>/dev/null; then
   python3 "$TOOL" make "$SEEDS/synthetic.db" --images 3 --features 4 --points 20 --journal delete --page_size 512
   cp "$SEEDS/synthetic.db" "$SEEDS/matched.db"
-  "$FUZZ_BUILD/colmap_bridge/cashash" exhaustive_matcher --database_path "$SEEDS/matched.db" \
+  "$BUILD/colmap_bridge/cashash" exhaustive_matcher --database_path "$SEEDS/matched.db" \
     --SiftMatching.use_gpu 0 --SiftMatching.min_num_inliers 3 >/dev/null 2>&1 || true
 fi
 if command -v colmap >/dev/null; then
@@ -97,7 +110,7 @@ con.execute("PRAGMA page_size=512")
 con.execute("VACUUM")
 PY
 done
-rm -f "$SEEDS"/*-wal "$SEEDS"/*-shm "$SEEDS"/*-journal "$FUZZ_BUILD"/tests/cashash 2>/dev/null || true
+rm -f "$SEEDS"/*-wal "$SEEDS"/*-shm "$SEEDS"/*-journal "$BUILD"/tests/cashash 2>/dev/null || true
 
 # database_fuzz writes each input to a scratch file: in memory where possible.
 if [[ -d /dev/shm && -w /dev/shm ]]; then export TMPDIR=/dev/shm; fi
@@ -107,27 +120,27 @@ if [[ -d /dev/shm && -w /dev/shm ]]; then export TMPDIR=/dev/shm; fi
 pids=()
 for target in "${targets[@]}"; do
   name="${target%_fuzz}"
-  corpus="$FUZZ_BUILD/corpus/$target"  # grows from run to run
+  corpus="$BUILD/corpus/$target"  # grows from run to run
   mkdir -p "$corpus"
   seed_dirs=()
   [[ -d "$REPO/tests/fuzz/corpus/$name" ]] && seed_dirs+=("$REPO/tests/fuzz/corpus/$name")
-  [[ -d "$FUZZ_BUILD/seeds/$target" ]] && seed_dirs+=("$FUZZ_BUILD/seeds/$target")
+  [[ -d "$BUILD/seeds/$target" ]] && seed_dirs+=("$BUILD/seeds/$target")
   log "$target for ${FUZZ_SECONDS}s (seeds: ${seed_dirs[*]:-none})"
-  (cd "$FUZZ_BUILD" && "$FUZZ_BUILD/tests/$target" -max_total_time="$FUZZ_SECONDS" -timeout=20 \
+  (cd "$BUILD" && "$BUILD/tests/$target" -max_total_time="$FUZZ_SECONDS" -timeout=20 \
      -rss_limit_mb=2560 -max_len=65536 -print_final_stats=1 "$corpus" "${seed_dirs[@]}" \
-     >"$FUZZ_BUILD/$target.log" 2>&1) &
+     >"$BUILD/$target.log" 2>&1) &
   pids+=($!)
 done
 status=0
 for index in "${!targets[@]}"; do
   target="${targets[$index]}"
   if ! wait "${pids[$index]}"; then
-    tail -60 "$FUZZ_BUILD/$target.log"
-    log "FAIL: $target found a problem (input saved as $FUZZ_BUILD/crash-* / timeout-* / oom-*)"
+    tail -60 "$BUILD/$target.log"
+    log "FAIL: $target found a problem (input saved as $BUILD/crash-* / timeout-* / oom-*)"
     status=1
   else
     log "$target:"
-    grep -E "^stat::number_of_executed_units|^stat::peak_rss_mb|^#[0-9]+ *DONE" "$FUZZ_BUILD/$target.log" || true
+    grep -E "^stat::number_of_executed_units|^stat::peak_rss_mb|^#[0-9]+ *DONE" "$BUILD/$target.log" || true
   fi
 done
 exit $status
