@@ -182,11 +182,17 @@ TEST(EncodeKeypointsTest, TwoFourAndSixColumnsRoundTripThroughTheDecoder) {
   EXPECT_THROW(colmap::EncodeKeypoints({kp}, 3), colmap::DatabaseError);
 }
 
-TEST(SyntheticStreetSceneTest, ObservationsAreProjectionsOfTheScenePoints) {
+// A 30-image street, small enough for the scene tests.
+colmap::SyntheticStreetSceneOptions ThirtyImageStreet() {
   colmap::SyntheticStreetSceneOptions o;
   o.num_images = 30;
   o.points_per_cell = 50;
   o.random_seed = 3;
+  return o;
+}
+
+TEST(SyntheticStreetSceneTest, ObservationsAreProjectionsOfTheScenePoints) {
+  const colmap::SyntheticStreetSceneOptions o = ThirtyImageStreet();
   const colmap::SyntheticStreetScene scene(o);
   for (int k : {0, 14, 29}) {
     const std::vector<colmap::PointObservation> seen = scene.Observe(k);
@@ -214,11 +220,7 @@ TEST(SyntheticStreetSceneTest, ObservationsAreProjectionsOfTheScenePoints) {
 // the unspecified order in which a call's arguments are evaluated, so a
 // clang build generated other cameras than a g++ build.
 TEST(SyntheticStreetSceneTest, ASeedGivesTheSameCamerasOnEveryCompiler) {
-  colmap::SyntheticStreetSceneOptions o;
-  o.num_images = 30;
-  o.points_per_cell = 50;
-  o.random_seed = 3;
-  const colmap::SyntheticStreetScene scene(o);
+  const colmap::SyntheticStreetScene scene(ThirtyImageStreet());
   const Eigen::Vector3d first(-0.14909699391747347, 0.028216579622629256, -0.0086092517778150416);
   const Eigen::Vector3d eighth(7.0633182987325007, -0.10164101456763759, 0.076377903850348525);
   EXPECT_LT((scene.Centre(0) - first).norm(), 1e-12) << scene.Centre(0).transpose();
