@@ -48,6 +48,28 @@ class OptionTable {
   po::options_description* description_;
 };
 
+// retrieval_matcher / vocab_tree_matcher: COLMAP's VocabTreeMatching.*
+// names where they mean the same, Retrieval.* for the hash-code words.
+void AddRetrievalOptions(OptionTable* table, MatcherCommandOptions* o) {
+  RetrievalOptions& r = o->retrieval;
+  table->Add({"VocabTreeMatching.num_images"}, &r.num_images, "Each image is matched with this many most similar images");
+  table->Add({"VocabTreeMatching.num_nearest_neighbors"}, &r.num_nearest_neighbors,
+             "Visual words a query feature looks up per table: its own cell and the nearest ones across its least "
+             "certain hash bits");
+  table->Add({"VocabTreeMatching.max_num_features"}, &r.max_num_features,
+             "Features indexed per image, largest scales first (-1: all)");
+  table->Add({"VocabTreeMatching.num_checks"}, &o->vocab_tree_num_checks,
+             "COLMAP's tree search depth: accepted, not used (no tree is searched)");
+  table->Add({"VocabTreeMatching.vocab_tree_path"}, &o->vocab_tree_path,
+             "COLMAP's vocabulary tree: accepted, not used (the words come from the hash codes; a warning says so)");
+  table->Add({"Retrieval.num_tables"}, &r.num_tables, "Hash tables, each giving every feature one visual word");
+  table->Add({"Retrieval.bits_per_word"}, &r.bits_per_word,
+             "Bits of a visual word; 0 = log2(median features per image) + 8, in [8, 24]");
+  table->Add({"TransitiveMatching.num_iterations", "transitive"}, &o->transitive_rounds,
+             "After the retrieved pairs: rounds of matching the pairs the verified graph implies (i-j, j-k "
+             "verified: i-k), as COLMAP's transitive_matcher; 0 = none");
+}
+
 }  // namespace
 
 // One function because the option table reads best as one list in --help
@@ -62,6 +84,9 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   if (command == "matches_importer") {
     table.Add({"match_list_path"}, &o.match_list_path, "Text file with one 'name1 name2' pair per line");
     table.Add({"match_type"}, &o.match_type, "Only 'pairs' is supported: match and verify the listed pairs");
+  }
+  if (command == "retrieval_matcher" || command == "vocab_tree_matcher") {
+    AddRetrievalOptions(&table, &o);
   }
   table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
   table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
@@ -204,6 +229,13 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
     }
   }
   if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
+  if (o.transitive_rounds < 0) {
+    return "--TransitiveMatching.num_iterations must be >= 0, got " + std::to_string(o.transitive_rounds);
+  }
+  {
+    const std::string retrieval_problem = o.retrieval.Check();
+    if (!retrieval_problem.empty()) return retrieval_problem;
+  }
   if (o.gpu_verifications_in_flight < 1 || o.gpu_verifications_in_flight > 8) {
     return "gpu_verifications_in_flight must be 1 to 8, got " + std::to_string(o.gpu_verifications_in_flight);
   }

@@ -10,6 +10,7 @@
 #include "cashash/matching/guided_matching.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/geometry/two_view_geometry.h"
+#include "cashash/retrieval/retrieval_options.h"
 
 namespace cashash {
 namespace colmap {
@@ -70,6 +71,16 @@ struct MatcherCommandOptions {
   // matches_importer only.
   std::string match_list_path;
   std::string match_type = "pairs";
+  // retrieval_matcher / vocab_tree_matcher (VocabTreeMatching.*,
+  // Retrieval.*): which pairs retrieval chooses. vocab_tree_path is
+  // COLMAP's and is not used (a warning says so): the vocabulary comes from
+  // the hash codes. transitive_rounds > 0: after the retrieved pairs, the
+  // pairs the verified graph implies are matched, this many rounds, as
+  // COLMAP's transitive_matcher does.
+  RetrievalOptions retrieval;
+  std::string vocab_tree_path;
+  int vocab_tree_num_checks = 256;  // COLMAP's VocabTreeMatching.num_checks: accepted, not used
+  int transitive_rounds = 0;
   // Not empty: each chunk's stage intervals are written to this CSV file
   // (pipeline_trace.h; under MPI each rank writes PATH.rankN), to read a
   // run's critical path with scripts/bench/pipeline_trace_summary.py.

@@ -15,6 +15,7 @@
 #include "colmap_bridge/api/command_options.h"
 #include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/api/process_clock.h"
+#include "colmap_bridge/api/retrieval_api.h"
 
 namespace cashash {
 namespace colmap {
@@ -188,6 +189,17 @@ int RunGuidedMatcher(int argc, const char* const* argv) {
   if (early >= 0) return early;
   return RunGuarded([&]() {
     return MatchExhaustive(options.database_path, options, ConsoleCallbacks("Guided feature matching (Ga-CasHash)"));
+  });
+}
+
+// `command` is "retrieval_matcher" or COLMAP's name, "vocab_tree_matcher".
+int RunRetrievalMatcher(const std::string& command, int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions(command, argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded([&]() {
+    return MatchRetrieval(options.database_path, options,
+                          ConsoleCallbacks("Retrieval feature matching (visual words from the hash codes)"));
   });
 }
 

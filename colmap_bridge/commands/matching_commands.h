@@ -2,6 +2,8 @@
 // matches_importer. Each returns the process exit code.
 #pragma once
 
+#include <string>
+
 namespace cashash {
 namespace colmap {
 
@@ -9,6 +11,9 @@ int RunExhaustiveMatcher(int argc, const char* const* argv);
 int RunMatchesImporter(int argc, const char* const* argv);
 // exhaustive_matcher with --GuidedMatching.enabled 1 (Ga-CasHash).
 int RunGuidedMatcher(int argc, const char* const* argv);
+// Retrieval from the hash codes, then the retrieved pairs (retrieval_api.h);
+// `command` is "retrieval_matcher" or "vocab_tree_matcher".
+int RunRetrievalMatcher(const std::string& command, int argc, const char* const* argv);
 
 }  // namespace colmap
 }  // namespace cashash

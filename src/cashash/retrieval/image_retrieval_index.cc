@@ -1,0 +1,181 @@
+#include "cashash/retrieval/image_retrieval_index.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "cashash/pipeline/thread_pool.h"
+
+namespace cashash {
+namespace {
+
+struct WordCount {
+  uint32_t word;
+  uint32_t count;
+};
+
+// (word, times it occurs) of `words`, by word ascending.
+std::vector<WordCount> CountWords(std::vector<uint32_t> words) {
+  std::sort(words.begin(), words.end());
+  std::vector<WordCount> counts;
+  for (size_t i = 0; i < words.size();) {
+    size_t j = i;
+    while (j < words.size() && words[j] == words[i]) ++j;
+    counts.push_back({words[i], static_cast<uint32_t>(j - i)});
+    i = j;
+  }
+  return counts;
+}
+
+// Better first: score descending, then position ascending.
+bool Better(const RetrievalNeighbor& a, const RetrievalNeighbor& b) {
+  return a.score != b.score ? a.score > b.score : a.image < b.image;
+}
+
+}  // namespace
+
+ImageRetrievalIndex::ImageRetrievalIndex(const std::vector<ImageWords>& images, uint32_t vocabulary_size,
+                                         int num_threads)
+    : num_threads_(num_threads) {
+  const size_t n = images.size();
+  for (size_t i = 0; i < n; ++i) {
+    for (const std::vector<uint32_t>* words : {&images[i].indexed, &images[i].query}) {
+      for (uint32_t word : *words) {
+        if (word >= vocabulary_size) {
+          throw std::invalid_argument("ImageRetrievalIndex: image " + std::to_string(i) + " has word " +
+                                      std::to_string(word) + " past the vocabulary of " +
+                                      std::to_string(vocabulary_size));
+        }
+      }
+    }
+  }
+  std::vector<std::vector<WordCount>> indexed(n), query(n);
+  ParallelFor(n, num_threads, [&](size_t i) {
+    indexed[i] = CountWords(images[i].indexed);
+    query[i] = CountWords(images[i].query);
+  });
+
+  // Document frequencies and idf over the indexed words.
+  std::vector<uint32_t> df(vocabulary_size, 0);
+  for (const std::vector<WordCount>& counts : indexed) {
+    for (const WordCount& c : counts) ++df[c.word];
+  }
+  std::vector<float> idf(vocabulary_size, 0.f);
+  for (uint32_t w = 0; w < vocabulary_size; ++w) {
+    if (df[w] > 0) idf[w] = static_cast<float>(std::log(static_cast<double>(n) / df[w]));
+  }
+
+  // Postings: sqrt(tf) * idf, normalised per image.
+  posting_offsets_.assign(static_cast<size_t>(vocabulary_size) + 1, 0);
+  for (uint32_t w = 0; w < vocabulary_size; ++w) posting_offsets_[w + 1] = posting_offsets_[w] + df[w];
+  postings_.resize(posting_offsets_.back());
+  std::vector<size_t> fill(posting_offsets_.begin(), posting_offsets_.end() - 1);
+  for (size_t i = 0; i < n; ++i) {
+    double norm2 = 0;
+    for (const WordCount& c : indexed[i]) {
+      const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word];
+      norm2 += v * v;
+    }
+    const double scale = norm2 > 0 ? 1.0 / std::sqrt(norm2) : 0.0;
+    for (const WordCount& c : indexed[i]) {
+      const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word] * scale;
+      postings_[fill[c.word]++] = {static_cast<uint32_t>(i), static_cast<float>(v)};
+    }
+  }
+
+  // Query vectors, the same weighting over the query words; words no image
+  // holds, or whose idf is 0 (every image holds them), score nothing.
+  query_offsets_.assign(n + 1, 0);
+  std::vector<std::vector<WeightedWord>> weighted(n);
+  ParallelFor(n, num_threads, [&](size_t i) {
+    double norm2 = 0;
+    for (const WordCount& c : query[i]) {
+      const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word];
+      norm2 += v * v;
+    }
+    const double scale = norm2 > 0 ? 1.0 / std::sqrt(norm2) : 0.0;
+    for (const WordCount& c : query[i]) {
+      if (df[c.word] == 0 || idf[c.word] <= 0.f) continue;
+      const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word] * scale;
+      weighted[i].push_back({c.word, static_cast<float>(v)});
+    }
+    std::vector<WordCount>().swap(query[i]);
+  });
+  for (size_t i = 0; i < n; ++i) query_offsets_[i + 1] = query_offsets_[i] + weighted[i].size();
+  queries_.resize(query_offsets_.back());
+  ParallelFor(n, num_threads, [&](size_t i) {
+    std::copy(weighted[i].begin(), weighted[i].end(), queries_.begin() + static_cast<std::ptrdiff_t>(query_offsets_[i]));
+  });
+}
+
+std::vector<RetrievalNeighbor> ImageRetrievalIndex::TopKWithScratch(size_t image, size_t k, std::vector<float>* scores,
+                                                                    std::vector<uint32_t>* touched) const {
+  if (image >= num_images()) {
+    throw std::out_of_range("ImageRetrievalIndex::TopK: image " + std::to_string(image) + " of " +
+                            std::to_string(num_images()));
+  }
+  scores->resize(num_images(), 0.f);
+  touched->clear();
+  for (size_t q = query_offsets_[image]; q < query_offsets_[image + 1]; ++q) {
+    const WeightedWord& word = queries_[q];
+    for (size_t p = posting_offsets_[word.word]; p < posting_offsets_[word.word + 1]; ++p) {
+      const Posting& posting = postings_[p];
+      float& score = (*scores)[posting.image];
+      if (score == 0.f) touched->push_back(posting.image);
+      score += word.weight * posting.weight;
+    }
+  }
+  std::vector<RetrievalNeighbor> candidates;
+  candidates.reserve(touched->size());
+  for (uint32_t j : *touched) {
+    const float score = (*scores)[j];
+    (*scores)[j] = 0.f;
+    if (j != image && score > 0.f) candidates.push_back({j, score});
+  }
+  // Every weight read is > 0 (query words of idf 0 are dropped), so an
+  // image is touched once per query.
+  std::sort(candidates.begin(), candidates.end(), Better);
+  if (candidates.size() > k) candidates.resize(k);
+  return candidates;
+}
+
+std::vector<RetrievalNeighbor> ImageRetrievalIndex::TopK(size_t image, size_t k) const {
+  std::vector<float> scores;
+  std::vector<uint32_t> touched;
+  return TopKWithScratch(image, k, &scores, &touched);
+}
+
+std::vector<std::vector<RetrievalNeighbor>> ImageRetrievalIndex::AllTopK(size_t k) const {
+  const size_t n = num_images();
+  std::vector<std::vector<RetrievalNeighbor>> result(n);
+  const size_t workers = NumParallelWorkers(n, num_threads_);
+  std::vector<std::vector<float>> scores(workers);
+  std::vector<std::vector<uint32_t>> touched(workers);
+  ParallelForWorkers(n, num_threads_, [&](size_t i, size_t worker) {
+    result[i] = TopKWithScratch(i, k, &scores[worker], &touched[worker]);
+  });
+  return result;
+}
+
+uint64_t ImageRetrievalIndex::PostingsReadByAllQueries() const {
+  uint64_t total = 0;
+  for (const WeightedWord& word : queries_) total += posting_offsets_[word.word + 1] - posting_offsets_[word.word];
+  return total;
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> UnionOfNeighborPairs(
+    const std::vector<std::vector<RetrievalNeighbor>>& neighbors) {
+  std::vector<std::pair<uint32_t, uint32_t>> pairs;
+  for (size_t i = 0; i < neighbors.size(); ++i) {
+    for (const RetrievalNeighbor& neighbor : neighbors[i]) {
+      const uint32_t a = static_cast<uint32_t>(i);
+      pairs.emplace_back(std::min(a, neighbor.image), std::max(a, neighbor.image));
+    }
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+}  // namespace cashash

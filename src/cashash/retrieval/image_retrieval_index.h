@@ -1,0 +1,81 @@
+// An inverted file over the visual words of a set of images (visual_words.h)
+// that finds, for each image, the images most likely to overlap it: tf-idf
+// bag-of-words retrieval (Sivic and Zisserman 2003) with the vocabulary
+// taken from the cascade's hash codes instead of a trained tree. Knows no
+// database and no COLMAP: images are positions 0 .. num_images - 1.
+//
+// Each image is a sparse vector over the words: weight sqrt(tf) * idf, tf
+// the times the image holds the word (the square root damps bursts, a
+// facade's repeated windows voting once per window), idf = log(N / df)
+// with df the images holding it (words every image holds say nothing),
+// then L2-normalised. The query side is the image's query words
+// (num_nearest_neighbors cells per feature and table), weighted the same
+// way. The similarity of query q to image j is the dot product of q's
+// query vector with j's indexed vector, accumulated over the postings of
+// q's words. docs/retrieval.md has the method and its cost.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "cashash/retrieval/visual_words.h"
+
+namespace cashash {
+
+struct RetrievalNeighbor {
+  uint32_t image = 0;  // position in the index
+  float score = 0.f;   // cosine similarity of the tf-idf vectors, in (0, 1]
+};
+
+class ImageRetrievalIndex {
+ public:
+  // images[i] are the words of image i; every word < vocabulary_size
+  // (std::invalid_argument otherwise). Building uses num_threads threads
+  // (-1: every core).
+  ImageRetrievalIndex(const std::vector<ImageWords>& images, uint32_t vocabulary_size, int num_threads = -1);
+
+  size_t num_images() const { return query_offsets_.size() - 1; }
+
+  // The k images most similar to `image`, itself excluded, best first
+  // (score descending, then position ascending, so the result is the same
+  // on every run and thread count). Images sharing no word with it are
+  // never returned, so there may be fewer than k.
+  std::vector<RetrievalNeighbor> TopK(size_t image, size_t k) const;
+
+  // TopK of every image, on num_threads threads.
+  std::vector<std::vector<RetrievalNeighbor>> AllTopK(size_t k) const;
+
+  // Postings read by the queries of all images (the cost of AllTopK).
+  uint64_t PostingsReadByAllQueries() const;
+
+ private:
+  struct WeightedWord {
+    uint32_t word;
+    float weight;
+  };
+  struct Posting {
+    uint32_t image;
+    float weight;
+  };
+
+  std::vector<RetrievalNeighbor> TopKWithScratch(size_t image, size_t k, std::vector<float>* scores,
+                                                 std::vector<uint32_t>* touched) const;
+
+  int num_threads_ = -1;
+  // Query vectors of all images, image i at [query_offsets_[i],
+  // query_offsets_[i + 1]); only words some other image holds are kept.
+  std::vector<size_t> query_offsets_;
+  std::vector<WeightedWord> queries_;
+  // Postings of word w at [posting_offsets_[w], posting_offsets_[w + 1]),
+  // by image ascending; words of a single image have none.
+  std::vector<size_t> posting_offsets_;
+  std::vector<Posting> postings_;
+};
+
+// The pairs to match from each image's neighbours: every (image, neighbour)
+// once, as (smaller position, larger position), sorted.
+std::vector<std::pair<uint32_t, uint32_t>> UnionOfNeighborPairs(
+    const std::vector<std::vector<RetrievalNeighbor>>& neighbors);
+
+}  // namespace cashash

@@ -1,0 +1,53 @@
+// Options of image retrieval from the cascade's own hash codes (no
+// vocabulary tree): which images are similar enough to be worth matching.
+// The names follow COLMAP's VocabTreeMatching.* where they mean the same;
+// docs/retrieval.md describes the method.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace cashash {
+
+struct RetrievalOptions {
+  // Each image is paired with its num_images most similar images
+  // (VocabTreeMatching.num_images, COLMAP's default 100).
+  int num_images = 100;
+  // Visual words of each feature in each table: its own cell and the
+  // num_nearest_neighbors - 1 cells nearest to it (the ones across its
+  // least certain hash bits), as COLMAP assigns a feature to its
+  // num_nearest_neighbors nearest words (VocabTreeMatching, default 5).
+  // Only the query side is spread this way, so the index does not grow.
+  int num_nearest_neighbors = 5;
+  // Features of an image that are indexed, largest scales first (COLMAP's
+  // VocabTreeMatching.max_num_features; -1 = all).
+  int max_num_features = -1;
+  // Hash tables per feature: each gives every feature one word of
+  // bits_per_word bits, from projections of its own (drawn from
+  // random_seed, as the cascade's are). More tables, more chances that two
+  // views of one point share a word.
+  int num_tables = 4;
+  // Bits of one word; 0 = chosen from the features per image
+  // (RetrievalBitsPerWord): about 256 cells per feature of an image, so a
+  // word occurs in few images and a query touches few postings.
+  int bits_per_word = 0;
+  uint64_t random_seed = 0;
+  int num_threads = -1;  // -1: every core
+
+  static constexpr int kMaxTables = 16;
+  static constexpr int kMinBitsPerWord = 8;
+  static constexpr int kMaxBitsPerWord = 24;
+
+  // "" or a message naming the option (--VocabTreeMatching.* or
+  // --Retrieval.* as on the command line).
+  std::string Check() const;
+};
+
+// bits_per_word for images of `features_per_image` features (the largest
+// image of the run, after max_num_features): log2 of it plus 8, within
+// [kMinBitsPerWord, kMaxBitsPerWord]. A word then holds about 1/256 of an
+// image's features, so that chance shares between unrelated images stay
+// few while the postings a query reads grow only with the images.
+int RetrievalBitsPerWord(const RetrievalOptions& options, size_t features_per_image);
+
+}  // namespace cashash
