@@ -17,6 +17,7 @@
 #include "colmap_bridge/api/build_info.h"
 #include "colmap_bridge/api/matcher_factory.h"
 #include "colmap_bridge/api/matching_api.h"
+#include "colmap_bridge/api/retrieval_api.h"
 
 namespace py = pybind11;
 
@@ -254,11 +255,21 @@ void BindOptions(py::module_& m) {
       .def_readwrite("max_num_trials", &TwoViewGeometryOptions::max_num_trials)
       .def_readwrite("min_inlier_ratio", &TwoViewGeometryOptions::min_inlier_ratio)
       .def_readwrite("random_seed", &TwoViewGeometryOptions::random_seed);
+  py::class_<RetrievalOptions>(m, "RetrievalOptions")
+      .def(py::init<>())
+      .def_readwrite("num_images", &RetrievalOptions::num_images)
+      .def_readwrite("num_nearest_neighbors", &RetrievalOptions::num_nearest_neighbors)
+      .def_readwrite("max_num_features", &RetrievalOptions::max_num_features)
+      .def_readwrite("num_tables", &RetrievalOptions::num_tables)
+      .def_readwrite("bits_per_word", &RetrievalOptions::bits_per_word);
   py::class_<MatcherCommandOptions>(m, "MatchingOptions")
       .def(py::init<>())
       .def_readwrite("sift", &MatcherCommandOptions::sift)
       .def_readwrite("cashash", &MatcherCommandOptions::cashash)
       .def_readwrite("two_view", &MatcherCommandOptions::two_view)
+      .def_readwrite("retrieval", &MatcherCommandOptions::retrieval)
+      .def_readwrite("vocab_tree_path", &MatcherCommandOptions::vocab_tree_path)
+      .def_readwrite("transitive_rounds", &MatcherCommandOptions::transitive_rounds)
       .def_readwrite("block_size", &MatcherCommandOptions::block_size)
       .def_readwrite("use_gpu", &MatcherCommandOptions::use_gpu)
       .def_readwrite("gpu_index", &MatcherCommandOptions::gpu_index)
@@ -295,6 +306,14 @@ PYBIND11_MODULE(_core, m) {
         });
       },
       py::arg("database_path"), py::arg("pairs"), py::arg("options"), py::arg("progress") = py::none());
+  m.def(
+      "match_retrieval",
+      [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchRetrieval(database_path, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());
   m.def("match", &MatchInMemory, py::arg("descriptors1"), py::arg("descriptors2"), py::arg("keypoints1"),
         py::arg("keypoints2"), py::arg("camera1"), py::arg("camera2"), py::arg("options"));
   m.def("build_info", []() {

@@ -3,6 +3,7 @@
     import cashash
     cashash.match_exhaustive("database.db")                 # like pycolmap.match_exhaustive
     cashash.match_pairs("database.db", [("a.jpg", "b.jpg")])
+    cashash.match_retrieval("database.db", num_images=50)   # like pycolmap.match_vocabtree, no tree
     result = cashash.match(desc1, desc2, kp1, kp2)         # numpy in, numpy out
 
 Options are keywords named as the fields of MatchingOptions and of its parts
@@ -16,7 +17,7 @@ the messages of the ``cashash`` command line.
 import numpy as np
 
 from . import _core
-from ._core import CasHashOptions, MatchingOptions, SiftMatchingOptions, TwoViewGeometryOptions
+from ._core import CasHashOptions, MatchingOptions, RetrievalOptions, SiftMatchingOptions, TwoViewGeometryOptions
 
 __all__ = [
     "CasHashOptions",
@@ -28,6 +29,9 @@ __all__ = [
     "match",
     "match_exhaustive",
     "match_pairs",
+    "match_retrieval",
+    "match_vocabtree",
+    "RetrievalOptions",
     "with_cuda",
 ]
 
@@ -63,12 +67,12 @@ def make_options(options=None, **kwargs):
         # not warn on every call.
         result.use_gpu = with_cuda
     else:
-        for part in ("sift", "cashash", "two_view"):
+        for part in ("sift", "cashash", "two_view", "retrieval"):
             source, target = getattr(options, part), getattr(result, part)
             for name in _fields(source):
                 setattr(target, name, getattr(source, name))
         for name in _fields(options):
-            if name not in ("sift", "cashash", "two_view"):
+            if name not in ("sift", "cashash", "two_view", "retrieval"):
                 setattr(result, name, getattr(options, name))
     for name, value in kwargs.items():
         for target in (result, result.sift, result.cashash, result.two_view):
@@ -103,6 +107,38 @@ def match_pairs(database_path, pairs, options=None, progress=None, **kwargs):
     """Like match_exhaustive, for the given (name1, name2) image pairs."""
     pairs = [(str(a), str(b)) for a, b in pairs]
     return _core.match_pairs(str(database_path), pairs, make_options(options, **kwargs), progress)
+
+
+def match_retrieval(database_path, num_images=100, options=None, progress=None, num_nearest_neighbors=5,
+                    max_num_features=-1, retrieval_num_tables=None, bits_per_word=0, transitive_rounds=0,
+                    vocab_tree_path="", **kwargs):
+    """Like match_exhaustive, for the pairs retrieval chooses: each image with
+    its num_images most similar images, similarity from visual words taken
+    from the cascade's hash codes (no vocabulary tree; docs/retrieval.md).
+
+    num_images, num_nearest_neighbors and max_num_features are COLMAP's
+    VocabTreeMatching options; retrieval_num_tables and bits_per_word shape
+    the words (Retrieval.num_tables, Retrieval.bits_per_word; 0 bits =
+    chosen from the features per image). transitive_rounds > 0 then matches
+    the pairs the verified graph implies, as COLMAP's transitive_matcher.
+    vocab_tree_path is accepted and not used (a warning says so).
+    """
+    opts = make_options(options, **kwargs)
+    retrieval = opts.retrieval
+    retrieval.num_images = int(num_images)
+    retrieval.num_nearest_neighbors = int(num_nearest_neighbors)
+    retrieval.max_num_features = int(max_num_features)
+    if retrieval_num_tables is not None:
+        retrieval.num_tables = int(retrieval_num_tables)
+    retrieval.bits_per_word = int(bits_per_word)
+    opts.retrieval = retrieval
+    opts.transitive_rounds = int(transitive_rounds)
+    opts.vocab_tree_path = str(vocab_tree_path)
+    return _core.match_retrieval(str(database_path), opts, progress)
+
+
+# pycolmap's name for the matcher it replaces.
+match_vocabtree = match_retrieval
 
 
 def _descriptors(array):

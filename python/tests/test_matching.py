@@ -90,6 +90,19 @@ def test_match_pairs_by_name(scene_database):
         cashash.match_pairs(scene_database, [("nope.jpg", "view1.jpg")])
 
 
+def test_match_retrieval(scene_database):
+    # Three views of one scene: with one most similar image each, retrieval
+    # pairs every view with another, and the pairs it picks verify.
+    with pytest.warns(RuntimeWarning, match="vocab_tree_path unused.bin is not used"):
+        summary = cashash.match_retrieval(scene_database, num_images=1, vocab_tree_path="unused.bin")
+    assert 2 <= summary["pairs_requested"] <= 3
+    assert summary["verified_pairs"] == summary["pairs_requested"]
+    again = cashash.match_vocabtree(scene_database, num_images=2)
+    assert again["pairs_requested"] == 3 and again["pairs_skipped"] == summary["pairs_requested"]
+    with pytest.raises(ValueError, match="--VocabTreeMatching.num_images must be >= 1"):
+        cashash.match_retrieval(scene_database, num_images=0)
+
+
 def test_database_errors_carry_cli_messages(tmp_path, scene_database):
     with pytest.raises(RuntimeError, match="database file not found: "):
         cashash.match_exhaustive(tmp_path / "missing.db")
