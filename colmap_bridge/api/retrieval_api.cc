@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <numeric>
 #include <sstream>
 #include <stdexcept>
@@ -21,6 +22,9 @@ namespace {
 // The hashing mean comes from at most this many images spread evenly over
 // the images, as the matcher's does (matching_api.cc).
 constexpr size_t kMaxImagesForMean = 100;
+
+// Processor time of the whole process, all threads (std::clock on POSIX).
+double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -83,6 +87,7 @@ DatabaseRetrievalIndex BuildDatabaseRetrievalIndex(const std::string& database_p
   result.seconds_mean = SecondsSince(start);
 
   start = std::chrono::steady_clock::now();
+  double cpu_start = CpuSeconds();
   const VisualWordHasher hasher(options, result.bits_per_word, mean);
   std::vector<ImageWords> words(image_ids.size());
   std::vector<size_t> features(image_ids.size(), 0);
@@ -99,15 +104,19 @@ DatabaseRetrievalIndex BuildDatabaseRetrievalIndex(const std::string& database_p
   readers.clear();
   result.features_indexed = std::accumulate(features.begin(), features.end(), size_t{0});
   result.seconds_reading_and_hashing = SecondsSince(start);
+  result.cpu_seconds_reading_and_hashing = CpuSeconds() - cpu_start;
 
   start = std::chrono::steady_clock::now();
-  result.index = std::make_unique<ImageRetrievalIndex>(words, hasher.vocabulary_size(), options.num_threads);
+  cpu_start = CpuSeconds();
+  result.index = std::make_unique<ImageRetrievalIndex>(std::move(words), hasher.vocabulary_size(), options.num_threads);
   result.seconds_indexing = SecondsSince(start);
+  result.cpu_seconds_indexing = CpuSeconds() - cpu_start;
   return result;
 }
 
 RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const RetrievalOptions& options) {
   const auto start = std::chrono::steady_clock::now();
+  const double cpu_start = CpuSeconds();
   RetrievedPairs result;
   const auto neighbors = index.index->AllTopK(static_cast<size_t>(options.num_images));
   for (const auto& [a, b] : UnionOfNeighborPairs(neighbors)) {
@@ -117,6 +126,7 @@ RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const Retrieva
   }
   std::sort(result.pairs.begin(), result.pairs.end());
   result.seconds_querying = SecondsSince(start);
+  result.cpu_seconds_querying = CpuSeconds() - cpu_start;
   return result;
 }
 

@@ -30,6 +30,10 @@ struct DatabaseRetrievalIndex {
   double seconds_mean = 0;
   double seconds_reading_and_hashing = 0;
   double seconds_indexing = 0;
+  // Processor seconds of all threads of the process over the same phases
+  // (what a machine with fewer or busier cores would wait for).
+  double cpu_seconds_reading_and_hashing = 0;
+  double cpu_seconds_indexing = 0;
 };
 
 // Reads, hashes and indexes the given images of the database (all of table
@@ -46,6 +50,7 @@ DatabaseRetrievalIndex BuildDatabaseRetrievalIndex(const std::string& database_p
 struct RetrievedPairs {
   std::vector<ImagePair> pairs;
   double seconds_querying = 0;
+  double cpu_seconds_querying = 0;
 };
 RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const RetrievalOptions& options);
 

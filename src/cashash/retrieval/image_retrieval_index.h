@@ -30,10 +30,12 @@ struct RetrievalNeighbor {
 
 class ImageRetrievalIndex {
  public:
-  // images[i] are the words of image i; every word < vocabulary_size
+  // images[i] are the words of image i (its query words are its indexed
+  // ones where `query` is empty); every word < vocabulary_size
   // (std::invalid_argument otherwise). Building uses num_threads threads
   // (-1: every core).
-  ImageRetrievalIndex(const std::vector<ImageWords>& images, uint32_t vocabulary_size, int num_threads = -1);
+  // Move the words in to have each image's freed once it is counted.
+  ImageRetrievalIndex(std::vector<ImageWords> images, uint32_t vocabulary_size, int num_threads = -1);
 
   size_t num_images() const { return query_offsets_.size() - 1; }
 

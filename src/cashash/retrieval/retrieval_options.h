@@ -13,12 +13,15 @@ struct RetrievalOptions {
   // Each image is paired with its num_images most similar images
   // (VocabTreeMatching.num_images, COLMAP's default 100).
   int num_images = 100;
-  // Visual words of each feature in each table: its own cell and the
-  // num_nearest_neighbors - 1 cells nearest to it (the ones across its
-  // least certain hash bits), as COLMAP assigns a feature to its
-  // num_nearest_neighbors nearest words (VocabTreeMatching, default 5).
-  // Only the query side is spread this way, so the index does not grow.
-  int num_nearest_neighbors = 5;
+  // Visual words a query feature looks up in each table: its own cell and
+  // the num_nearest_neighbors - 1 cells nearest to it (across its least
+  // certain hash bits), as COLMAP assigns a feature to its
+  // num_nearest_neighbors nearest words. Only the query side is spread, so
+  // the index does not grow. Default 1, not COLMAP's 5: with several
+  // tables of fine words, more cells found no more overlapping pairs on
+  // the generated street (docs/retrieval.md) and cost 5x the query
+  // memory.
+  int num_nearest_neighbors = 1;
   // Features of an image that are indexed, largest scales first (COLMAP's
   // VocabTreeMatching.max_num_features; -1 = all).
   int max_num_features = -1;

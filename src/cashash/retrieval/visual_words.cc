@@ -120,7 +120,7 @@ ImageWords VisualWordHasher::Words(const FeatureDescriptors& descriptors, const 
 
   ImageWords words;
   words.indexed.resize(n * num_tables_);
-  words.query.reserve(n * num_tables_ * num_probes_);
+  if (num_probes_ > 1) words.query.reserve(n * num_tables_ * num_probes_);
   std::vector<float> margins(bits_per_word_);
   for (size_t i = 0; i < n; ++i) {
     for (int t = 0; t < num_tables_; ++t) {
@@ -133,6 +133,7 @@ ImageWords VisualWordHasher::Words(const FeatureDescriptors& descriptors, const 
       }
       const uint32_t word = (static_cast<uint32_t>(t) << bits_per_word_) | cell;
       words.indexed[i * num_tables_ + t] = word;
+      if (num_probes_ <= 1) continue;
       words.query.push_back(word);
       uint32_t masks[kMaxCellFlips];
       const int num_masks = NearestCellFlips(margins.data(), bits_per_word_, num_probes_, masks);

@@ -25,8 +25,8 @@ struct ImageWords {
   std::vector<uint32_t> indexed;
   // The cells a query of this image looks up: for each feature and table
   // its own cell and its num_nearest_neighbors - 1 nearest cells (across
-  // the bits whose projections lie closest to zero). Equal to `indexed`
-  // when num_nearest_neighbors is 1.
+  // the bits whose projections lie closest to zero). Empty when
+  // num_nearest_neighbors is 1: the query words are then `indexed`.
   std::vector<uint32_t> query;
 };
 
