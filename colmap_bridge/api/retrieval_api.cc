@@ -108,7 +108,8 @@ DatabaseRetrievalIndex BuildDatabaseRetrievalIndex(const std::string& database_p
 
   start = std::chrono::steady_clock::now();
   cpu_start = CpuSeconds();
-  result.index = std::make_unique<ImageRetrievalIndex>(std::move(words), hasher.vocabulary_size(), options.num_threads);
+  result.index = std::make_unique<ImageRetrievalIndex>(std::move(words), hasher.vocabulary_size(), options.num_threads,
+                                                       options.max_word_image_fraction);
   result.seconds_indexing = SecondsSince(start);
   result.cpu_seconds_indexing = CpuSeconds() - cpu_start;
   return result;

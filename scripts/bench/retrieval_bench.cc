@@ -180,7 +180,8 @@ void RunSynthetic(const std::string& source, int num_images, int num_features, c
   const double hashing_wall = WallSeconds() - wall, hashing_cpu = CpuSeconds() - cpu;
   wall = WallSeconds();
   cpu = CpuSeconds();
-  const ImageRetrievalIndex index(std::move(words), hasher.vocabulary_size(), options.num_threads);
+  const ImageRetrievalIndex index(std::move(words), hasher.vocabulary_size(), options.num_threads,
+                                  options.max_word_image_fraction);
   const double indexing_wall = WallSeconds() - wall, indexing_cpu = CpuSeconds() - cpu;
   wall = WallSeconds();
   cpu = CpuSeconds();
@@ -209,7 +210,7 @@ void RunSynthetic(const std::string& source, int num_images, int num_features, c
 int main(int argc, char** argv) {
   std::string database, truth, pairs_out;
   RetrievalOptions options;
-  options.num_images = 50;
+  options.num_images = 50;  // the scale target's
   int min_inliers = 15, strong_inliers = 50, max_images = 0, synthetic_images = 0, synthetic_features = 4096;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
@@ -224,6 +225,7 @@ int main(int argc, char** argv) {
     else if (key == "--max_num_features") options.max_num_features = std::stoi(value);
     else if (key == "--threads") options.num_threads = std::stoi(value);
     else if (key == "--seed") options.random_seed = std::stoull(value);
+    else if (key == "--max_word_image_fraction") options.max_word_image_fraction = std::stod(value);
     else if (key == "--min_inliers") min_inliers = std::stoi(value);
     else if (key == "--max_images") max_images = std::stoi(value);
     else if (key == "--synthetic_images") synthetic_images = std::stoi(value);

@@ -74,6 +74,28 @@ TEST(ImageRetrievalIndex, RareWordsWeighMoreThanCommonOnes) {
   EXPECT_EQ(top[0].image, 2u);
 }
 
+TEST(ImageRetrievalIndex, StopWordsAreLeftOut) {
+  // Images 0..69 of 120 hold words 0..9; pairs (2k, 2k + 1) share 20
+  // words of their own. Held by more than 50 images (max(0.05 x 120, 50)),
+  // words 0..9 are stop words.
+  std::vector<ImageWords> images(120);
+  for (size_t i = 0; i < images.size(); ++i) {
+    for (uint32_t w = 0; w < 10 && i < 70; ++w) images[i].indexed.push_back(w);
+    for (uint32_t w = 0; w < 20; ++w) images[i].indexed.push_back(static_cast<uint32_t>(100 + 20 * (i / 2) + w));
+  }
+  const ImageRetrievalIndex all(images, 5000, 2, 1.0);
+  const ImageRetrievalIndex stopped(images, 5000, 2, 0.05);
+  EXPECT_EQ(all.PostingsReadByAllQueries(), 70u * (10 * 70) + 120u * 20 * 2);
+  EXPECT_EQ(stopped.PostingsReadByAllQueries(), 120u * 20 * 2);
+  for (size_t i = 0; i < images.size(); ++i) {
+    const std::vector<RetrievalNeighbor> top = stopped.TopK(i, 5);
+    ASSERT_EQ(top.size(), 1u);
+    EXPECT_EQ(top[0].image, i ^ 1u);
+    EXPECT_NEAR(top[0].score, 1.0f, 1e-5f);
+    EXPECT_EQ(all.TopK(i, 1)[0].image, i ^ 1u);
+  }
+}
+
 TEST(ImageRetrievalIndex, SameResultOnAnyThreadCount) {
   std::mt19937 rng(5);
   std::uniform_int_distribution<uint32_t> word(0, 4999);

@@ -35,7 +35,8 @@ bool Better(const RetrievalNeighbor& a, const RetrievalNeighbor& b) {
 
 }  // namespace
 
-ImageRetrievalIndex::ImageRetrievalIndex(std::vector<ImageWords> images, uint32_t vocabulary_size, int num_threads)
+ImageRetrievalIndex::ImageRetrievalIndex(std::vector<ImageWords> images, uint32_t vocabulary_size, int num_threads,
+                                         double max_word_image_fraction)
     : num_threads_(num_threads) {
   const size_t n = images.size();
   for (size_t i = 0; i < n; ++i) {
@@ -56,33 +57,65 @@ ImageRetrievalIndex::ImageRetrievalIndex(std::vector<ImageWords> images, uint32_
     if (!images[i].query.empty()) query[i] = CountWords(std::move(images[i].query));
   });
 
-  // Document frequencies and idf over the indexed words.
-  std::vector<uint32_t> df(vocabulary_size, 0);
-  for (const std::vector<WordCount>& counts : indexed) {
-    for (const WordCount& c : counts) ++df[c.word];
-  }
-  std::vector<float> idf(vocabulary_size, 0.f);
-  for (uint32_t w = 0; w < vocabulary_size; ++w) {
-    if (df[w] > 0) idf[w] = static_cast<float>(std::log(static_cast<double>(n) / df[w]));
-  }
+  // The vocabulary is cut into ranges of words, each range done by one
+  // thread over every image (each image's counts are sorted by word, so
+  // its part of a range is found by binary search): counting and filling
+  // the postings scatter over arrays as large as the vocabulary, and this
+  // way each thread scatters into a slice of its own.
+  const size_t num_ranges = 8 * NumParallelWorkers(std::max<size_t>(n, 1), num_threads);
+  auto range_begin = [&](size_t r) {
+    return static_cast<uint32_t>(static_cast<uint64_t>(vocabulary_size) * r / num_ranges);
+  };
+  auto for_each_in_range = [&](size_t r, auto&& visit) {
+    const uint32_t w0 = range_begin(r), w1 = range_begin(r + 1);
+    for (size_t i = 0; i < n; ++i) {
+      const std::vector<WordCount>& counts = indexed[i];
+      auto it = std::lower_bound(counts.begin(), counts.end(), w0,
+                                 [](const WordCount& c, uint32_t w) { return c.word < w; });
+      for (; it != counts.end() && it->word < w1; ++it) visit(i, *it);
+    }
+  };
 
-  // Postings: sqrt(tf) * idf, normalised per image.
-  posting_offsets_.assign(static_cast<size_t>(vocabulary_size) + 1, 0);
-  for (uint32_t w = 0; w < vocabulary_size; ++w) posting_offsets_[w + 1] = posting_offsets_[w] + df[w];
-  postings_.resize(posting_offsets_.back());
-  std::vector<size_t> fill(posting_offsets_.begin(), posting_offsets_.end() - 1);
-  for (size_t i = 0; i < n; ++i) {
+  // Document frequencies and idf over the indexed words. Stop words (in
+  // more than max_word_image_fraction of the images, and more than
+  // kMinStopWordImages: a point seen by tens of images is no stop word)
+  // get idf 0: they say little about which images overlap and their
+  // postings would be most of what the queries read.
+  std::vector<uint32_t> df(vocabulary_size, 0);
+  std::vector<float> idf(vocabulary_size, 0.f);
+  const double stop_df =
+      std::max<double>(RetrievalOptions::kMinStopWordImages, max_word_image_fraction * static_cast<double>(n));
+  ParallelFor(num_ranges, num_threads, [&](size_t r) {
+    for_each_in_range(r, [&](size_t, const WordCount& c) { ++df[c.word]; });
+    for (uint32_t w = range_begin(r); w < range_begin(r + 1); ++w) {
+      if (df[w] > 0 && df[w] <= stop_df) idf[w] = static_cast<float>(std::log(static_cast<double>(n) / df[w]));
+    }
+  });
+
+  // Postings: sqrt(tf) * idf, normalised per image; by image ascending.
+  std::vector<double> scale(n, 0.0);
+  ParallelFor(n, num_threads, [&](size_t i) {
     double norm2 = 0;
     for (const WordCount& c : indexed[i]) {
       const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word];
       norm2 += v * v;
     }
-    const double scale = norm2 > 0 ? 1.0 / std::sqrt(norm2) : 0.0;
-    for (const WordCount& c : indexed[i]) {
-      const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word] * scale;
-      postings_[fill[c.word]++] = {static_cast<uint32_t>(i), static_cast<float>(v)};
-    }
+    scale[i] = norm2 > 0 ? 1.0 / std::sqrt(norm2) : 0.0;
+  });
+  posting_offsets_.assign(static_cast<size_t>(vocabulary_size) + 1, 0);
+  for (uint32_t w = 0; w < vocabulary_size; ++w) {
+    posting_offsets_[w + 1] = posting_offsets_[w] + (idf[w] > 0.f ? df[w] : 0);
   }
+  postings_.resize(posting_offsets_.back());
+  ParallelFor(num_ranges, num_threads, [&](size_t r) {
+    // df now counts the postings written.
+    std::fill(df.begin() + range_begin(r), df.begin() + range_begin(r + 1), 0u);
+    for_each_in_range(r, [&](size_t i, const WordCount& c) {
+      if (idf[c.word] <= 0.f) return;
+      const double v = std::sqrt(static_cast<double>(c.count)) * idf[c.word] * scale[i];
+      postings_[posting_offsets_[c.word] + df[c.word]++] = {static_cast<uint32_t>(i), static_cast<float>(v)};
+    });
+  });
 
   // Query vectors, the same weighting over the query words; words no image
   // holds, or whose idf is 0 (every image holds them), score nothing. Each
@@ -92,7 +125,7 @@ ImageRetrievalIndex::ImageRetrievalIndex(std::vector<ImageWords> images, uint32_
   auto query_words = [&](size_t i) -> const std::vector<WordCount>& {
     return query[i].empty() ? indexed[i] : query[i];
   };
-  auto scores = [&](const WordCount& c) { return df[c.word] > 0 && idf[c.word] > 0.f; };
+  auto scores = [&](const WordCount& c) { return idf[c.word] > 0.f; };
   std::vector<size_t> sizes(n, 0);
   ParallelFor(n, num_threads, [&](size_t i) {
     for (const WordCount& c : query_words(i)) sizes[i] += scores(c);

@@ -7,8 +7,9 @@
 // Each image is a sparse vector over the words: weight sqrt(tf) * idf, tf
 // the times the image holds the word (the square root damps bursts, a
 // facade's repeated windows voting once per window), idf = log(N / df)
-// with df the images holding it (words every image holds say nothing),
-// then L2-normalised. The query side is the image's query words
+// with df the images holding it (words every image holds say nothing;
+// words in more than a given share of the images are dropped as stop
+// words), then L2-normalised. The query side is the image's query words
 // (num_nearest_neighbors cells per feature and table), weighted the same
 // way. The similarity of query q to image j is the dot product of q's
 // query vector with j's indexed vector, accumulated over the postings of
@@ -19,6 +20,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "cashash/retrieval/retrieval_options.h"
 #include "cashash/retrieval/visual_words.h"
 
 namespace cashash {
@@ -35,7 +37,11 @@ class ImageRetrievalIndex {
   // (std::invalid_argument otherwise). Building uses num_threads threads
   // (-1: every core).
   // Move the words in to have each image's freed once it is counted.
-  ImageRetrievalIndex(std::vector<ImageWords> images, uint32_t vocabulary_size, int num_threads = -1);
+  // Words held by more than max_word_image_fraction of the images (and
+  // more than RetrievalOptions::kMinStopWordImages) are stop words: left
+  // out of every vector.
+  ImageRetrievalIndex(std::vector<ImageWords> images, uint32_t vocabulary_size, int num_threads = -1,
+                      double max_word_image_fraction = 1.0);
 
   size_t num_images() const { return query_offsets_.size() - 1; }
 

@@ -23,6 +23,9 @@ std::string RetrievalOptions::Check() const {
            std::to_string(kMinBitsPerWord) + ", " + std::to_string(kMaxBitsPerWord) + "], got " +
            std::to_string(bits_per_word);
   }
+  if (!(max_word_image_fraction > 0.0 && max_word_image_fraction <= 1.0)) {
+    return "--Retrieval.max_word_image_fraction must be in (0, 1], got " + std::to_string(max_word_image_fraction);
+  }
   return "";
 }
 
