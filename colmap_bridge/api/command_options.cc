@@ -64,7 +64,7 @@ void AddRetrievalOptions(OptionTable* table, MatcherCommandOptions* o) {
              "COLMAP's vocabulary tree: accepted, not used (the words come from the hash codes; a warning says so)");
   table->Add({"Retrieval.num_tables"}, &r.num_tables, "Hash tables, each giving every feature one visual word");
   table->Add({"Retrieval.bits_per_word"}, &r.bits_per_word,
-             "Bits of a visual word; 0 = log2(median features per image) + 8, in [8, 24]");
+             "Bits of a visual word; 0 = log2(median features per image) + 10, in [8, 24]");
   table->Add({"Retrieval.max_word_image_fraction"}, &r.max_word_image_fraction,
              "Words held by more than this share of the images are stop words, left out");
   table->Add({"TransitiveMatching.num_iterations", "transitive"}, &o->transitive_rounds,

@@ -216,8 +216,9 @@ TEST(RetrievalOptions, CheckNamesTheOption) {
   options = RetrievalOptions();
   options.max_num_features = 0;
   EXPECT_NE(options.Check().find("max_num_features"), std::string::npos);
-  EXPECT_EQ(RetrievalBitsPerWord(RetrievalOptions(), 4096), 20);
-  EXPECT_EQ(RetrievalBitsPerWord(RetrievalOptions(), 10), RetrievalOptions::kMinBitsPerWord + 3);
+  EXPECT_EQ(RetrievalBitsPerWord(RetrievalOptions(), 4096), 22);
+  EXPECT_EQ(RetrievalBitsPerWord(RetrievalOptions(), 10), 13);
+  EXPECT_EQ(RetrievalBitsPerWord(RetrievalOptions(), 1 << 20), RetrievalOptions::kMaxBitsPerWord);
 }
 
 }  // namespace

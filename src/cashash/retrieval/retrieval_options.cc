@@ -33,7 +33,7 @@ int RetrievalBitsPerWord(const RetrievalOptions& options, size_t features_per_im
   if (options.bits_per_word > 0) return options.bits_per_word;
   int log2_features = 0;
   while ((size_t{1} << (log2_features + 1)) <= std::max<size_t>(features_per_image, 1)) ++log2_features;
-  return std::clamp(log2_features + 8, RetrievalOptions::kMinBitsPerWord, RetrievalOptions::kMaxBitsPerWord);
+  return std::clamp(log2_features + 10, RetrievalOptions::kMinBitsPerWord, RetrievalOptions::kMaxBitsPerWord);
 }
 
 }  // namespace cashash
