@@ -6,7 +6,8 @@
 # Usage: scripts/demo.sh [WORK_DIR]        (default: demo_out/ in the repo)
 # Environment:
 #   CASHASH_BUILD_DIR   build folder (default: build/ in the repo)
-#   CASHASH_MATCHER     cascade (default) or bruteforce
+#   CASHASH_MATCHER     auto (default: the cascade with the rule of the device
+#                       the run matches on), cascade (the same) or bruteforce
 #   CASHASH_SKIP_DEPS=1 do not call install_deps.sh
 #   CASHASH_NUM_VIEWS   number of rendered views (default 10)
 set -euo pipefail
@@ -14,7 +15,7 @@ set -euo pipefail
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 WORK="${1:-$REPO/demo_out}"
 BUILD="${CASHASH_BUILD_DIR:-$REPO/build}"
-MATCHER="${CASHASH_MATCHER:-cascade}"
+MATCHER="${CASHASH_MATCHER:-auto}"
 NUM_VIEWS="${CASHASH_NUM_VIEWS:-10}"
 JOBS="$(nproc)"
 export QT_QPA_PLATFORM=offscreen

@@ -111,7 +111,7 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   const bool rematch_from_shape = options.cashash.exact_rematch_min_matches == kRematchMinMatchesChosen &&
                                   cashash.exact_rematch_min_matches != kDefaultRematchMinMatches;
   run.rematch_on_matching_thread = bucket_screen;
-  if (options.cashash.matcher == MatcherType::kAuto) run.notes.push_back("Matcher: " + choice.reason);
+  if (options.cashash.matcher != MatcherType::kBruteForce) run.notes.push_back("Matcher: " + choice.reason);
   // tau: where not given, for screening while the exact rematch decides the
   // pairs that may verify, for precision where the cascade's matches are kept.
   if (cashash.tau <= 0) {

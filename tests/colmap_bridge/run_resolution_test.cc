@@ -107,9 +107,9 @@ const std::vector<Row>& Table() {
          o->cashash.matcher = MatcherType::kCascade;
        },
        GpuFacts(2, 8192, false), "cascade", 3, 9, 40, kBucket, 0, true, kDefaultBlockSize, 0},
-      {"the cascade named on the CPU: the runs' rematch, as on the GPU", {"--CasHash.matcher", "cascade"},
+      {"the cascade named on the CPU: auto's window and tables for recall", {"--CasHash.matcher", "cascade"},
        [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kCascade; }, Facts(2, 8192, false), "cascade",
-       3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
       // On the CPU auto is the cascade's own matches (tables for recall,
       // tau for precision) and the exact rematch of the window [12, 64).
       {"CPU defaults, 8,192 features: the rematch window, the cascade for recall", {}, none, Facts(2, 8192, false),
@@ -284,6 +284,26 @@ TEST(RunResolution, RulesOfTheRematchThresholdAndTheMatcher) {
     EXPECT_EQ(MatcherRule(guided, on_gpu, 8192).matcher, MatcherType::kCascade);
     EXPECT_EQ(MatcherRule(guided, on_gpu, 8192).exact_rematch_max_matches, 0);
     EXPECT_EQ(MatcherRule(brute_force, on_gpu, 8192).matcher, MatcherType::kBruteForce);
+  }
+}
+
+// --CasHash.matcher cascade names the algorithm auto chooses, so it gets
+// the same run: the CPU's rematch window and tables for recall on the CPU,
+// the runs' rematch and the screening tables on the GPU. Only brute force
+// is another algorithm.
+TEST(RunResolution, TheCascadeNamedResolvesAsAutoOnEachDevice) {
+  MatcherCommandOptions cascade;
+  cascade.cashash.matcher = MatcherType::kCascade;
+  const MatcherCommandOptions automatic;
+  for (const size_t rows : {size_t{2048}, size_t{4096}, size_t{8192}, size_t{16384}}) {
+    for (const bool exhaustive : {false, true}) {
+      const RunFacts cpu = Facts(20, rows, exhaustive);
+      EXPECT_EQ(Decisions(ResolveRun(cascade, cpu)), Decisions(ResolveRun(automatic, cpu)))
+          << rows << " features on the CPU";
+      const RunFacts gpu = Facts(20, rows, exhaustive, 16 * kGiB, 0, 80 * kGiB);
+      EXPECT_EQ(Decisions(ResolveRun(cascade, gpu)), Decisions(ResolveRun(automatic, gpu)))
+          << rows << " features on the GPU";
+    }
   }
 }
 
