@@ -147,6 +147,10 @@ void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
       if (options_.write_two_view_geometries) {
         database_.WriteTwoViewGeometry(result.pair.first, result.pair.second, result.geometry);
         ++rows;
+      } else if (options_.replace_existing) {
+        // An old verification of other matches: kept, it would make the
+        // pair look done to a resumed run.
+        database_.DeleteTwoViewGeometry(result.pair.first, result.pair.second);
       }
     }
     // In the chunk's transaction: recorded exactly when the chunk is.

@@ -76,7 +76,9 @@ class DatabaseResultSink : public ResultSink {
     // record and would match those pairs again.
     bool write_empty_pairs = true;
     // The pairs may have rows from an earlier run (--overwrite): a pair now
-    // without a match has its old rows deleted when no rows are written for it.
+    // without a match has its old rows deleted when no rows are written for
+    // it, and without write_two_view_geometries its old two_view_geometries
+    // row goes (it verified other matches; a resumed run would skip the pair).
     bool replace_existing = false;
     // With a write-ahead log (COLMAP's databases): its size in pages at which
     // the writer waits for the checkpointer to fold it, so that the next
