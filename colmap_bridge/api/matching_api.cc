@@ -200,7 +200,7 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path);
+    DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
     if (callbacks.database_opened) callbacks.database_opened();
     clock.Mark("opening the database");
     const std::vector<image_t> image_ids = ImageIds(source);
@@ -236,7 +236,7 @@ MatchingSummary MatchPairs(const std::string& database_path,
     PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path);
+    DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
     if (callbacks.database_opened) callbacks.database_opened();
     clock.Mark("opening the database");
     return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), clock, callbacks);
@@ -249,7 +249,7 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
     PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path);
+    DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
     if (callbacks.database_opened) callbacks.database_opened();
     clock.Mark("opening the database");
     std::unordered_map<std::string, image_t> ids_by_name;

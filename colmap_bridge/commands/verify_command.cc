@@ -136,7 +136,8 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
   const std::string problem = CheckMatcherCommandOptions(checked);
   if (!problem.empty()) throw std::invalid_argument(problem);
 
-  DatabaseFeatureSource database_source(database_path);
+  DatabaseFeatureSource database_source(database_path,
+                                        [&callbacks](const std::string& text) { Warn(callbacks, text); });
   if (callbacks.database_opened) callbacks.database_opened();
   std::unordered_set<image_t> known_images;
   for (const Image& image : database_source.images()) known_images.insert(image.image_id);
