@@ -15,7 +15,7 @@
 #include "cashash/matching/pair_matching.h"
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/build_info.h"
-#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/matching_api.h"
 
 namespace py = pybind11;
@@ -182,7 +182,7 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   colmap::RunFacts facts;
   facts.rows_per_image = {d1.rows(), d2.rows()};
   facts.exhaustive = false;
-  facts.gpu_index = options.use_gpu ? colmap::GpuIndexForRun(options) : -1;
+  facts.gpu_indices = colmap::ChooseRunDevices(options, colmap::MachineDeviceFacts()).gpu_indices;
   const colmap::ResolvedRun run = colmap::ResolveRun(requested, facts);
   PairMatchingOptions pair_options;
   pair_options.sift = run.options.sift;

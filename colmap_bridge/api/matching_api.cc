@@ -12,7 +12,7 @@
 #include "cashash/pipeline/pair_generation.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
-#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/run_plan.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -84,18 +84,20 @@ std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vecto
 }
 
 // What the database and the machine say about a run, for ResolveRun: the
-// images' feature rows, the run's device and, for an exhaustive run, the
-// memory to size its blocks and groups from (the smallest over MPI ranks,
-// so that all cut the same).
+// images' feature rows, the run's usable devices and, for an exhaustive
+// run, the memory to size its blocks and groups from (the smallest over MPI
+// ranks, so that all cut the same).
 RunFacts GatherRunFacts(const MatcherCommandOptions& options, std::vector<size_t> rows_per_image, bool exhaustive) {
   RunFacts facts;
   facts.rows_per_image = std::move(rows_per_image);
   facts.exhaustive = exhaustive;
-  facts.gpu_index = GpuIndexForRun(options);
+  RunDevices devices = ChooseRunDevices(options, MachineDeviceFacts());
+  facts.gpu_indices = std::move(devices.gpu_indices);
+  facts.device_warnings = std::move(devices.warnings);
   if (exhaustive) {
     facts.physical_memory_bytes = PhysicalMemoryBytes();
-    if (facts.gpu_index >= 0 && options.max_gpu_memory.empty()) {
-      facts.gpu_free_bytes = GpuFreeMemoryBytes(facts.gpu_index);
+    if (!facts.gpu_indices.empty() && options.max_gpu_memory.empty()) {
+      facts.gpu_free_bytes = GpuFreeMemoryBytes(facts.gpu_indices.front());
     }
     facts.smallest_over_ranks = [](uint64_t value) { return MpiMin(value); };
   }

@@ -23,7 +23,7 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
   } else {
     ParseMemorySize(options.max_host_memory, &limits.max_host_bytes);  // checked with the options
   }
-  if (facts.gpu_index >= 0) {
+  if (!facts.gpu_indices.empty()) {
     if (options.max_gpu_memory.empty()) {
       limits.max_gpu_bytes = facts.gpu_free_bytes;
     } else {
@@ -82,7 +82,7 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   run.options = options;
   CasHashOptions& cashash = run.options.cashash;
   const bool guided = options.guided.enabled;
-  const bool on_gpu = facts.gpu_index >= 0;
+  const bool on_gpu = !facts.gpu_indices.empty();
   const size_t features = TypicalFeatureCount(facts.rows_per_image, options.sift.max_num_matches);
 
   // The matcher and, for auto, the rematch threshold and window; then the
@@ -132,7 +132,9 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
     run.notes.push_back(text);
   }
 
-  run.gpu_index = facts.gpu_index;
+  run.gpu_indices = facts.gpu_indices;
+  run.gpu_index = facts.gpu_indices.empty() ? -1 : facts.gpu_indices.front();
+  run.warnings.insert(run.warnings.begin(), facts.device_warnings.begin(), facts.device_warnings.end());
   if (!options.max_gpu_memory.empty()) {
     ParseMemorySize(options.max_gpu_memory, &run.gpu_memory_budget_bytes);  // checked with the options
   }

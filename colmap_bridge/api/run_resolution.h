@@ -29,17 +29,19 @@ struct RunFacts {
   bool exhaustive = true;
   // Physical memory of the machine; 0: unknown (the host cap is then 8 GiB).
   size_t physical_memory_bytes = 0;
-  // The device the run matches on (the first of --FeatureMatching.gpu_index
-  // that is usable), -1: none, the run matches on the CPU; and its free
-  // memory.
-  int gpu_index = -1;
+  // The devices the run matches and verifies on (ChooseRunDevices,
+  // run_devices.h: the usable ones of --FeatureMatching.gpu_index), empty:
+  // the CPU; the free memory of the first; and what the choice warned.
+  std::vector<int> gpu_indices;
   size_t gpu_free_bytes = 0;
+  std::vector<std::string> device_warnings;
   // Under MPI: the smallest of a value over all ranks, so that every rank
   // cuts the same blocks and groups (distributed::MpiMin); unset: one process.
   std::function<uint64_t(uint64_t)> smallest_over_ranks;
 };
 
-// The run as it will be carried out. Built by ResolveRun only.
+// The run as it will be carried out. Built by ResolveRun only, and not
+// changed after: the plan of a run reads it (run_plan.cc).
 struct ResolvedRun {
   // The user's options with every "chosen" value decided: the matcher (auto
   // never stays auto: MatcherRule), the table shape, tau, the exact rematch
@@ -49,7 +51,9 @@ struct ResolvedRun {
   // Where a single GPU's exact rematch runs: on the matching thread (the
   // bucket screen leaves it room) or deferred to the verification threads.
   bool rematch_on_matching_thread = false;
-  // The device the run matches on, -1: the CPU (RunFacts::gpu_index).
+  // The devices the run matches on (RunFacts::gpu_indices), empty: the
+  // CPU; and the first of them, -1: the CPU: the verifier's device.
+  std::vector<int> gpu_indices;
   int gpu_index = -1;
   // Device memory each GPU matcher may take (cuda::GpuMatcherConfig::
   // memory_budget_bytes): --max_gpu_memory, 0 when not given (no cap but

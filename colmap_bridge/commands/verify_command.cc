@@ -18,6 +18,7 @@
 #include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/sqlite_statement.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/verifier_selection.h"
 
 namespace cashash {
@@ -177,8 +178,10 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
 
   KeypointSource source(&database_source);
   StoredMatches stored(&source);
+  const RunDevices devices = ChooseRunDevices(checked, MachineDeviceFacts());
+  for (const std::string& text : devices.warnings) Warn(callbacks, text);
   std::unique_ptr<BatchVerifier> verifier =
-      CreateBatchVerifierForOptions(checked, [&](const std::string& text) { Warn(callbacks, text); });
+      CreateBatchVerifierOnDevice(checked, devices.gpu_indices.empty() ? -1 : devices.gpu_indices.front());
   DatabaseResultSink sink(database_path, true);
   PipelineOptions pipeline_options;
   pipeline_options.num_threads = checked.sift.num_threads;

@@ -29,7 +29,7 @@ ResolvedRun ResolveOnGpu(const MatcherCommandOptions& options, const std::vector
   RunFacts facts;
   facts.rows_per_image = rows;
   facts.exhaustive = false;
-  facts.gpu_index = 0;
+  facts.gpu_indices = {0};
   ResolvedRun run = ResolveRun(options, facts);
   if (notes != nullptr) notes->insert(notes->end(), run.notes.begin(), run.notes.end());
   return run;

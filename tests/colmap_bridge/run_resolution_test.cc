@@ -9,6 +9,7 @@
 
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/run_resolution.h"
 
 namespace cashash {
@@ -24,7 +25,7 @@ RunFacts Facts(size_t images, size_t rows, bool exhaustive, size_t physical = 16
   facts.rows_per_image.assign(images, rows);
   facts.exhaustive = exhaustive;
   facts.physical_memory_bytes = physical;
-  facts.gpu_index = gpu_index;
+  if (gpu_index >= 0) facts.gpu_indices = {gpu_index};
   facts.gpu_free_bytes = gpu_free;
   return facts;
 }
@@ -203,7 +204,8 @@ TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
     }
     EXPECT_EQ(run.schedule.block_size, run.options.block_size);
     EXPECT_EQ(run.gpu_memory_budget_bytes, row.budget);
-    EXPECT_EQ(run.gpu_index, row.facts.gpu_index);
+    EXPECT_EQ(run.gpu_indices, row.facts.gpu_indices);
+    EXPECT_EQ(run.gpu_index, row.facts.gpu_indices.empty() ? -1 : row.facts.gpu_indices.front());
     if (row.facts.exhaustive) {
       EXPECT_GT(run.schedule.blocks_per_group, 0);
       EXPECT_GT(run.max_host_bytes, 0u);
@@ -305,6 +307,67 @@ TEST(RunResolution, TheCascadeNamedResolvesAsAutoOnEachDevice) {
           << rows << " features on the GPU";
     }
   }
+}
+
+// A machine whose device 0 cannot run this build's code (an architecture
+// the build left out) and whose device 1 can.
+DeviceFacts FirstDeviceUnusable() {
+  DeviceFacts machine;
+  machine.cuda_built = true;
+  machine.num_devices = 2;
+  machine.usable = [](int gpu_index, std::string* reason) {
+    if (gpu_index == 1) return true;
+    *reason = "GPU " + std::to_string(gpu_index) + " cannot run this build's GPU code";
+    return false;
+  };
+  return machine;
+}
+
+// --FeatureMatching.gpu_index 0,1 where device 0 is unusable: the run
+// matches on device 1, so it is resolved with the GPU's rules (a 64-bit
+// bucket signature; the CPU's 19 x 12 tables at 16,384 features would not
+// fit it) and verifies there too; a warning names device 0.
+TEST(RunDevices, ARunIsResolvedWithTheRulesOfTheGpusThatMatch) {
+  MatcherCommandOptions options;
+  options.gpu_index = "0,1";
+  const RunDevices devices = ChooseRunDevices(options, FirstDeviceUnusable());
+  EXPECT_EQ(devices.gpu_indices, std::vector<int>{1});
+  ASSERT_EQ(devices.warnings.size(), 1u);
+  EXPECT_NE(devices.warnings[0].find("device 0: GPU 0 cannot run this build's GPU code"), std::string::npos)
+      << devices.warnings[0];
+  RunFacts facts = Facts(20, 16384, false);
+  facts.gpu_indices = devices.gpu_indices;
+  facts.device_warnings = devices.warnings;
+  const ResolvedRun run = ResolveRun(options, facts);
+  EXPECT_EQ(run.gpu_index, 1);
+  EXPECT_LE(run.options.cashash.num_tables * run.options.cashash.bits_per_table, kMaxSignatureBits);
+  RunFacts on_device_1 = Facts(20, 16384, false, 16 * kGiB, 1);
+  EXPECT_EQ(Decisions(run), Decisions(ResolveRun(options, on_device_1)));
+  EXPECT_EQ(run.warnings, devices.warnings);
+
+  // Only the unusable device listed: the CPU, with its rules and a warning.
+  options.gpu_index = "0";
+  const RunDevices none = ChooseRunDevices(options, FirstDeviceUnusable());
+  EXPECT_TRUE(none.gpu_indices.empty());
+  ASSERT_EQ(none.warnings.size(), 1u);
+  EXPECT_NE(none.warnings[0].find("matching on the CPU"), std::string::npos) << none.warnings[0];
+  // Without use_gpu no device is asked for and nothing is said.
+  options.use_gpu = false;
+  EXPECT_TRUE(ChooseRunDevices(options, FirstDeviceUnusable()).gpu_indices.empty());
+  EXPECT_TRUE(ChooseRunDevices(options, FirstDeviceUnusable()).warnings.empty());
+}
+
+TEST(RunDevices, MpiRanksOfOneMachineShareItsGpusUnlessOneIsNamed) {
+  DeviceFacts machine;
+  machine.cuda_built = true;
+  machine.num_devices = 4;
+  machine.usable = [](int, std::string*) { return true; };
+  machine.num_ranks = 8;
+  machine.local_rank = 5;
+  MatcherCommandOptions options;
+  EXPECT_EQ(ChooseRunDevices(options, machine).gpu_indices, std::vector<int>{1});
+  options.gpu_index = "2";
+  EXPECT_EQ(ChooseRunDevices(options, machine).gpu_indices, std::vector<int>{2});
 }
 
 }  // namespace
