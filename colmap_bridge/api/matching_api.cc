@@ -85,8 +85,8 @@ std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vecto
 
 // What the database and the machine say about a run, for ResolveRun: the
 // images' feature rows, the run's usable devices and, for an exhaustive
-// run, the memory to size its blocks and groups from (the smallest over MPI
-// ranks, so that all cut the same).
+// run, the memory to size its blocks and groups from; reduced over MPI
+// ranks, so that all resolve the same run.
 RunFacts GatherRunFacts(const MatcherCommandOptions& options, std::vector<size_t> rows_per_image, bool exhaustive) {
   RunFacts facts;
   facts.rows_per_image = std::move(rows_per_image);
@@ -99,8 +99,8 @@ RunFacts GatherRunFacts(const MatcherCommandOptions& options, std::vector<size_t
     if (!facts.gpu_indices.empty() && options.max_gpu_memory.empty()) {
       facts.gpu_free_bytes = GpuFreeMemoryBytes(facts.gpu_indices.front());
     }
-    facts.smallest_over_ranks = [](uint64_t value) { return MpiMin(value); };
   }
+  facts.smallest_over_ranks = [](uint64_t value) { return MpiMin(value); };
   return facts;
 }
 

@@ -35,8 +35,9 @@ struct RunFacts {
   std::vector<int> gpu_indices;
   size_t gpu_free_bytes = 0;
   std::vector<std::string> device_warnings;
-  // Under MPI: the smallest of a value over all ranks, so that every rank
-  // cuts the same blocks and groups (distributed::MpiMin); unset: one process.
+  // Under MPI: the smallest of a value over all ranks (distributed::MpiMin),
+  // so that every rank resolves the same run: the same matcher, tables and
+  // rematch, blocks and groups; unset: one process.
   std::function<uint64_t(uint64_t)> smallest_over_ranks;
 };
 
@@ -75,7 +76,11 @@ struct ResolvedRun {
 // is cut into chunks of this many images squared.
 constexpr int kDefaultBlockSize = 50;
 
-// Resolves the options for a run over the given facts. Throws
+// Resolves the options for a run over the given facts. Under MPI every
+// rank resolves the same run from facts reduced over the ranks: the GPU's
+// rules where any rank matches on a GPU (the CPU matches the GPU's tables
+// and rematch identically, while a GPU cannot run the CPU's fine-bucket
+// tables), the CPU's where none does; the smallest memory caps. Throws
 // std::invalid_argument when the options cannot fit (ChooseScheduleSizes).
 ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& facts);
 

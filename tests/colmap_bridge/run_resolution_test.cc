@@ -3,8 +3,13 @@
 // on the command line and set as Python sets them resolve alike.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cashash/matching/table_shape.h"
@@ -368,6 +373,64 @@ TEST(RunDevices, MpiRanksOfOneMachineShareItsGpusUnlessOneIsNamed) {
   EXPECT_EQ(ChooseRunDevices(options, machine).gpu_indices, std::vector<int>{1});
   options.gpu_index = "2";
   EXPECT_EQ(ChooseRunDevices(options, machine).gpu_indices, std::vector<int>{2});
+}
+
+// Two MPI ranks as two threads: Min waits for both values and gives each
+// the smaller (distributed::MpiMin), as the job's ranks would.
+class TwoRanks {
+ public:
+  uint64_t Min(uint64_t value) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const int round = round_;
+    if (arrived_ == 0) smallest_ = value;
+    smallest_ = std::min(smallest_, value);
+    if (++arrived_ == 2) {
+      result_ = smallest_;
+      arrived_ = 0;
+      ++round_;
+      changed_.notify_all();
+    } else if (!changed_.wait_for(lock, std::chrono::seconds(10), [&] { return round_ != round; })) {
+      ADD_FAILURE() << "the other rank never reduced";
+      return value;
+    }
+    return result_;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  int arrived_ = 0, round_ = 0;
+  uint64_t smallest_ = 0, result_ = 0;
+};
+
+// Under MPI every rank resolves the same run, whichever rank has a GPU: a
+// chunk's rows do not depend on the rank that matched it.
+TEST(RunResolution, MpiRanksWithAndWithoutAGpuResolveTheSameRun) {
+  for (const size_t rows : {size_t{4096}, size_t{8192}, size_t{16384}}) {
+    for (const bool exhaustive : {false, true}) {
+      TwoRanks ranks;
+      RunFacts with_gpu = Facts(40, rows, exhaustive, 16 * kGiB, 0, 80 * kGiB);
+      RunFacts without = Facts(40, rows, exhaustive, 16 * kGiB);
+      with_gpu.smallest_over_ranks = [&](uint64_t value) { return ranks.Min(value); };
+      without.smallest_over_ranks = with_gpu.smallest_over_ranks;
+      ResolvedRun run_with, run_without;
+      std::thread other([&] { run_without = ResolveRun(MatcherCommandOptions(), without); });
+      run_with = ResolveRun(MatcherCommandOptions(), with_gpu);
+      other.join();
+      const CasHashOptions& a = run_with.options.cashash;
+      const CasHashOptions& b = run_without.options.cashash;
+      SCOPED_TRACE(std::to_string(rows) + (exhaustive ? " features, exhaustive" : " features, pair list"));
+      EXPECT_EQ(a.num_tables, b.num_tables);
+      EXPECT_EQ(a.bits_per_table, b.bits_per_table);
+      EXPECT_EQ(a.tau, b.tau);
+      EXPECT_EQ(a.exact_rematch_min_matches, b.exact_rematch_min_matches);
+      EXPECT_EQ(a.exact_rematch_max_matches, b.exact_rematch_max_matches);
+      EXPECT_EQ(run_with.options.block_size, run_without.options.block_size);
+      EXPECT_EQ(run_with.schedule.blocks_per_group, run_without.schedule.blocks_per_group);
+      // The GPU's shapes: the rank with the GPU can run them.
+      EXPECT_LE(a.num_tables * a.bits_per_table, kMaxSignatureBits);
+    }
+  }
 }
 
 }  // namespace
