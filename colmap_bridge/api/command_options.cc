@@ -195,6 +195,10 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.database_path.empty()) return "--database_path is required";
+  return CheckRunOptions(o);
+}
+
+std::string CheckRunOptions(const MatcherCommandOptions& o) {
   // 0: chosen for the run.
   if (o.block_size < 0 || o.block_size == 1) return "--ExhaustiveMatching.block_size must be >= 2";
   for (const auto& [name, text] : {std::make_pair("--max_host_memory", &o.max_host_memory),
