@@ -27,6 +27,18 @@ using distributed::MpiMin;
 using distributed::MpiRank;
 using distributed::MpiSize;
 
+void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.warning) {
+    callbacks.warning(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
+}
+
+void Info(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.info) callbacks.info(text);
+}
+
 namespace {
 
 // The hashing mean comes from at most this many images spread evenly over

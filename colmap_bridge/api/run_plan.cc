@@ -4,7 +4,6 @@
 #include <chrono>
 #include <iomanip>
 #include <memory>
-#include <iostream>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
@@ -38,20 +37,6 @@ using distributed::MpiResultReceiver;
 using distributed::MpiResultSender;
 using distributed::MpiSize;
 using distributed::RankReport;
-
-// Callers that set no warning sink still see warnings, on stderr as the
-// command line prints them.
-void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.warning) {
-    callbacks.warning(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
-}
-
-void Info(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.info) callbacks.info(text);
-}
 
 namespace {
 

@@ -3,9 +3,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <csignal>
 #include <cstdlib>
 #include <iomanip>
 #include <iostream>
@@ -20,6 +18,7 @@
 #include "colmap_bridge/sqlite_statement.h"
 #include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/verifier_selection.h"
+#include "colmap_bridge/commands/console.h"
 
 namespace cashash {
 namespace colmap {
@@ -107,26 +106,6 @@ class StoredMatches : public FeatureMatcher {
   KeypointSource* source_;
 };
 
-void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.warning) {
-    callbacks.warning(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
-}
-
-void Info(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.info) callbacks.info(text);
-}
-
-std::atomic<bool> g_stop_requested{false};
-
-extern "C" void HandleVerifierInterrupt(int) {
-  if (g_stop_requested.exchange(true)) {
-    std::signal(SIGINT, SIG_DFL);
-    std::raise(SIGINT);
-  }
-}
 
 }  // namespace
 
@@ -207,20 +186,16 @@ int RunGeometricVerifier(int argc, const char* const* argv) {
       break;
   }
   MatchingCallbacks callbacks;
-  callbacks.database_opened = []() {
-    std::cout << "\n" << std::string(78, '=') << "\nGeometric verification\n" << std::string(78, '=') << "\n"
-              << std::endl;
-  };
+  callbacks.database_opened = []() { PrintHeading("Geometric verification"); };
   callbacks.info = [](const std::string& text) { std::cout << text << std::endl; };
-  callbacks.warning = [](const std::string& text) { std::cerr << "WARNING: " << text << std::endl; };
+  callbacks.warning = PrintWarning;
   callbacks.progress = [](const PipelineProgress& p) {
     std::cout << "Verified " << p.pairs_done << "/" << p.pairs_total << " pairs (" << std::fixed
               << std::setprecision(1) << 100.0 * p.pairs_done / p.pairs_total << "%) in " << std::setprecision(3)
               << p.elapsed_seconds << "s" << std::endl;
   };
-  g_stop_requested = false;
-  callbacks.stop = &g_stop_requested;
-  std::signal(SIGINT, HandleVerifierInterrupt);
+  const StopOnInterrupt interrupt;
+  callbacks.stop = interrupt.stop_flag();
   int code = EXIT_FAILURE;
   try {
     const MatchingSummary summary = VerifyExistingMatches(options.database_path, options, callbacks);
@@ -240,7 +215,6 @@ int RunGeometricVerifier(int argc, const char* const* argv) {
   } catch (const std::exception& e) {
     std::cerr << "ERROR: " << e.what() << std::endl;
   }
-  std::signal(SIGINT, SIG_DFL);
   return code;
 }
 
