@@ -208,8 +208,16 @@ MatchingSummary EndAllRanksOnError(Body body) {
 
 }  // namespace
 
-MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
-                                const MatchingCallbacks& all_callbacks) {
+namespace {
+
+// What each public entry point does first, once: under MPI an error on any
+// rank ends them all; this rank's callbacks; the options checked as the
+// command line checks them; the database opened (its data warnings through
+// the callbacks). `body(checked options, source, clock, callbacks)` does
+// the rest.
+template <typename Body>
+MatchingSummary RunOnDatabase(const std::string& database_path, const MatcherCommandOptions& options,
+                              const MatchingCallbacks& all_callbacks, Body body) {
   return EndAllRanksOnError([&]() {
     PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
@@ -217,6 +225,17 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
     if (callbacks.database_opened) callbacks.database_opened();
     clock.Mark("opening the database");
+    return body(checked, source, clock, callbacks);
+  });
+}
+
+}  // namespace
+
+MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& all_callbacks) {
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
     const std::vector<image_t> image_ids = ImageIds(source);
     if (image_ids.size() < 2) {
       Warn(callbacks, "table images of " + database_path + " holds " + std::to_string(image_ids.size()) + " image" +
@@ -246,26 +265,18 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
 MatchingSummary MatchPairs(const std::string& database_path,
                            const std::vector<std::pair<std::string, std::string>>& image_name_pairs,
                            const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
-  return EndAllRanksOnError([&]() {
-    PhaseClock clock;
-    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
-    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
-    if (callbacks.database_opened) callbacks.database_opened();
-    clock.Mark("opening the database");
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
     return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), clock, callbacks);
   });
 }
 
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
                               const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
-  return EndAllRanksOnError([&]() {
-    PhaseClock clock;
-    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
-    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
-    if (callbacks.database_opened) callbacks.database_opened();
-    clock.Mark("opening the database");
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
     std::unordered_map<std::string, image_t> ids_by_name;
     for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
     std::ifstream file(match_list_path);
