@@ -13,6 +13,7 @@
 #include "cashash/matchers/split_feature_matcher.h"
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/matching_api.h"
+#include "colmap_bridge/api/run_gpu_resources.h"
 #ifdef CASHASH_WITH_CUDA
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #endif
@@ -70,10 +71,12 @@ namespace {
 
 // The backend of one matcher type (cascade or brute force): on the GPUs of
 // the options where usable, else on the CPU. *on_gpu says which.
+// `gpu` (may be null: each GPU matcher then owns its memory) gives each
+// device's owner of memory.
 std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOptions& options,
                                                         size_t gpu_memory_budget_bytes, const MeanDescriptor& mean,
                                                         const std::function<void(const std::string&)>& warning,
-                                                        bool* on_gpu) {
+                                                        RunGpuResources* gpu, bool* on_gpu) {
   *on_gpu = false;
   if (options.use_gpu) {
 #ifdef CASHASH_WITH_CUDA
@@ -88,13 +91,17 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
       cuda::GpuMatcherConfig config;
       config.gpu_index = gpu_index;
       config.memory_budget_bytes = gpu_memory_budget_bytes;
+      if (gpu != nullptr) config.resources = gpu->ForDevice(gpu_index);
       // A run that outgrows the card (device memory) finishes on the CPU.
       parts.push_back(CreateFallbackFeatureMatcher(
           cuda::CreateGpuFeatureMatcher(options.sift, options.cashash, mean, config),
           [sift = options.sift, cashash = options.cashash, mean]() {
             return CreateCpuFeatureMatcher(sift, cashash, mean);
           },
-          IsDeviceMemoryError, warning));
+          IsDeviceMemoryError, [warning, gpu](const std::string& text) {
+            if (gpu != nullptr) gpu->NoteMatcherFallback();
+            if (warning) warning(text);
+          }));
     }
     if (!parts.empty()) {
       *on_gpu = true;
@@ -105,6 +112,7 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
     }
     if (warning) warning("no usable CUDA device (" + reason + "); matching on the CPU");
 #else
+    (void)gpu;
     if (warning) warning("cashash was built without CUDA; matching on the CPU");
 #endif
   }
@@ -116,19 +124,21 @@ std::unique_ptr<FeatureMatcher> CreateBackendForOptions(const MatcherCommandOpti
 // stays on the matching thread: with several GPUs (each chunk is split
 // between them), or where the run placed it there
 // (ResolvedRun::rematch_on_matching_thread).
-std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const ResolvedRun& run, const MeanDescriptor& mean) {
+std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const ResolvedRun& run, const MeanDescriptor& mean,
+                                                      RunGpuResources* gpu) {
 #ifdef CASHASH_WITH_CUDA
   if (run.rematch_on_matching_thread) return nullptr;
   if (GpuIndices(run.options.gpu_index).size() != 1) return nullptr;
   MatcherCommandOptions brute_force = run.options;
   brute_force.cashash.matcher = MatcherType::kBruteForce;
-  return std::make_shared<ExactMatcherPool>([brute_force, budget = run.gpu_memory_budget_bytes, mean]() {
+  return std::make_shared<ExactMatcherPool>([brute_force, budget = run.gpu_memory_budget_bytes, mean, gpu]() {
     bool on_gpu = false;
-    return CreateBackendForOptions(brute_force, budget, mean, nullptr, &on_gpu);
+    return CreateBackendForOptions(brute_force, budget, mean, nullptr, gpu, &on_gpu);
   });
 #else
   (void)run;
   (void)mean;
+  (void)gpu;
   return nullptr;
 #endif
 }
@@ -139,16 +149,17 @@ std::shared_ptr<ExactMatcherPool> DeferredRematchPool(const ResolvedRun& run, co
 // keeps the bare cascade: its stage 2 screens by the epipolar band.
 std::unique_ptr<FeatureMatcher> CreateCascadeForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                     const std::function<void(const std::string&)>& warning,
-                                                    const std::shared_ptr<ExactRematchCounts>& counts, bool* on_gpu) {
+                                                    const std::shared_ptr<ExactRematchCounts>& counts,
+                                                    RunGpuResources* gpu, bool* on_gpu) {
   const MatcherCommandOptions& options = run.options;
   MatcherCommandOptions cascade = options;
   cascade.cashash.matcher = MatcherType::kCascade;
   std::unique_ptr<FeatureMatcher> matcher =
-      CreateBackendForOptions(cascade, run.gpu_memory_budget_bytes, mean, warning, on_gpu);
+      CreateBackendForOptions(cascade, run.gpu_memory_budget_bytes, mean, warning, gpu, on_gpu);
   if (options.guided.enabled || options.cashash.exact_rematch_min_matches <= 0) return matcher;
   return std::make_unique<ExactRematchFeatureMatcher>(
       std::move(matcher), static_cast<size_t>(options.cashash.exact_rematch_min_matches), counts,
-      *on_gpu ? DeferredRematchPool(run, mean) : nullptr,
+      *on_gpu ? DeferredRematchPool(run, mean, gpu) : nullptr,
       static_cast<size_t>(std::max(0, options.cashash.exact_rematch_max_matches)));
 }
 
@@ -156,15 +167,18 @@ std::unique_ptr<FeatureMatcher> CreateCascadeForRun(const ResolvedRun& run, cons
 
 std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                     const std::function<void(const std::string&)>& warning,
-                                                    const std::shared_ptr<ExactRematchCounts>& counts) {
+                                                    const std::shared_ptr<ExactRematchCounts>& counts,
+                                                    RunGpuResources* gpu) {
   const MatcherCommandOptions& options = run.options;
   // ResolveRun decides auto (MatcherRule); a ResolvedRun is built by it only.
   if (options.cashash.matcher == MatcherType::kAuto) {
     throw std::logic_error("CreateMatcherForRun: CasHash.matcher auto was not resolved (ResolveRun decides it)");
   }
   bool on_gpu = false;
-  if (options.cashash.matcher == MatcherType::kCascade) return CreateCascadeForRun(run, mean, warning, counts, &on_gpu);
-  return CreateBackendForOptions(options, run.gpu_memory_budget_bytes, mean, warning, &on_gpu);
+  if (options.cashash.matcher == MatcherType::kCascade) {
+    return CreateCascadeForRun(run, mean, warning, counts, gpu, &on_gpu);
+  }
+  return CreateBackendForOptions(options, run.gpu_memory_budget_bytes, mean, warning, gpu, &on_gpu);
 }
 
 }  // namespace colmap

@@ -13,7 +13,8 @@ namespace cashash {
 namespace colmap {
 
 std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherCommandOptions& options,
-                                                             const std::function<void(const std::string&)>& warning) {
+                                                             const std::function<void(const std::string&)>& warning,
+                                                             RunGpuResources* gpu) {
   if (options.use_gpu) {
 #ifdef CASHASH_WITH_CUDA
     int gpu_index = 0;
@@ -29,17 +30,20 @@ std::unique_ptr<BatchVerifier> CreateBatchVerifierForOptions(const MatcherComman
       config.gpu_index = gpu_index;
       config.num_threads = options.sift.num_threads;
       config.verifications_in_flight = options.gpu_verifications_in_flight;
+      if (gpu != nullptr) config.resources = gpu->ForDevice(gpu_index);
       return cuda::CreateGpuBatchVerifier(options.two_view, config);
     }
     if (warning) warning("no usable CUDA device (" + reason + "); verifying on the CPU");
 #else
+    (void)gpu;
     if (warning) warning("cashash was built without CUDA; verifying on the CPU");
 #endif
   }
   return CreateCpuBatchVerifier(options.two_view, options.sift.num_threads);
 }
 
-std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options) {
+std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(const MatcherCommandOptions& options,
+                                                                                RunGpuResources* gpu) {
 #ifdef CASHASH_WITH_CUDA
   if (options.use_gpu) {
     int gpu_index = 0;
@@ -49,9 +53,12 @@ std::unique_ptr<BatchFundamentalEstimator> CreateFundamentalEstimatorForOptions(
       gpu_index = 0;  // CreateBatchVerifierForOptions reports the bad value
     }
     if (cuda::CudaDeviceUsable(gpu_index, nullptr)) {
-      return cuda::CreateGpuFundamentalEstimator(options.two_view, gpu_index);
+      return cuda::CreateGpuFundamentalEstimator(options.two_view, gpu_index,
+                                                 gpu != nullptr ? gpu->ForDevice(gpu_index) : nullptr);
     }
   }
+#else
+  (void)gpu;
 #endif
   return CreateCpuFundamentalEstimator(options.two_view, options.sift.num_threads);
 }
