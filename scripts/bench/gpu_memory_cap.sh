@@ -102,7 +102,7 @@ run() {
   wait "$sampler" 2> /dev/null
   rm -f "$copy" "$copy-wal" "$copy-shm"
   local fallback=no
-  grep -qE "CPU fallback|continuing on|verifying on the CPU" "$log" && fallback=yes
+  grep -qE "CPU fallback|continuing on|(matching|verifying) on the CPU" "$log" && fallback=yes
   [ "$code" != 0 ] && fallback="exit $code"
   local owner
   owner=$(grep -m1 "^GPU memory:" "$log" | sed 's/^GPU memory: //; s/,/;/g')
