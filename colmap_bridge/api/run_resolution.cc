@@ -25,7 +25,11 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
   }
   if (facts.gpu_index >= 0) {
     if (options.max_gpu_memory.empty()) {
+      // No budget: the images may take the share they took before the
+      // rematch and the verifier shared one (the rest of the card, a
+      // quarter, is far more than those need).
       limits.max_gpu_bytes = facts.gpu_free_bytes;
+      limits.gpu_image_share = ScheduleLimits::kImageShareWithoutBudget;
     } else {
       ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);
     }

@@ -13,8 +13,8 @@
 // user answers that error the same way: its work goes to the CPU.
 //
 // How the budget is shared: the run's schedule gives the cascade's images
-// at most half of it (ScheduleLimits::gpu_image_share), a fifth more with
-// their size classes; each of the cascade's two batch slots grows within a
+// at most half of it, counted at their size class
+// (ScheduleLimits::gpu_image_share); each of the cascade's two batch slots grows within a
 // sixteenth; each rematch batch's scratch stays within ScratchBytes(), a
 // thirty-second (its kernels grow their buffers by half again, and up to
 // three run at once); the verifier's buffers, sized by the chunk, find the

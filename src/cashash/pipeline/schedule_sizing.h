@@ -46,9 +46,11 @@ struct ScheduleLimits {
   // Share of max_gpu_bytes for the images the GPU matcher holds. The rest is
   // for everything else the run puts on the device under the same budget
   // (cuda/cashash_cuda/utils/gpu_resources.h): the matcher's batch buffers,
-  // the exact rematch's kernels, the verifier's RANSAC buffers, and the
-  // rounding of blocks up to their size class.
+  // the exact rematch's kernels, the verifier's RANSAC buffers. Without
+  // --max_gpu_memory (max_gpu_bytes the device's free memory, no budget)
+  // the run uses kImageShareWithoutBudget.
   double gpu_image_share = 0.5;
+  static constexpr double kImageShareWithoutBudget = 0.75;
   int block_size = 0;  // 0: derive, at most kMaxDerivedBlockSize
   int max_num_matches = 32768;  // rows per image the matcher keeps
   int num_tables = 8;           // cascade hash tables (matcher memory)
