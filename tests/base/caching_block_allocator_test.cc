@@ -85,11 +85,53 @@ TEST(CachingBlockAllocator, SizeClassesRoundUpByAtMostAQuarterOrAPage) {
   size_t between = 0;
   for (size_t c : classes) between += c > 16 * kMiB && c <= 32 * kMiB;
   EXPECT_LE(between, 4u);
+  // In slabs the classes keep their quarter steps: the slab takes the pages.
+  EXPECT_EQ(A::SlabBlockClass(4 * kMiB + 1), 5 * kMiB);
+  EXPECT_EQ(A::SlabBlockClass(2100000), 5 * kMiB / 2);
+}
+
+// Without a budget a class's blocks share slabs of up to 32 MiB in whole
+// 2 MiB pages: few source allocations for many images.
+TEST(CachingBlockAllocator, WithoutABudgetBlocksOfAClassShareSlabs) {
+  using A = CachingBlockAllocator;
+  EXPECT_EQ(A::BlocksPerSlab(5 * kMiB / 2), 12u);        // 30 MiB
+  EXPECT_EQ(A::BlocksPerSlab(7 * kMiB / 2), 9u);         // 31.5 MiB in 32
+  EXPECT_EQ(A::BlocksPerSlab(A::kGranularity), 8192u);  // one page
+  EXPECT_EQ(A::BlocksPerSlab(400 * 1024), 20u);          // 8 MiB
+  EXPECT_EQ(A::BlocksPerSlab(24 * kMiB), 1u);
+  EXPECT_EQ(A::BlocksPerSlab(40 * kMiB), 1u);
+  HostSource source;
+  CachingBlockAllocator allocator(&source, 0);
+  std::vector<char*> blocks;
+  for (int i = 0; i < 24; ++i) blocks.push_back(static_cast<char*>(allocator.Acquire(2100000, "image")));
+  EXPECT_EQ(source.allocations, 2);
+  std::vector<char*> sorted = blocks;
+  std::sort(sorted.begin(), sorted.end());
+  for (size_t i = 1; i < sorted.size(); ++i) {
+    EXPECT_GE(static_cast<size_t>(sorted[i] - sorted[i - 1]), 2100000u) << "blocks overlap";
+  }
+  BlockAllocatorStats stats = allocator.Stats();
+  EXPECT_EQ(stats.in_use_bytes, 60 * kMiB);
+  EXPECT_EQ(stats.cached_bytes, 0u);
+  // A slab goes back only once all its blocks are free.
+  for (int i = 0; i < 13; ++i) allocator.Release(blocks[i]);
+  allocator.Trim();
+  EXPECT_EQ(source.frees, 1);
+  EXPECT_EQ(allocator.Stats().held_bytes(), 30 * kMiB);
+  // Freed blocks of a still-held slab serve the next requests.
+  void* again = allocator.Acquire(2200000, "image");  // another size of the class
+  EXPECT_EQ(again, blocks[12]);
+  EXPECT_EQ(source.allocations, 2);
+  allocator.Release(again);
+  for (int i = 13; i < 24; ++i) allocator.Release(blocks[i]);
+  allocator.Trim();
+  EXPECT_EQ(source.held(), 0u);
+  EXPECT_EQ(allocator.Stats().trimmed_blocks, 2u);
 }
 
 TEST(CachingBlockAllocator, AFreedBlockServesAnyRequestOfItsClass) {
   HostSource source;
-  CachingBlockAllocator allocator(&source, 0);
+  CachingBlockAllocator allocator(&source, 1024 * kMiB);  // a budget: a block to a slab
   void* a = allocator.Acquire(3 * kMiB + 1000, "image a");
   allocator.Release(a);
   void* b = allocator.Acquire(3 * kMiB + 200000, "image b");  // other size, same class (4 MiB)

@@ -87,7 +87,8 @@ GpuResources::GpuResources(int device, size_t budget_bytes)
       device_source_(std::make_unique<DeviceSource>(device)),
       pinned_source_(std::make_unique<PinnedSource>(device)),
       device_memory_(device_source_.get(), budget_bytes, "GPU memory"),
-      pinned_memory_(pinned_source_.get(), 0, "pinned host memory") {}
+      // One allocation per pinned block: its device address is asked for.
+      pinned_memory_(pinned_source_.get(), 0, "pinned host memory", /*slabs=*/false) {}
 
 GpuResources::~GpuResources() = default;
 

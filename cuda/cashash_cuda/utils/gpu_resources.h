@@ -6,7 +6,10 @@
 // --max_gpu_memory.
 //
 // Device memory is a CachingBlockAllocator over cudaMalloc: size classes,
-// freed blocks cached for the next request of their class, cached blocks
+// freed blocks cached for the next request of their class (without a
+// budget, blocks of a class share slabs of up to 32 MiB, so hundreds of
+// images cost a few dozen cudaMalloc calls; under one, each block is its
+// own, so that any cached block can be given back alone), cached blocks
 // given back (cudaFree) when a request would pass the budget, and
 // DeviceMemoryError (cashash/base/device_memory_error.h) when the blocks in
 // use leave no room or cudaMalloc reports cudaErrorMemoryAllocation. Every
