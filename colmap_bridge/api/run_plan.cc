@@ -236,12 +236,15 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
         std::move(plan->matcher), keep_bytes,
         [max_rows, tables = options.cashash.num_tables, share, position_bytes,
-         on_gpu = plan->run.gpu_index >= 0](const FeatureDescriptors& d) {
+         on_gpu = plan->run.gpu_index >= 0,
+         budget = plan->run.gpu_memory_budget_bytes > 0](const FeatureDescriptors& d) {
           const size_t rows = std::min(d.rows(), max_rows);
           // On the GPU, the size class of the image's block: what the
           // device's owner of memory counts (ScheduleSizes does the same).
           size_t bytes = MatcherBytesPerImage(rows, tables);
-          if (on_gpu) bytes = CachingBlockAllocator::SizeClass(bytes);
+          if (on_gpu) {
+            bytes = budget ? CachingBlockAllocator::SizeClass(bytes) : CachingBlockAllocator::SlabBlockClass(bytes);
+          }
           return static_cast<size_t>(share * static_cast<double>(bytes)) + rows * position_bytes;
         });
     plan->retaining = keeping.get();

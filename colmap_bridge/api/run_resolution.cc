@@ -30,6 +30,7 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
       // quarter, is far more than those need).
       limits.max_gpu_bytes = facts.gpu_free_bytes;
       limits.gpu_image_share = ScheduleLimits::kImageShareWithoutBudget;
+      limits.gpu_without_budget = true;
     } else {
       ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);
     }

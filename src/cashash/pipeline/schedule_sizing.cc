@@ -87,7 +87,11 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
                            limits.num_tables);
   // On the GPU an image's block is rounded up to its size class, and that
   // is what the device's owner of memory counts against the budget.
-  if (gpu) sizes.matcher_bytes_per_image = CachingBlockAllocator::SizeClass(sizes.matcher_bytes_per_image);
+  if (gpu) {
+    sizes.matcher_bytes_per_image = limits.gpu_without_budget
+                                        ? CachingBlockAllocator::SlabBlockClass(sizes.matcher_bytes_per_image)
+                                        : CachingBlockAllocator::SizeClass(sizes.matcher_bytes_per_image);
+  }
   const size_t gpu_for_images = static_cast<size_t>(limits.gpu_image_share * limits.max_gpu_bytes);
   const size_t n = std::max<size_t>(2, features_per_image.size());
 

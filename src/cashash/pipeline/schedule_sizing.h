@@ -51,6 +51,10 @@ struct ScheduleLimits {
   // the run uses kImageShareWithoutBudget.
   double gpu_image_share = 0.5;
   static constexpr double kImageShareWithoutBudget = 0.75;
+  // No device budget: the GPU's blocks share slabs and keep their
+  // quarter-step class (CachingBlockAllocator::SlabBlockClass) instead of
+  // whole pages (SizeClass).
+  bool gpu_without_budget = false;
   int block_size = 0;  // 0: derive, at most kMaxDerivedBlockSize
   int max_num_matches = 32768;  // rows per image the matcher keeps
   int num_tables = 8;           // cascade hash tables (matcher memory)
