@@ -102,6 +102,10 @@ py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   d["inlier_matches"] = s.pipeline.inlier_matches;
   d["seconds"] = s.pipeline.seconds_total;
   d["stopped"] = s.pipeline.stopped;
+  // The run's owner of GPU memory: at most this much held (0 without a GPU),
+  // and how often a GPU part went on on the CPU for want of device memory.
+  d["gpu_memory_peak_held_bytes"] = s.gpu_memory.peak_held_bytes;
+  d["gpu_memory_fallbacks"] = s.gpu_memory_fallbacks;
   // How the run was resolved (ResolveRun): the same for the same inputs as
   // on the command line.
   d["run"] = RunToDict(s.run);

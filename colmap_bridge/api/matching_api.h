@@ -16,6 +16,7 @@
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/run_gpu_resources.h"
 #include "colmap_bridge/api/run_resolution.h"
 
 namespace cashash {
@@ -58,6 +59,11 @@ struct MatchingSummary {
   size_t gpu_total_bytes = 0;
   size_t gpu_used_before_bytes = 0;  // in use before the matcher was made
   size_t gpu_peak_used_bytes = 0;    // most in use at a sample
+  // The run's own books of GPU memory (RunGpuResources): what its owner of
+  // the device's memory held at most against the budget, and how often a
+  // GPU part went on on the CPU for want of device memory (0: never).
+  RunGpuMemoryBooks gpu_memory;
+  size_t gpu_memory_fallbacks = 0;
   // Where the call's time outside the pipeline went, phase by phase: before
   // it (opening the database, starting the GPU, making the matcher) and
   // after it (closing the database, freeing GPU memory).
@@ -98,10 +104,14 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 // verify (with fewer cascade matches than the window's upper bound
 // exact_rematch_max_matches, where that is set) are matched again by brute
 // force, from the descriptors the cascade holds, on the matching thread or
-// deferred as run.rematch_on_matching_thread says.
+// deferred as run.rematch_on_matching_thread says. With `gpu`, every GPU
+// part takes its device memory from that device's owner in it (one budget
+// for the run); without, each GPU matcher owns its memory under
+// run.gpu_memory_budget_bytes.
 std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                     const std::function<void(const std::string&)>& warning,
-                                                    const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
+                                                    const std::shared_ptr<ExactRematchCounts>& counts = nullptr,
+                                                    RunGpuResources* gpu = nullptr);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -10,6 +10,7 @@
 #include <string>
 #include <utility>
 
+#include "cashash/base/caching_block_allocator.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/retaining_feature_matcher.h"
 #include "cashash/matching/guided_matching.h"
@@ -17,6 +18,7 @@
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
+#include "colmap_bridge/api/run_gpu_resources.h"
 #include "colmap_bridge/api/verifier_selection.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "distributed/mpi_distributed.h"
@@ -133,6 +135,9 @@ struct RunPlan {
   std::unique_ptr<KeypointRecordingSource> keypoint_source;  // guided only
   FeatureSource* features = nullptr;
   std::unique_ptr<GpuMemorySampler> gpu_memory;
+  // One owner of device memory per GPU, shared by the matchers, the
+  // rematch and the verifier under --max_gpu_memory.
+  std::unique_ptr<RunGpuResources> gpu_resources;
   std::shared_ptr<ExactRematchCounts> rematch_counts;
   std::unique_ptr<FeatureMatcher> matcher;
   GuidedFeatureMatcher* guided = nullptr;       // inside matcher, if any
@@ -189,15 +194,16 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
   const MatcherCommandOptions& options = plan->run.options;
   plan->rematch_counts = std::make_shared<ExactRematchCounts>();
   plan->matcher = CreateMatcherForRun(plan->run, mean, [&](const std::string& text) { Warn(callbacks, text); },
-                                      plan->rematch_counts);
+                                      plan->rematch_counts, plan->gpu_resources.get());
   // Guided matching (Ga-CasHash, cashash/matching/guided_matching.h): a
   // second matcher for the top-scale subsets, the stage-1 F estimator, and
   // the pipeline's features read through a source that keeps the keypoints.
   if (options.guided.enabled) {
     plan->keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
     auto guided = std::make_unique<GuidedFeatureMatcher>(
-        std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr),
-        CreateFundamentalEstimatorOnDevice(options, plan->run.gpu_index), plan->keypoint_source.get(), options.guided,
+        std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr, nullptr, plan->gpu_resources.get()),
+        CreateFundamentalEstimatorOnDevice(options, plan->run.gpu_index, plan->gpu_resources.get()),
+        plan->keypoint_source.get(), options.guided,
         options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
     plan->guided = guided.get();
     plan->matcher = std::move(guided);
@@ -210,10 +216,17 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
     const size_t position_bytes = options.guided.enabled ? 24 : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
         std::move(plan->matcher), keep_bytes,
-        [max_rows, tables = options.cashash.num_tables, share, position_bytes](const FeatureDescriptors& d) {
+        [max_rows, tables = options.cashash.num_tables, share, position_bytes,
+         on_gpu = plan->run.gpu_index >= 0,
+         budget = plan->run.gpu_memory_budget_bytes > 0](const FeatureDescriptors& d) {
           const size_t rows = std::min(d.rows(), max_rows);
-          return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
-                 rows * position_bytes;
+          // On the GPU, the size class of the image's block: what the
+          // device's owner of memory counts (ScheduleSizes does the same).
+          size_t bytes = MatcherBytesPerImage(rows, tables);
+          if (on_gpu) {
+            bytes = budget ? CachingBlockAllocator::SizeClass(bytes) : CachingBlockAllocator::SlabBlockClass(bytes);
+          }
+          return static_cast<size_t>(share * static_cast<double>(bytes)) + rows * position_bytes;
         });
     plan->retaining = keeping.get();
     plan->keep_bytes = keep_bytes;
@@ -254,6 +267,7 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   clock.Mark("starting the feature reader");
 
   plan->gpu_memory = std::make_unique<GpuMemorySampler>(plan->run.gpu_index);
+  plan->gpu_resources = std::make_unique<RunGpuResources>(plan->run.gpu_memory_budget_bytes);
   clock.Mark("starting the GPU and sizing the run");
   const MeanDescriptor& mean = request.mean.get();
   clock.Mark("waiting for the hashing mean");
@@ -267,7 +281,8 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   clock.Mark("opening the database for writing");
   // Verification on the run's first device, where matching runs too.
   if (!plan->run.options.skip_geometric_verification) {
-    plan->verifier = CreateBatchVerifierOnDevice(plan->run.options, plan->run.gpu_index);
+    plan->verifier =
+        CreateBatchVerifierOnDevice(plan->run.options, plan->run.gpu_index, plan->gpu_resources.get());
     clock.Mark("making the verifier");
   }
 }
@@ -285,11 +300,30 @@ void DismantlePlan(RunPlan& plan, PhaseClock& clock) {
   clock.Mark("closing the database");
   plan.matcher.reset();
   plan.rematch_counts.reset();
+  plan.gpu_resources.reset();  // the blocks the owners still cache
   clock.Mark("freeing the matcher");
   plan.features = nullptr;
   plan.keypoint_source.reset();
   plan.cache.reset();
   clock.Mark("stopping the feature reader");
+}
+
+// The run's own books of GPU memory against its budget, and every fall
+// back to the CPU for want of device memory (rank 0's share).
+void ReportGpuMemory(const MatchingSummary& summary, const MatchingCallbacks& callbacks) {
+  const RunGpuMemoryBooks& books = summary.gpu_memory;
+  if (books.devices == 0) return;
+  Info(callbacks, "GPU memory: at most " + FormatMemorySize(books.peak_held_bytes) + " held (" +
+                      FormatMemorySize(books.peak_in_use_bytes) + " in use) of " +
+                      (books.budget_bytes > 0 ? "--max_gpu_memory " + FormatMemorySize(books.budget_bytes)
+                                              : std::string("the device (no --max_gpu_memory)")) +
+                      "; " + std::to_string(books.blocks_made) + " blocks allocated, " +
+                      std::to_string(books.blocks_reused) + " reused, " + std::to_string(books.blocks_trimmed) +
+                      " given back");
+  if (summary.gpu_memory_fallbacks > 0) {
+    Warn(callbacks, "CPU fallback: " + std::to_string(summary.gpu_memory_fallbacks) +
+                        " times a GPU part found no room in GPU memory and went on on the CPU");
+  }
 }
 
 // What the matcher's wrappers and the feature cache did, for the log.
@@ -406,6 +440,10 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   summary.matcher_name = plan.matcher->Name();
   plan.gpu_memory->Sample();
   plan.gpu_memory->Fill(&summary);  // rank 0's device
+  summary.gpu_memory = plan.gpu_resources->Books();
+  summary.gpu_memory_fallbacks = summary.gpu_memory.matcher_fallbacks + plan.rematch_counts->tickets_without_memory +
+                                 (plan.verifier ? plan.verifier->CallsWithoutDeviceMemory() : 0);
+  ReportGpuMemory(summary, callbacks);
   ReportMatcherStats(plan, num_images, callbacks);  // rank 0's share
   if (share.num_ranks > 1) {
     Info(callbacks, "Matched by " + std::to_string(share.num_ranks) + " MPI processes");

@@ -29,6 +29,11 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
   if (!facts.gpu_indices.empty()) {
     if (options.max_gpu_memory.empty()) {
       gpu_cap = facts.gpu_free_bytes;
+      // No budget: the images may take the share they took before the
+      // rematch and the verifier shared one (the rest of the card, a
+      // quarter, is far more than those need).
+      limits.gpu_image_share = ScheduleLimits::kImageShareWithoutBudget;
+      limits.gpu_without_budget = true;
     } else {
       size_t bytes = 0;
       ParseMemorySize(options.max_gpu_memory, &bytes);  // checked with the options

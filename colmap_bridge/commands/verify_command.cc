@@ -12,6 +12,8 @@
 #include <unordered_set>
 
 #include "cashash/pipeline/pair_generation.h"
+#include "cashash/pipeline/schedule_sizing.h"
+#include "cashash/pipeline/schedule_sizing.h"
 #include "cashash/base/pair_id.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -159,8 +161,12 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
   StoredMatches stored(&source);
   const RunDevices devices = ChooseRunDevices(checked, MachineDeviceFacts());
   for (const std::string& text : devices.warnings) Warn(callbacks, text);
+  // The verifier's device memory under --max_gpu_memory, as in a matching run.
+  size_t gpu_budget = 0;
+  if (!checked.max_gpu_memory.empty()) ParseMemorySize(checked.max_gpu_memory, &gpu_budget);
+  RunGpuResources gpu(gpu_budget);
   std::unique_ptr<BatchVerifier> verifier =
-      CreateBatchVerifierOnDevice(checked, devices.gpu_indices.empty() ? -1 : devices.gpu_indices.front());
+      CreateBatchVerifierOnDevice(checked, devices.gpu_indices.empty() ? -1 : devices.gpu_indices.front(), &gpu);
   DatabaseResultSink sink(database_path, true);
   PipelineOptions pipeline_options;
   pipeline_options.num_threads = checked.sift.num_threads;

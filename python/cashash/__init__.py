@@ -89,7 +89,10 @@ def match_exhaustive(database_path, options=None, progress=None, **kwargs):
     called after each committed block; an exception it raises stops the run
     (finished blocks stay committed) and is raised again. Returns a dict of
     counts: pairs_requested, pairs_skipped, pairs_done, raw_matches,
-    verified_pairs, inlier_matches, seconds, matcher, stopped; and run, a
+    verified_pairs, inlier_matches, seconds, matcher, stopped,
+    gpu_memory_peak_held_bytes (what the run's owner of GPU memory held at
+    most, 0 without a GPU), gpu_memory_fallbacks (times a GPU part went on
+    on the CPU for want of device memory); and run, a
     dict of how the run was resolved from the options and the database
     (matcher, num_tables, bits_per_table, tau, exact_rematch_min_matches,
     exact_rematch_max_matches, rematch_on_matching_thread, block_size, blocks_per_group, gpu_index,

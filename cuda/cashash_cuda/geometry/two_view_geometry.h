@@ -13,6 +13,7 @@
 
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/geometry/two_view_geometry.h"
+#include "cashash_cuda/utils/gpu_resources.h"
 
 namespace cashash {
 namespace cuda {
@@ -35,8 +36,12 @@ struct GpuRansacStats {
 // one Estimate call at a time.
 class GpuTwoViewRansac {
  public:
-  // Throws std::runtime_error when the device cannot be used.
-  GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index);
+  // Throws std::runtime_error when the device cannot be used. Its buffers
+  // come from `resources` (null: an owner of its own without a budget);
+  // Estimate throws DeviceMemoryError, before anything is queued, when
+  // they have no room.
+  GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index,
+                   std::shared_ptr<GpuResources> resources = nullptr);
   ~GpuTwoViewRansac();
   GpuTwoViewRansac(const GpuTwoViewRansac&) = delete;
   GpuTwoViewRansac& operator=(const GpuTwoViewRansac&) = delete;
@@ -89,10 +94,15 @@ struct GpuVerifierConfig {
   // Chunks verified on the device at once, 1 to kMaxGpuVerificationsInFlight
   // (values outside are clamped).
   int verifications_in_flight = kDefaultGpuVerificationsInFlight;
+  // The owner of the device's memory, shared with the run's matchers (null:
+  // one of its own without a budget).
+  std::shared_ptr<GpuResources> resources;
 };
 
 // The BatchVerifier that estimates F, H and E of a whole chunk on the GPU
-// and prepares points and decides on CPU threads.
+// and prepares points and decides on CPU threads. A chunk whose buffers
+// find no room on the device (DeviceMemoryError) is verified on the CPU
+// instead; StatsSummary counts those chunks.
 std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options,
                                                       const GpuVerifierConfig& config);
 // The same with the default number of verifications in flight.
