@@ -18,8 +18,10 @@
 # Environment (defaults in brackets):
 #   SIZES ["5000 20000"]: images of each street, NUM_FEATURES [8],
 #   RUN_S [25]: seconds before SIGINT, MPI_RANKS [2] (1: no MPI runs),
-#   USE_GPU [0], WORK [/tmp/cashash_host_memory]: the databases (kept, reused
-#   when present), OUT [WORK/logs]: one log and one time file per run.
+#   USE_GPU [0], OPTIONS []: more exhaustive_matcher options (for example
+#   "--max_host_memory 256M"), WORK [/tmp/cashash_host_memory]: the
+#   databases (kept, reused when present), OUT [WORK/logs]: one log and one
+#   time file per run.
 # Prints a table: build, images, processes, peak RSS (MiB, the largest
 # process), seconds to the first committed chunk, pairs committed.
 set -u -o pipefail
@@ -31,6 +33,7 @@ NUM_FEATURES="${NUM_FEATURES:-8}"
 RUN_S="${RUN_S:-25}"
 MPI_RANKS="${MPI_RANKS:-2}"
 USE_GPU="${USE_GPU:-0}"
+read -r -a OPTIONS <<< "${OPTIONS:-}"
 WORK="${WORK:-/tmp/cashash_host_memory}"
 OUT="${OUT:-$WORK/logs}"
 mkdir -p "$WORK" "$OUT"
@@ -60,7 +63,7 @@ run_one() {
   rm -f "$copy" "$copy-wal" "$copy-shm"
   cp "$db" "$copy"
   rm -f "$OUT/$tag".time*
-  local args=(exhaustive_matcher --database_path "$copy" --FeatureMatching.use_gpu "$USE_GPU")
+  local args=(exhaustive_matcher --database_path "$copy" --FeatureMatching.use_gpu "$USE_GPU" "${OPTIONS[@]}")
   local t0="$EPOCHREALTIME"
   if [ "$ranks" -gt 1 ]; then
     # Each rank: its own timer, its own SIGINT (mpirun itself would end
@@ -94,7 +97,7 @@ done
 # --- Runs ----------------------------------------------------------------------
 echo "# host_memory_scale.sh $(date -u +%Y-%m-%dT%H:%M:%SZ), $(nproc) cores," \
   "$(awk '/MemTotal/ { printf "%.1f GiB", $2 / 1048576 }' /proc/meminfo); ${NUM_FEATURES} features an image," \
-  "SIGINT after ${RUN_S} s, --FeatureMatching.use_gpu $USE_GPU"
+  "SIGINT after ${RUN_S} s, --FeatureMatching.use_gpu $USE_GPU ${OPTIONS[*]}"
 printf '%-10s %7s %5s %10s %12s %22s\n' build images procs "peak MiB" "1st chunk s" "pairs committed"
 b=0
 for binary in "${BUILDS[@]}"; do
