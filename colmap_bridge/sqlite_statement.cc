@@ -91,10 +91,6 @@ void SqliteStatement::Execute() {
 
 int64_t SqliteStatement::ColumnInt64(int col) const { return sqlite3_column_int64(stmt_, col); }
 
-bool SqliteStatement::ColumnIsNull(int col) const {
-  return sqlite3_column_type(stmt_, col) == SQLITE_NULL;
-}
-
 const void* SqliteStatement::ColumnBlob(int col) const { return sqlite3_column_blob(stmt_, col); }
 
 size_t SqliteStatement::ColumnBytes(int col) const {

@@ -37,7 +37,6 @@ class SqliteStatement {
 
   // Column indices are 0-based, as in SQLite.
   int64_t ColumnInt64(int col) const;
-  bool ColumnIsNull(int col) const;
   const void* ColumnBlob(int col) const;
   size_t ColumnBytes(int col) const;
   std::string ColumnText(int col) const;
