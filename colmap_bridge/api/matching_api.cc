@@ -249,13 +249,11 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     RunRequest request;
     request.run = ResolveAndReport(checked, facts, callbacks);
     clock.Mark("starting the GPU and sizing the run");
-    const ScheduleSizes& sizes = request.run.schedule;
     const size_t n = image_ids.size();
     request.source = &source;
     request.image_ids = image_ids;
-    request.chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
+    request.exhaustive = true;
     request.num_pairs_requested = n * (n - 1) / 2;
-    request.cache_groups = true;
     request.mean = std::move(mean);
     request.clock = clock;
     return MatchChunks(std::move(request), callbacks);

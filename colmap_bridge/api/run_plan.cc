@@ -15,6 +15,8 @@
 #include "cashash/matchers/retaining_feature_matcher.h"
 #include "cashash/matching/guided_matching.h"
 #include "cashash/pipeline/feature_cache.h"
+#include "cashash/pipeline/pair_chunk_source.h"
+#include "cashash/pipeline/pair_triangle.h"
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
@@ -27,7 +29,6 @@
 namespace cashash {
 namespace colmap {
 
-using distributed::ChunkListChecksum;
 using distributed::ChunksOfRank;
 using distributed::LockedSink;
 using distributed::MpiAbortJob;
@@ -115,13 +116,18 @@ class GpuMemorySampler {
 };
 
 // What this process matches: the pairs not yet in the database, and of
-// those this rank's chunks.
+// those this rank's chunks. Exhaustive runs make their chunks as the
+// pipeline asks for them; pair lists hold theirs.
 struct RunShare {
   int rank = 0;
   int num_ranks = 1;
   size_t num_pairs = 0;  // of every rank
   size_t pairs_skipped = 0;
-  std::vector<PairChunk> my_chunks;
+  std::unique_ptr<std::vector<PairChunk>> listed;  // a pair list's chunks left
+  std::unique_ptr<PairChunkSource> all;            // every rank's chunks left
+  std::unique_ptr<PairChunkSource> mine;           // this rank's, under MPI
+
+  const PairChunkSource& my_chunks() const { return mine ? *mine : *all; }
 };
 
 // Everything a run is made of, built once by PlanRun. Members point into
@@ -152,37 +158,50 @@ struct RunPlan {
   std::unique_ptr<BatchVerifier> verifier;  // none when verification is skipped
 };
 
-// The pairs left of `chunks` (the request's, moved: at 20,000 images the
-// list is 1.6 GB) after resume, checked to be the same on every rank, and
-// this rank's share of them.
-RunShare ShareOfRun(std::vector<PairChunk> chunks, const RunRequest& request, const MatchingCallbacks& callbacks) {
+// The pairs left of the request's after resume, checked to be the same on
+// every rank, and this rank's share of them. An exhaustive run keeps one
+// bit per pair of the run, and only once the database holds one of them;
+// a pair list is thinned as it is.
+RunShare ShareOfRun(RunRequest& request, const MatchingCallbacks& callbacks) {
   RunShare share;
   share.rank = MpiRank();
   share.num_ranks = MpiSize();
-  if (!request.run.options.overwrite) {
-    // One bit per pair of the run, whatever the database holds.
-    const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, chunks);
-    if (done.num_completed() > 0) {
-      chunks = RemovePairs(std::move(chunks),
-                           [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
+  const bool resume = !request.run.options.overwrite;
+  if (request.exhaustive) {
+    PairTriangle done;
+    if (resume) {
+      CompletedPairs completed = ReadCompletedPairs(request.source->database(), request.image_ids);
+      if (completed.num_completed() > 0) done = completed.TakeTriangle();
     }
+    share.all = std::make_unique<ScheduledChunkSource>(request.image_ids, request.run.schedule.block_size,
+                                                       request.run.schedule.blocks_per_group, std::move(done));
+  } else {
+    share.listed = std::make_unique<std::vector<PairChunk>>(std::move(request.chunks));
+    if (resume) {
+      const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, *share.listed);
+      if (done.num_completed() > 0) {
+        *share.listed = RemovePairs(std::move(*share.listed),
+                                    [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
+      }
+    }
+    share.all = std::make_unique<ChunkList>(share.listed.get());
   }
   if (share.num_ranks > 1) {
-    const uint64_t checksum = ChunkListChecksum(chunks);
+    const uint64_t checksum = share.all->Checksum();
     if (MpiMin(checksum) != MpiMax(checksum)) {
       throw std::runtime_error("MPI ranks disagree on the pairs to match (same database and options on every rank?)");
     }
     // Every rank has read the completed pairs: rank 0 may start writing.
     MpiBarrier();
   }
-  for (const PairChunk& chunk : chunks) share.num_pairs += chunk.pairs.size();
+  share.num_pairs = share.all->num_pairs();
   share.pairs_skipped = request.num_pairs_requested - share.num_pairs;
   if (share.pairs_skipped > 0) {
     Info(callbacks, "Skipping " + std::to_string(share.pairs_skipped) + " of " +
                         std::to_string(request.num_pairs_requested) +
                         " pairs already in the database (use --overwrite 1 to match them again)");
   }
-  share.my_chunks = share.num_ranks > 1 ? ChunksOfRank(chunks, share.rank, share.num_ranks) : std::move(chunks);
+  if (share.num_ranks > 1) share.mine = std::make_unique<ChunksOfRank>(share.all.get(), share.rank, share.num_ranks);
   return share;
 }
 
@@ -245,7 +264,7 @@ void OpenSink(RunPlan* plan) {
     plan->locked_sink = std::make_unique<LockedSink>(plan->database_sink.get());
     plan->sink = plan->locked_sink.get();
   } else {
-    plan->sender = std::make_unique<MpiResultSender>(plan->share.my_chunks);
+    plan->sender = std::make_unique<MpiResultSender>(&plan->share.my_chunks());
     plan->sink = plan->sender.get();
   }
 }
@@ -260,8 +279,8 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   PhaseClock& clock = request.clock;
   plan->share = std::move(share);
   if (plan->share.rank == 0) WarnAboutSmallImages(*request.source, request.image_ids, callbacks);
-  if (request.cache_groups) {
-    plan->cache = std::make_unique<GroupFeatureCache>(request.source, plan->share.my_chunks);
+  if (request.exhaustive) {
+    plan->cache = std::make_unique<GroupFeatureCache>(request.source, plan->share.my_chunks());
   }
   plan->features = plan->cache ? static_cast<FeatureSource*>(plan->cache.get()) : request.source;
   clock.Mark("starting the feature reader");
@@ -411,7 +430,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   clock.Mark("starting the pipeline");
   if (share.rank > 0) {
     RankReport report;
-    report.stats = pipeline.Run(share.my_chunks);
+    report.stats = pipeline.Run(share.my_chunks());
     clock.Restart();
     WriteTrace(trace, trace_path, callbacks);
     report.matcher_name = plan.matcher->Name();
@@ -419,7 +438,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
     return MatchingSummary();  // rank 0 reports the run
   }
   if (share.num_ranks == 1) {
-    summary.pipeline = pipeline.Run(share.my_chunks);
+    summary.pipeline = pipeline.Run(share.my_chunks());
     clock.Restart();
   } else {
     MpiResultReceiver receiver(plan.sink, [&](const PairChunk& chunk) {
@@ -428,7 +447,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
       report_progress(progress);
     });
     try {
-      summary.pipeline = pipeline.Run(share.my_chunks);
+      summary.pipeline = pipeline.Run(share.my_chunks());
     } catch (const std::exception& e) {
       MpiAbortJob(e.what());  // the other ranks cannot be told otherwise
     }
@@ -456,7 +475,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
 }  // namespace
 
 MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks) {
-  RunShare share = ShareOfRun(std::move(request.chunks), request, callbacks);
+  RunShare share = ShareOfRun(request, callbacks);
   MatchingSummary summary;
   summary.pairs_requested = request.num_pairs_requested;
   summary.pairs_skipped = share.pairs_skipped;

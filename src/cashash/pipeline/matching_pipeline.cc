@@ -85,8 +85,8 @@ class PipelineRun {
     chunks_per_call_ = std::max<size_t>(1, verifier_ != nullptr ? verifier_->ChunksPerCall() : 1);
   }
 
-  PipelineStats Execute(const std::vector<PairChunk>& chunks) {
-    for (const PairChunk& chunk : chunks) stats_.pairs_total += chunk.pairs.size();
+  PipelineStats Execute(const PairChunkSource& chunks) {
+    stats_.pairs_total = chunks.num_pairs();
     stats_.verification_threads = num_verifier_threads_;
     std::thread writer(&PipelineRun::Write, this);
     std::vector<std::thread> verifier_threads;
@@ -124,21 +124,26 @@ class PipelineRun {
   }
 
   // Stage 1, on the caller's thread: load what the chunk needs, match.
-  void Match(const std::vector<PairChunk>& chunks) {
+  void Match(const PairChunkSource& chunks) {
     BlockingQueue<MatchedChunk>& after_matching = to_verify_;
     try {
       std::unordered_map<image_t, FeaturesPtr> loaded;
+      // Chunks are made one ahead: the next one's images stay loaded.
+      std::shared_ptr<const PairChunk> next;
       for (size_t c = 0; c < chunks.size(); ++c) {
         if (error_.failed() || (stop_ && stop_->load())) {
           stats_.stopped = !error_.failed();
           break;
         }
-        const PairChunk& chunk = chunks[c];
         const Clock::time_point chunk_start = Clock::now();
+        std::shared_ptr<const PairChunk> current =
+            next ? std::move(next) : std::make_shared<const PairChunk>(chunks.Chunk(c));
+        next = c + 1 < chunks.size() ? std::make_shared<const PairChunk>(chunks.Chunk(c + 1)) : nullptr;
+        const PairChunk& chunk = *current;
 
         // Drop images that neither this chunk nor the next one needs.
         std::unordered_set<image_t> keep(chunk.images.begin(), chunk.images.end());
-        if (c + 1 < chunks.size()) keep.insert(chunks[c + 1].images.begin(), chunks[c + 1].images.end());
+        if (next) keep.insert(next->images.begin(), next->images.end());
         for (auto it = loaded.begin(); it != loaded.end();) {
           if (keep.count(it->first)) {
             ++it;
@@ -163,7 +168,7 @@ class PipelineRun {
         const Clock::time_point t_match = Clock::now();
         MatchedChunk item;
         item.index = c;
-        item.chunk = &chunk;
+        item.chunk = current;
         item.started = chunk_start;
         ChunkMatches matched = matcher_->MatchPairsDeferred(chunk.pairs);
         item.matches = std::move(matched.matches);
@@ -271,7 +276,7 @@ class PipelineRun {
         }
         progress.pairs_total = stats_.pairs_total;
         progress.elapsed_seconds = SecondsSince(run_start_);
-        progress.chunk = item->chunk;
+        progress.chunk = item->chunk.get();
         progress.chunk_seconds = SecondsSince(item->started);
         if (progress_) progress_(progress);
       }
@@ -324,9 +329,11 @@ void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop
 
 void MatchingPipeline::SetBatchVerifier(BatchVerifier* verifier) { verifier_ = verifier; }
 
-PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
+PipelineStats MatchingPipeline::Run(const PairChunkSource& chunks) {
   PipelineRun run(options_, source_, matcher_, sink_, verifier_, progress_, stop_);
   return run.Execute(chunks);
 }
+
+PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) { return Run(ChunkList(&chunks)); }
 
 }  // namespace cashash

@@ -16,7 +16,7 @@
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/matchers/feature_matcher.h"
-#include "cashash/pipeline/pair_generation.h"
+#include "cashash/pipeline/pair_chunk_source.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash/base/types.h"
 
@@ -134,6 +134,9 @@ class MatchingPipeline {
   // instead of the default CPU thread pool over options.two_view.
   void SetBatchVerifier(BatchVerifier* verifier);
 
+  // Matches the chunks in order, making each when it is next (and the one
+  // after it, whose images decide what stays loaded).
+  PipelineStats Run(const PairChunkSource& chunks);
   PipelineStats Run(const std::vector<PairChunk>& chunks);
 
  private:
