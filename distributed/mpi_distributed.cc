@@ -42,6 +42,11 @@ void LockedSink::WriteChunk(const std::vector<PairResult>& results) {
   pairs_written_ += results.size();
 }
 
+void LockedSink::Flush() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  sink_->Flush();
+}
+
 
 MpiResultSender::MpiResultSender(const std::vector<PairChunk>& chunks) {
   for (const PairChunk& chunk : chunks) {
