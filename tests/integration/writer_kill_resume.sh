@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # The writer groups chunks into transactions (DatabaseResultSink's
 # commit_seconds): a kill -9 must still leave whole chunks only, and resuming
-# must end with exactly the rows of an uninterrupted run. A run on 160
-# synthetic images (12,720 pairs, block size 8: 210 chunks, several seconds
-# on the CPU) is killed twice, each time once its first commit is visible
-# (so the kill lands while later chunks sit in an open transaction); after
+# must end with exactly the rows of an uninterrupted run. A run on 120
+# synthetic images (7,140 pairs, block size 6: 210 chunks of about 10 ms,
+# a few seconds on the CPU) is killed twice, each time once its first commit
+# is visible, with --database_commit_seconds 0.25 (each transaction some 25
+# chunks; the kill lands while later chunks sit in an open one); after
 # each kill every block pair must be in the database with all its pairs or
 # with none. Then a third run finishes, and every row of matches and
 # two_view_geometries must equal an uninterrupted run's.
@@ -14,8 +15,8 @@ set -euo pipefail
 CASHASH="$1"
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 TOOL="$HERE/reliability_db_tool.py"
-IMAGES=160
-BLOCK=8
+IMAGES=120
+BLOCK=6
 PAIRS=$((IMAGES * (IMAGES - 1) / 2))
 
 if ! python3 -c "import numpy" 2>/dev/null; then
@@ -31,7 +32,7 @@ trap cleanup EXIT
 
 ARGS=(--SiftMatching.use_gpu 0 --CasHash.matcher cascade --ExhaustiveMatching.block_size "$BLOCK")
 
-python3 "$TOOL" make "$WORK/base.db" --images "$IMAGES" --features 48 --points 400
+python3 "$TOOL" make "$WORK/base.db" --images "$IMAGES" --features 80 --points 300
 cp "$WORK/base.db" "$WORK/reference.db"
 "$CASHASH" exhaustive_matcher --database_path "$WORK/reference.db" "${ARGS[@]}" >"$WORK/reference.log" 2>&1 ||
   { cat "$WORK/reference.log"; exit 1; }
@@ -41,7 +42,8 @@ cp "$WORK/base.db" "$WORK/killed.db"
 for attempt in 1 2; do
   before="$(python3 "$TOOL" count "$WORK/killed.db")"
   # exec: the signal must reach cashash itself, not a subshell.
-  (exec "$CASHASH" exhaustive_matcher --database_path "$WORK/killed.db" "${ARGS[@]}") >"$WORK/killed_$attempt.log" 2>&1 &
+  (exec "$CASHASH" exhaustive_matcher --database_path "$WORK/killed.db" "${ARGS[@]}" --database_commit_seconds 0.25) \
+    >"$WORK/killed_$attempt.log" 2>&1 &
   PID=$!
   committed=""
   for _ in $(seq 1200); do
