@@ -97,7 +97,7 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
 }
 
 // Device memory in use on the run's GPU: before the matcher exists, then
-// after every committed block (the writer thread, and the MPI receiver's).
+// after every written block (the writer thread, and the MPI receiver's).
 class GpuMemorySampler {
  public:
   explicit GpuMemorySampler(int gpu_index) : gpu_index_(gpu_index) {
