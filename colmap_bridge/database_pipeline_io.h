@@ -1,8 +1,10 @@
 // The matching pipeline's source and sink on a COLMAP database: features are
-// read through one connection, results written through another in one
-// transaction per chunk, so that a stopped run leaves whole chunks only.
+// read through one connection, results written through another in
+// transactions of whole chunks, so that a stopped run leaves whole chunks
+// only.
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -88,22 +90,47 @@ class DatabaseResultSink : public ResultSink {
     int log_pages_before_catch_up = 16384;
     // DatabaseOptions::busy_timeout_ms of the writer's connection.
     int busy_timeout_ms = DatabaseOptions().busy_timeout_ms;
+    // A transaction takes the chunks that come until it has been open this
+    // long, then commits after a whole chunk (0: one transaction per
+    // chunk). Chunks of one row of block pairs share their images' key
+    // ranges, so one commit writes the pages they share to the log once
+    // instead of once per chunk. What a kill -9 loses is bounded by it:
+    // the uncommitted chunks are matched again by the next run.
+    double commit_seconds = 1.0;
+    // DatabaseOptions::cache_mib of the writer's connection: room for a
+    // transaction's changed pages.
+    int cache_mib = 256;
+    // DatabaseOptions::disk_sync of the writer's connection (see DiskSync
+    // for what each setting risks).
+    DiskSync disk_sync = DiskSync::kFull;
   };
 
   // Throws DatabaseError when another cashash process writes to the same
   // database (see DatabaseWriterLock).
   DatabaseResultSink(const std::string& database_path, bool write_two_view_geometries);
   DatabaseResultSink(const std::string& database_path, const Options& options);
-  // One transaction per chunk, through prepared statements, from the one
-  // writer thread of the pipeline.
+  // Commits what is written (Flush); a failure then rolls back the chunks
+  // not yet committed, which the next run matches again.
+  ~DatabaseResultSink() override;
+  // Writes the chunk into the open transaction (opening one if needed),
+  // rows sorted by pair id, table by table, through prepared statements,
+  // from the one writer thread of the pipeline; commits when the
+  // transaction is commit_seconds old. On failure the transaction's chunks
+  // are rolled back.
   void WriteChunk(const std::vector<PairResult>& results) override;
+  // Commits the open transaction, if any.
+  void Flush() override;
 
-  // Rows written to matches and two_view_geometries so far.
+  // Rows written to matches and two_view_geometries and committed so far.
   size_t rows_written() const { return rows_written_; }
-  // Pairs recorded as empty instead of written (write_empty_pairs off).
+  // Pairs recorded as empty instead of written (write_empty_pairs off), committed.
   size_t empty_pairs_recorded() const { return empty_pairs_recorded_; }
+  // Transactions committed so far.
+  size_t commits() const { return commits_; }
 
  private:
+  void WriteRows(const std::vector<PairResult>& results);
+  void Commit();
 
   DatabaseWriterLock lock_;  // taken before opening, released after closing
   Database database_;
@@ -112,8 +139,16 @@ class DatabaseResultSink : public ResultSink {
   std::unique_ptr<WalCheckpointer> checkpointer_;
   Options options_;
   int logged_pages_ = 0;  // in the log after the last commit
+  bool in_transaction_ = false;
+  std::chrono::steady_clock::time_point transaction_start_;
+  std::vector<size_t> order_;  // a chunk's rows by pair id, reused
+  std::vector<PairRowsRef> rows_;  // the same, as written, reused
+  std::vector<pair_t> empty_pairs_;  // reused
+  size_t pending_rows_ = 0;          // in the open transaction
+  size_t pending_empty_pairs_ = 0;
   size_t rows_written_ = 0;
   size_t empty_pairs_recorded_ = 0;
+  size_t commits_ = 0;
 };
 
 }  // namespace colmap

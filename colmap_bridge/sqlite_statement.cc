@@ -110,6 +110,8 @@ void SqliteStatement::Reset() {
   sqlite3_clear_bindings(stmt_);
 }
 
+void SqliteStatement::ResetKeepingBindings() { sqlite3_reset(stmt_); }
+
 void ExecuteSql(sqlite3* db, const std::string& sql) {
   char* message = nullptr;
   if (sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message) != SQLITE_OK) {

@@ -43,6 +43,9 @@ class SqliteStatement {
 
   // Makes the statement reusable and releases the read snapshot it holds.
   void Reset();
+  // As Reset, but keeps the bound values: for a write whose every
+  // parameter is bound again before it runs.
+  void ResetKeepingBindings();
 
  private:
   [[noreturn]] void Fail(const char* action) const;

@@ -34,6 +34,11 @@ void LockedSink::WriteChunk(const std::vector<PairResult>& results) {
   pairs_written_ += results.size();
 }
 
+void LockedSink::Flush() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  sink_->Flush();
+}
+
 
 MpiResultSender::MpiResultSender(const PairChunkSource* chunks) : chunks_(chunks) {}
 

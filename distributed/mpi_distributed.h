@@ -47,6 +47,7 @@ class LockedSink : public ResultSink {
  public:
   explicit LockedSink(ResultSink* sink) : sink_(sink) {}
   void WriteChunk(const std::vector<PairResult>& results) override;
+  void Flush() override;
   size_t pairs_written() const { return pairs_written_; }
 
  private:

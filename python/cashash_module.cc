@@ -269,6 +269,8 @@ void BindOptions(py::module_& m) {
       .def_readwrite("skip_geometric_verification", &MatcherCommandOptions::skip_geometric_verification)
       .def_readwrite("overwrite", &MatcherCommandOptions::overwrite)
       .def_readwrite("write_empty_pairs", &MatcherCommandOptions::write_empty_pairs)
+      .def_readwrite("database_commit_seconds", &MatcherCommandOptions::database_commit_seconds)
+      .def_readwrite("database_synchronous", &MatcherCommandOptions::database_synchronous)
       .def_readwrite("max_host_memory", &MatcherCommandOptions::max_host_memory)
       .def_readwrite("max_gpu_memory", &MatcherCommandOptions::max_gpu_memory)
       .def_readwrite("pipeline_trace_path", &MatcherCommandOptions::pipeline_trace_path)

@@ -8,6 +8,7 @@
 
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/run_resolution.h"
+#include "colmap_bridge/database.h"
 
 namespace po = boost::program_options;
 
@@ -69,6 +70,13 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   table.Add({"write_empty_pairs"}, &o.write_empty_pairs,
             "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
             "them in table cashash_empty_pairs only, so that a rerun skips them)");
+  table.Add({"database_commit_seconds"}, &o.database_commit_seconds,
+            "Seconds a write transaction takes chunks before it commits (0: one transaction per chunk); a kill "
+            "loses the chunks not yet committed, which a rerun matches again");
+  table.Add({"database_synchronous"}, &o.database_synchronous,
+            "SQLite's synchronous setting for writing: FULL (safe), NORMAL (a power loss or OS crash may undo "
+            "the last commits; the file stays valid) or OFF (a power loss or OS crash may damage the database; "
+            "COLMAP's own setting)");
 
   table.Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o.sift.num_threads,
             "CPU threads, -1 for all cores");
@@ -212,6 +220,13 @@ std::string CheckRunOptions(const MatcherCommandOptions& o) {
   const std::string gpu_index_problem = ParseGpuIndices(o.gpu_index, &gpu_indices);
   if (!gpu_index_problem.empty()) return gpu_index_problem;
   if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
+  if (!(o.database_commit_seconds >= 0 && o.database_commit_seconds <= 3600)) {
+    return "--database_commit_seconds must be 0 to 3600, got " + std::to_string(o.database_commit_seconds);
+  }
+  DiskSync sync;
+  if (!ParseDiskSync(o.database_synchronous, &sync)) {
+    return "--database_synchronous must be FULL, NORMAL or OFF, got '" + o.database_synchronous + "'";
+  }
   if (o.gpu_verifications_in_flight < 1 || o.gpu_verifications_in_flight > 8) {
     return "gpu_verifications_in_flight must be 1 to 8, got " + std::to_string(o.gpu_verifications_in_flight);
   }

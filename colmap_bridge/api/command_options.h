@@ -66,6 +66,13 @@ struct MatcherCommandOptions {
   // COLMAP writes rows for every matched pair, rows = 0 included; 0 writes
   // only pairs with matches and records the others compactly for resuming.
   bool write_empty_pairs = true;
+  // The writer's transactions: chunks are committed together once a
+  // transaction has been open this many seconds (0: each chunk alone). A
+  // kill -9 loses the chunks not yet committed (matched again on resume).
+  double database_commit_seconds = 1.0;
+  // PRAGMA synchronous of the writer: FULL (SQLite's default), NORMAL or
+  // OFF; DiskSync (database.h) says what NORMAL and OFF risk on a power loss.
+  std::string database_synchronous = "FULL";
   uint64_t random_seed = 0;
   // matches_importer only.
   std::string match_list_path;

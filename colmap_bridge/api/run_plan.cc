@@ -80,7 +80,7 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
 }
 
 // Device memory in use on the run's GPU: before the matcher exists, then
-// after every committed block (the writer thread, and the MPI receiver's).
+// after every written block (the writer thread, and the MPI receiver's).
 class GpuMemorySampler {
  public:
   explicit GpuMemorySampler(int gpu_index) : gpu_index_(gpu_index) {
@@ -258,9 +258,13 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
 void OpenSink(RunPlan* plan) {
   const MatcherCommandOptions& options = plan->run.options;
   if (plan->share.rank == 0) {
-    plan->database_sink = std::make_unique<DatabaseResultSink>(
-        options.database_path, DatabaseResultSink::Options{!options.skip_geometric_verification,
-                                                           options.write_empty_pairs, options.overwrite});
+    DatabaseResultSink::Options writing;
+    writing.write_two_view_geometries = !options.skip_geometric_verification;
+    writing.write_empty_pairs = options.write_empty_pairs;
+    writing.replace_existing = options.overwrite;
+    writing.commit_seconds = options.database_commit_seconds;
+    ParseDiskSync(options.database_synchronous, &writing.disk_sync);  // checked with the options
+    plan->database_sink = std::make_unique<DatabaseResultSink>(options.database_path, writing);
     plan->locked_sink = std::make_unique<LockedSink>(plan->database_sink.get());
     plan->sink = plan->locked_sink.get();
   } else {
@@ -452,6 +456,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
       MpiAbortJob(e.what());  // the other ranks cannot be told otherwise
     }
     for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
+    plan.sink->Flush();  // what the receiver wrote after the pipeline's last flush
     clock.Restart();
   }
   WriteTrace(trace, trace_path, callbacks);

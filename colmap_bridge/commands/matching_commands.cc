@@ -38,7 +38,7 @@ void PrintProgress(const PipelineProgress& p) {
 }
 
 // COLMAP-style console output of a run: heading, notes on stdout, warnings
-// on stderr, one line per committed block; Ctrl-C stops it cleanly.
+// on stderr, one line per written block; Ctrl-C stops it cleanly.
 MatchingCallbacks ConsoleCallbacks(const std::string& heading, const StopOnInterrupt& interrupt) {
   MatchingCallbacks callbacks;
   callbacks.database_opened = [heading]() {

@@ -554,6 +554,7 @@ TEST(ReliabilityFaultTest, LockedDatabaseTimesOut) {
   }
   EXPECT_EQ(CountRows(path, "matches"), 0u);
   sink.WriteChunk({ResultWithMatches(1, 2, 4), ResultWithMatches(1, 3, 2)});
+  sink.Flush();
   EXPECT_EQ(CountRows(path, "matches"), 2u);
   EXPECT_EQ(IntegrityOf(path), "ok");
 }
@@ -582,8 +583,12 @@ TEST(ReliabilityFaultTest, DiskFullWhileWriting) {
     DatabaseResultSink sink(path, true);
     struct rlimit small = {limit, old_limit.rlim_max};
     ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
-    // 40k matches: 320 kB, far past the limit.
-    error = ErrorOf([&] { sink.WriteChunk({ResultWithMatches(1, 3, 40000)}); });
+    // 40k matches: 320 kB, far past the limit; written to the file at the
+    // latest when the transaction commits.
+    error = ErrorOf([&] {
+      sink.WriteChunk({ResultWithMatches(1, 3, 40000)});
+      sink.Flush();
+    });
     setrlimit(RLIMIT_FSIZE, &old_limit);
   }
   sigaction(SIGXFSZ, &old_action, nullptr);

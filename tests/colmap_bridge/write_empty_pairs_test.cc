@@ -107,6 +107,7 @@ TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty)
   PairResult empty;
   empty.pair = {25, 1};
   sink.WriteChunk({empty});
+  sink.Flush();
   EXPECT_EQ(sink.rows_written(), 0u);
   EXPECT_EQ(sink.empty_pairs_recorded(), 1u);
   EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 0);

@@ -23,6 +23,9 @@ using pipeline_internal::MatchedChunk;
 using pipeline_internal::VerifiedChunk;
 using pipeline_internal::VerifyChunks;
 
+// How long the writer waits for a chunk before it flushes the sink.
+constexpr std::chrono::milliseconds kWriterIdleFlush(500);
+
 double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
@@ -248,13 +251,23 @@ class PipelineRun {
     if (--verifier_threads_left_ == 0) to_write_.Close();
   }
 
-  // Stage 3: the single writer.
+  // Stage 3: the single writer. The sink may hold several chunks in one
+  // transaction; it is flushed when no chunk has come for
+  // kWriterIdleFlush (a chunk not yet committed is lost to a kill, and its
+  // open transaction keeps other writers out) and when the run ends.
   void Write() {
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
-        std::optional<VerifiedChunk> item = to_write_.Pop();
+        bool idle = false;
+        std::optional<VerifiedChunk> item = to_write_.PopWithin(kWriterIdleFlush, &idle);
         AddSeconds(&PipelineStats::seconds_writing_wait_input, t_wait);
+        if (idle) {
+          const Clock::time_point t_flush = Clock::now();
+          sink_->Flush();
+          AddSeconds(&PipelineStats::seconds_writing, t_flush);
+          continue;
+        }
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
         const std::vector<PairResult>& results = *item->results;
@@ -280,6 +293,11 @@ class PipelineRun {
         progress.chunk_seconds = SecondsSince(item->started);
         if (progress_) progress_(progress);
       }
+      // Finished, stopped, or another stage failed: what was written is
+      // whole chunks, kept as it would have been with a commit per chunk.
+      const Clock::time_point t_flush = Clock::now();
+      sink_->Flush();
+      AddSeconds(&PipelineStats::seconds_writing, t_flush);
     } catch (...) {
       error_.Set(std::current_exception());
       to_verify_.Close();

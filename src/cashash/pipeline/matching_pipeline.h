@@ -50,13 +50,20 @@ struct PairResult {
   TwoViewGeometry geometry;
 };
 
-// Where results go. WriteChunk persists a chunk atomically (one
-// transaction), so a stopped run leaves only whole chunks behind.
+// Where results go. A chunk is persisted atomically: a transaction holds
+// whole chunks only (one or several), so a stopped run leaves whole chunks
+// behind.
 class ResultSink {
  public:
   virtual ~ResultSink() = default;
-  // A chunk's matches and geometries, in one transaction.
+  // A chunk's matches and geometries. A sink may keep the chunk's
+  // transaction open for the chunks that follow (DatabaseResultSink) until
+  // Flush.
   virtual void WriteChunk(const std::vector<PairResult>& results) = 0;
+  // Persists every chunk written so far. The pipeline's writer calls it
+  // when the run ends (finished, stopped or failed elsewhere) and when no
+  // chunk has come for a while.
+  virtual void Flush() {}
 };
 
 struct PipelineOptions {
