@@ -10,10 +10,10 @@
 #include <functional>
 #include <mutex>
 #include <thread>
-#include <unordered_map>
 #include <vector>
 
 #include "cashash/pipeline/matching_pipeline.h"
+#include "cashash/pipeline/pair_chunk_source.h"
 #include "cashash/base/pair_id.h"
 #include "distributed/mpi_result_codec.h"
 
