@@ -191,6 +191,24 @@ int RunGuidedMatcher(int argc, const char* const* argv) {
   });
 }
 
+int RunSequentialMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("sequential_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded([&]() {
+    return MatchSequential(options.database_path, options, ConsoleCallbacks("Sequential feature matching"));
+  });
+}
+
+int RunSpatialMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("spatial_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded([&]() {
+    return MatchSpatial(options.database_path, options, ConsoleCallbacks("Spatial feature matching"));
+  });
+}
+
 int RunMatchesImporter(int argc, const char* const* argv) {
   MatcherCommandOptions options;
   const int early = PrepareOptions("matches_importer", argc, argv, &options);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <thread>
 #include <unordered_set>
 
@@ -36,7 +37,9 @@ int ThreadCount(int num_threads, size_t work) {
 
 std::string SpatialPairingOptions::Check() const {
   if (!(max_distance >= 0) || !std::isfinite(max_distance)) {
-    return "--SpatialMatching.max_distance must be >= 0 and finite, got " + std::to_string(max_distance);
+    std::ostringstream text;
+    text << "--SpatialMatching.max_distance must be >= 0 and finite, got " << max_distance;
+    return text.str();
   }
   if (max_num_neighbors <= 0) {
     return "--SpatialMatching.max_num_neighbors must be > 0, got " + std::to_string(max_num_neighbors);
