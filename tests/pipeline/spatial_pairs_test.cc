@@ -3,8 +3,11 @@
 // max_num_neighbors, at least min_num_neighbors; GPS priors through ECEF.
 #include "cashash/pipeline/spatial_pairs.h"
 
+#include <algorithm>
 #include <cmath>
+#include <random>
 #include <set>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -148,6 +151,55 @@ TEST(SpatialPairs, GpsPriorsAreComparedInMetres) {
   SpatialPairingOptions options;
   options.max_distance = 65;  // two steps of 30 m, not three
   EXPECT_EQ(PairIds(SpatialPairs(priors, options)), WithinSteps(6, 2));
+}
+
+// COLMAP's rule written out the slow way: every distance of every image,
+// sorted by (distance, image id position), the image itself counted.
+std::set<pair_t> ExhaustiveReference(const std::vector<PositionPrior>& priors, const SpatialPairingOptions& options) {
+  std::vector<Eigen::Vector3f> points;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const PositionPrior& prior : priors) mean += prior.position;
+  mean /= static_cast<double>(priors.size());
+  for (const PositionPrior& prior : priors) points.push_back((prior.position - mean).cast<float>());
+  const int n = static_cast<int>(points.size());
+  const int knn = std::min(options.max_num_neighbors + 1, n);
+  const double max_squared = static_cast<float>(options.max_distance * options.max_distance);
+  std::set<pair_t> pairs;
+  for (int i = 0; i < n; ++i) {
+    std::vector<std::pair<double, int>> all;
+    for (int j = 0; j < n; ++j) all.emplace_back((points[i] - points[j]).cast<double>().squaredNorm(), j);
+    std::sort(all.begin(), all.end());
+    for (int rank = 0; rank < knn; ++rank) {
+      if (all[rank].second == i) continue;
+      if (all[rank].first > max_squared && rank > options.min_num_neighbors) break;
+      pairs.insert(ImagePairToPairId(priors[i].image_id, priors[all[rank].second].image_id));
+    }
+  }
+  return pairs;
+}
+
+TEST(SpatialPairs, TheSweepFindsWhatAnExhaustiveSearchFinds) {
+  // A lattice (many equal distances) and a random cloud, in 2-D and 3-D.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(-20.0, 20.0);
+  for (int layout = 0; layout < 4; ++layout) {
+    std::vector<PositionPrior> priors;
+    for (int k = 0; k < 300; ++k) {
+      const Eigen::Vector3d p = layout < 2 ? Eigen::Vector3d(k % 20, (k / 20) % 15, layout == 1 ? k % 3 : 0)
+                                           : Eigen::Vector3d(uniform(rng), uniform(rng), layout == 3 ? uniform(rng) : 0);
+      priors.push_back(Cartesian(static_cast<image_t>(k + 1), p.x(), p.y(), p.z()));
+    }
+    for (const auto& [neighbors, distance, minimum] : {std::make_tuple(5, 100.0, 0), std::make_tuple(12, 2.0, 0),
+                                                        std::make_tuple(50, 1.0, 7), std::make_tuple(3, 0.5, 3)}) {
+      SpatialPairingOptions options;
+      options.ignore_z = false;
+      options.max_num_neighbors = neighbors;
+      options.max_distance = distance;
+      options.min_num_neighbors = minimum;
+      EXPECT_EQ(PairIds(SpatialPairs(priors, options)), ExhaustiveReference(priors, options))
+          << "layout " << layout << ", " << neighbors << " neighbours within " << distance;
+    }
+  }
 }
 
 TEST(SpatialPairs, CheckNamesTheOption) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <thread>
 #include <unordered_set>
@@ -25,6 +26,68 @@ struct Candidate {
     return distance_squared != other.distance_squared ? distance_squared < other.distance_squared
                                                       : index < other.index;
   }
+};
+
+double SquaredDistance(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return (a - b).cast<double>().squaredNorm();
+}
+
+// Exact k nearest neighbours, ordered by (distance, index) as an exhaustive
+// search orders them, found by sweeping outwards along the axis of largest
+// spread: once the gap along that axis alone exceeds the k-th distance so
+// far, nothing farther along can enter. A street or a flight line then
+// costs about k points a query instead of all of them.
+class KnnSweep {
+ public:
+  explicit KnnSweep(const std::vector<Eigen::Vector3f>& points) : points_(points) {
+    Eigen::Vector3f low = Eigen::Vector3f::Constant(std::numeric_limits<float>::max());
+    Eigen::Vector3f high = -low;
+    for (const Eigen::Vector3f& p : points) {
+      low = low.cwiseMin(p);
+      high = high.cwiseMax(p);
+    }
+    (high - low).maxCoeff(&axis_);
+    order_.resize(points.size());
+    for (size_t i = 0; i < order_.size(); ++i) order_[i] = static_cast<int>(i);
+    std::sort(order_.begin(), order_.end(), [&](int a, int b) { return points[a](axis_) < points[b](axis_); });
+    rank_.resize(points.size());
+    for (size_t r = 0; r < order_.size(); ++r) rank_[order_[r]] = static_cast<int>(r);
+  }
+
+  // The k nearest points to point `query`, itself included, ascending.
+  void Nearest(int query, int k, std::vector<Candidate>* nearest) const {
+    std::vector<Candidate>& heap = *nearest;  // a max-heap while searching
+    heap.clear();
+    const Eigen::Vector3f& q = points_[query];
+    auto offer = [&](int index) {
+      const Candidate candidate{SquaredDistance(q, points_[index]), index};
+      if (static_cast<int>(heap.size()) < k) {
+        heap.push_back(candidate);
+        std::push_heap(heap.begin(), heap.end());
+      } else if (candidate < heap.front()) {
+        std::pop_heap(heap.begin(), heap.end());
+        heap.back() = candidate;
+        std::push_heap(heap.begin(), heap.end());
+      }
+    };
+    // Beyond this gap along the axis a point is strictly farther than the
+    // k-th so far (equal distances are still offered: the index decides).
+    auto beyond = [&](int index) {
+      if (static_cast<int>(heap.size()) < k) return false;
+      const double gap = static_cast<double>(q(axis_) - points_[index](axis_));
+      return gap * gap > heap.front().distance_squared;
+    };
+    const int n = static_cast<int>(order_.size());
+    for (int r = rank_[query]; r < n && !beyond(order_[r]); ++r) offer(order_[r]);
+    for (int r = rank_[query] - 1; r >= 0 && !beyond(order_[r]); --r) offer(order_[r]);
+    std::sort_heap(heap.begin(), heap.end());
+  }
+
+ private:
+  const std::vector<Eigen::Vector3f>& points_;
+  Eigen::Index axis_ = 0;
+  std::vector<int> order_;  // points by their coordinate on axis_
+  std::vector<int> rank_;   // position of each point in order_
 };
 
 int ThreadCount(int num_threads, size_t work) {
@@ -101,22 +164,18 @@ std::vector<ImagePair> SpatialPairs(std::vector<PositionPrior> priors, const Spa
 
   const int knn = std::min(options.max_num_neighbors + 1, n);
   const double max_distance_squared = static_cast<float>(options.max_distance * options.max_distance);
+  const KnnSweep sweep(rounded);
   std::vector<std::vector<int>> neighbours(positions.size());
   auto search = [&](int begin, int end) {
-    std::vector<Candidate> candidates(positions.size());
+    std::vector<Candidate> nearest;
     for (int i = begin; i < end; ++i) {
-      for (int j = 0; j < n; ++j) {
-        const Eigen::Vector3d d = (rounded[i] - rounded[j]).cast<double>();
-        candidates[j] = {d.squaredNorm(), j};
-      }
-      std::nth_element(candidates.begin(), candidates.begin() + (knn - 1), candidates.end());
-      std::sort(candidates.begin(), candidates.begin() + knn);
+      sweep.Nearest(i, knn, &nearest);
       for (int rank = 0; rank < knn; ++rank) {
         // The image itself is skipped but keeps its rank: COLMAP counts it
         // in min_num_neighbors' test.
-        if (candidates[rank].index == i) continue;
-        if (candidates[rank].distance_squared > max_distance_squared && rank > options.min_num_neighbors) break;
-        neighbours[i].push_back(candidates[rank].index);
+        if (nearest[rank].index == i) continue;
+        if (nearest[rank].distance_squared > max_distance_squared && rank > options.min_num_neighbors) break;
+        neighbours[i].push_back(nearest[rank].index);
       }
     }
   };

@@ -61,9 +61,10 @@ bool HasUsablePosition(const PositionPrior& prior, const SpatialPairingOptions& 
 // order COLMAP first generates it. Priors without a usable position are
 // skipped; an undefined coordinate system is read as Cartesian (COLMAP
 // warns so). Positions are centred on their mean and rounded to float, and
-// neighbours ordered by distance then by image id, as COLMAP's search does;
-// every image is compared with every other (COLMAP's index is exhaustive
-// too), so the cost grows with the square of the images.
+// neighbours ordered by distance then by image id, as COLMAP's exhaustive
+// search orders them. The search is exact but sweeps along the axis of
+// largest spread, so a street or a flight line costs about
+// max_num_neighbors distances per image instead of one per image pair.
 std::vector<ImagePair> SpatialPairs(std::vector<PositionPrior> priors, const SpatialPairingOptions& options);
 
 }  // namespace cashash
