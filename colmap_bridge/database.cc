@@ -419,6 +419,12 @@ void Database::DeleteMatchesAndGeometry(image_t image_id1, image_t image_id2) {
   StatementScope m(impl_->Prepared(impl_->delete_matches, "DELETE FROM matches WHERE pair_id = ?"));
   m->BindInt64(1, pair_id);
   m->Execute();
+  DeleteTwoViewGeometry(image_id1, image_id2);
+}
+
+void Database::DeleteTwoViewGeometry(image_t image_id1, image_t image_id2) {
+  impl_->RequireWritable();
+  const int64_t pair_id = static_cast<int64_t>(ImagePairToPairId(image_id1, image_id2));
   StatementScope g(impl_->Prepared(impl_->delete_geometry, "DELETE FROM two_view_geometries WHERE pair_id = ?"));
   g->BindInt64(1, pair_id);
   g->Execute();

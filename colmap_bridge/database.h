@@ -85,6 +85,9 @@ class Database {
   // Removes a pair's rows from matches and two_view_geometries (a pair
   // matched again, now without matches, under --write_empty_pairs 0).
   void DeleteMatchesAndGeometry(image_t image_id1, image_t image_id2);
+  // Removes a pair's two_view_geometries row (its matches rewritten without
+  // verification under --overwrite: the old row describes other matches).
+  void DeleteTwoViewGeometry(image_t image_id1, image_t image_id2);
 
   FeatureMatches ReadMatches(image_t image_id1, image_t image_id2) const;
   TwoViewGeometry ReadTwoViewGeometry(image_t image_id1, image_t image_id2) const;

@@ -9,9 +9,11 @@
 namespace cashash {
 namespace colmap {
 
-DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
+DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path,
+                                             std::function<void(const std::string&)> warning)
     : database_(database_path, /*read_only=*/true),
-      readers_([database_path]() { return std::make_unique<Database>(database_path, /*read_only=*/true); }) {
+      readers_([database_path]() { return std::make_unique<Database>(database_path, /*read_only=*/true); }),
+      warning_(std::move(warning)) {
   images_ = database_.ReadAllImages();
   for (Camera& camera : database_.ReadAllCameras()) {
     CheckCamera(camera);
@@ -41,8 +43,8 @@ void DatabaseFeatureSource::CheckCamera(const Camera& camera) {
   if (expected < 0) {
     // A model of a newer COLMAP, or garbage: verification needs no intrinsics
     // unless both cameras of a pair have a focal prior.
-    std::cerr << "WARNING: " << label << " has model id " << camera.model_id
-              << ", unknown to cashash; its images are verified with F and H only" << std::endl;
+    Warn(label + " has model id " + std::to_string(camera.model_id) +
+         ", unknown to cashash; its images are verified with F and H only");
     return;
   }
   if (static_cast<int>(camera.params.size()) != expected) {
@@ -57,8 +59,12 @@ void DatabaseFeatureSource::CheckCamera(const Camera& camera) {
   }
 }
 
-void DatabaseFeatureSource::SetWarningCallback(std::function<void(const std::string&)> warning) {
-  warning_ = std::move(warning);
+void DatabaseFeatureSource::Warn(const std::string& text) {
+  if (warning_) {
+    warning_(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
 }
 
 const Image& DatabaseFeatureSource::image(image_t image_id) const { return images_.at(image_index_.at(image_id)); }
@@ -87,11 +93,7 @@ void DatabaseFeatureSource::WarnAboutKeypointsOutside(image_t image_id, const Ke
                            " keypoints lie outside the " + std::to_string(camera.width) + " x " +
                            std::to_string(camera.height) + " image (first: row " + std::to_string(first) + " at " +
                            std::to_string(kp.x) + ", " + std::to_string(kp.y) + "); matching them anyway";
-  if (warning_) {
-    warning_(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
+  Warn(text);
 }
 
 ImageFeatures DatabaseFeatureSource::LoadFeatures(image_t image_id) {
@@ -147,6 +149,10 @@ void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
       if (options_.write_two_view_geometries) {
         database_.WriteTwoViewGeometry(result.pair.first, result.pair.second, result.geometry);
         ++rows;
+      } else if (options_.replace_existing) {
+        // An old verification of other matches: kept, it would make the
+        // pair look done to a resumed run.
+        database_.DeleteTwoViewGeometry(result.pair.first, result.pair.second);
       }
     }
     // In the chunk's transaction: recorded exactly when the chunk is.

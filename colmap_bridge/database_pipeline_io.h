@@ -24,12 +24,12 @@ class DatabaseFeatureSource : public FeatureSource {
  public:
   // Reads the images and cameras tables; throws DatabaseError if an image
   // refers to a camera that does not exist or two images share a name.
-  explicit DatabaseFeatureSource(const std::string& database_path);
-
-  // Where warnings about usable but suspicious data go (keypoints outside
-  // their image); by default "WARNING: ..." lines on stderr. Called from the
-  // loading threads, one call at a time.
-  void SetWarningCallback(std::function<void(const std::string&)> warning);
+  // `warning` hears about usable but suspicious data (a camera model
+  // unknown to cashash, keypoints outside their image), one call at a time,
+  // from the constructor and the loading threads; unset: "WARNING: ..."
+  // lines on stderr. The runs pass their callbacks' warning.
+  explicit DatabaseFeatureSource(const std::string& database_path,
+                                 std::function<void(const std::string&)> warning = nullptr);
 
   const std::vector<Image>& images() const { return images_; }
   const Image& image(image_t image_id) const;
@@ -51,8 +51,9 @@ class DatabaseFeatureSource : public FeatureSource {
 
  private:
   // Throws when the params do not fit a known model; warns for unknown models.
-  static void CheckCamera(const Camera& camera);
+  void CheckCamera(const Camera& camera);
   void WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints);
+  void Warn(const std::string& text);
 
   Database database_;
   ObjectPool<Database> readers_;  // LoadFeatures' connections, one per caller at a time
@@ -76,7 +77,9 @@ class DatabaseResultSink : public ResultSink {
     // record and would match those pairs again.
     bool write_empty_pairs = true;
     // The pairs may have rows from an earlier run (--overwrite): a pair now
-    // without a match has its old rows deleted when no rows are written for it.
+    // without a match has its old rows deleted when no rows are written for
+    // it, and without write_two_view_geometries its old two_view_geometries
+    // row goes (it verified other matches; a resumed run would skip the pair).
     bool replace_existing = false;
     // With a write-ahead log (COLMAP's databases): its size in pages at which
     // the writer waits for the checkpointer to fold it, so that the next

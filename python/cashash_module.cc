@@ -15,7 +15,7 @@
 #include "cashash/matching/pair_matching.h"
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/build_info.h"
-#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/matching_api.h"
 
 namespace py = pybind11;
@@ -74,6 +74,23 @@ py::array_t<double> EigenToArray(const Matrix& m) {
   return array;
 }
 
+py::dict RunToDict(const colmap::ResolvedRun& resolved) {
+  py::dict run;
+  run["matcher"] = MatcherTypeToString(resolved.options.cashash.matcher);
+  run["num_tables"] = resolved.options.cashash.num_tables;
+  run["bits_per_table"] = resolved.options.cashash.bits_per_table;
+  run["tau"] = resolved.options.cashash.tau;
+  run["exact_rematch_min_matches"] = resolved.options.cashash.exact_rematch_min_matches;
+  run["exact_rematch_max_matches"] = resolved.options.cashash.exact_rematch_max_matches;
+  run["rematch_on_matching_thread"] = resolved.rematch_on_matching_thread;
+  run["block_size"] = resolved.options.block_size;
+  run["blocks_per_group"] = resolved.schedule.blocks_per_group;
+  run["gpu_index"] = resolved.gpu_index;
+  run["gpu_memory_budget_bytes"] = resolved.gpu_memory_budget_bytes;
+  run["max_host_bytes"] = resolved.max_host_bytes;
+  return run;
+}
+
 py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   py::dict d;
   d["pairs_requested"] = s.pairs_requested;
@@ -87,20 +104,7 @@ py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   d["stopped"] = s.pipeline.stopped;
   // How the run was resolved (ResolveRun): the same for the same inputs as
   // on the command line.
-  py::dict run;
-  run["matcher"] = MatcherTypeToString(s.run.options.cashash.matcher);
-  run["num_tables"] = s.run.options.cashash.num_tables;
-  run["bits_per_table"] = s.run.options.cashash.bits_per_table;
-  run["tau"] = s.run.options.cashash.tau;
-  run["exact_rematch_min_matches"] = s.run.options.cashash.exact_rematch_min_matches;
-  run["exact_rematch_max_matches"] = s.run.options.cashash.exact_rematch_max_matches;
-  run["rematch_on_matching_thread"] = s.run.rematch_on_matching_thread;
-  run["block_size"] = s.run.options.block_size;
-  run["blocks_per_group"] = s.run.schedule.blocks_per_group;
-  run["gpu_index"] = s.run.gpu_index;
-  run["gpu_memory_budget_bytes"] = s.run.gpu_memory_budget_bytes;
-  run["max_host_bytes"] = s.run.max_host_bytes;
-  d["run"] = run;
+  d["run"] = RunToDict(s.run);
   return d;
 }
 
@@ -170,20 +174,17 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   std::optional<Camera> c1, c2;
   if (camera1) c1 = CameraFromDict(*camera1);
   if (camera2) c2 = CameraFromDict(*camera2);
-  // The pair resolves as a run of two images does (ResolveRun), except
-  // that without the GPU MatchImagePair's own CPU matcher keeps the
-  // cascade's matches (no exact rematch), so its tables and tau are the
-  // ones for recall and precision.
-  MatcherCommandOptions requested = options;
-  if (!options.use_gpu) {
-    requested.cashash.exact_rematch_min_matches = 0;
-    requested.cashash.exact_rematch_max_matches = 0;
-  }
+  // The pair is checked and resolved as a run of two images is: the same
+  // option check (CheckRunOptions), the devices ChooseRunDevices finds
+  // (none without use_gpu), ResolveRun, and the matcher CreateMatcherForRun
+  // builds; so use_gpu without a usable GPU matches as use_gpu=False does.
+  const std::string problem = colmap::CheckRunOptions(options);
+  if (!problem.empty()) throw std::invalid_argument(problem);
   colmap::RunFacts facts;
   facts.rows_per_image = {d1.rows(), d2.rows()};
   facts.exhaustive = false;
-  facts.gpu_index = options.use_gpu ? colmap::GpuIndexForRun(options) : -1;
-  const colmap::ResolvedRun run = colmap::ResolveRun(requested, facts);
+  facts.gpu_indices = colmap::ChooseRunDevices(options, colmap::MachineDeviceFacts()).gpu_indices;
+  const colmap::ResolvedRun run = colmap::ResolveRun(options, facts);
   PairMatchingOptions pair_options;
   pair_options.sift = run.options.sift;
   pair_options.cashash = run.options.cashash;
@@ -193,10 +194,8 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   PairMatchingResult result;
   {
     py::gil_scoped_release no_gil;
-    std::unique_ptr<FeatureMatcher> matcher;
-    if (options.use_gpu) {
-      matcher = colmap::CreateMatcherForRun(run, ComputeMeanDescriptor({&d1, &d2}), nullptr);
-    }
+    const std::unique_ptr<FeatureMatcher> matcher =
+        colmap::CreateMatcherForRun(run, ComputeMeanDescriptor({&d1, &d2}), nullptr);
     result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get());
   }
   py::dict out;
@@ -210,6 +209,7 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   out["H"] = EigenToArray(g.H);
   out["qvec"] = EigenToArray(g.qvec);
   out["tvec"] = EigenToArray(g.tvec);
+  out["run"] = RunToDict(run);
   return out;
 }
 

@@ -19,7 +19,7 @@
 
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/geometry/random_sampler.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "colmap_bridge/colmap38_schema.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/position_priors.h"

@@ -1,5 +1,6 @@
 #include "colmap_bridge/api/command_options.h"
 
+#include <algorithm>
 #include <iostream>
 #include <sstream>
 
@@ -240,6 +241,10 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.database_path.empty()) return "--database_path is required";
+  return CheckRunOptions(o);
+}
+
+std::string CheckRunOptions(const MatcherCommandOptions& o) {
   // 0: chosen for the run.
   if (o.block_size < 0 || o.block_size == 1) return "--ExhaustiveMatching.block_size must be >= 2";
   for (const auto& [name, text] : {std::make_pair("--max_host_memory", &o.max_host_memory),
@@ -249,6 +254,9 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
       return std::string(name) + " must be a size such as 16G, 512M or 4096 (MiB), got '" + *text + "'";
     }
   }
+  std::vector<int> gpu_indices;
+  const std::string gpu_index_problem = ParseGpuIndices(o.gpu_index, &gpu_indices);
+  if (!gpu_index_problem.empty()) return gpu_index_problem;
   if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
   if (o.gpu_verifications_in_flight < 1 || o.gpu_verifications_in_flight > 8) {
     return "gpu_verifications_in_flight must be 1 to 8, got " + std::to_string(o.gpu_verifications_in_flight);
@@ -275,6 +283,31 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
     }
   }
   return o.two_view.Check();
+}
+
+std::string ParseGpuIndices(const std::string& gpu_index, std::vector<int>* indices) {
+  indices->clear();
+  size_t at = 0;
+  while (at <= gpu_index.size()) {
+    const size_t comma = std::min(gpu_index.find(',', at), gpu_index.size());
+    const std::string item = gpu_index.substr(at, comma - at);
+    size_t used = 0;
+    int value = -1;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size()) {
+      indices->clear();
+      return "--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+             gpu_index + "'";
+    }
+    value = std::max(0, value);
+    if (std::find(indices->begin(), indices->end(), value) == indices->end()) indices->push_back(value);
+    at = comma + 1;
+  }
+  return "";
 }
 
 }  // namespace colmap

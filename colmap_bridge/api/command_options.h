@@ -97,5 +97,14 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 // Checks every option's range; returns "" or a message naming the option.
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& options);
 
+// The same for a run without a database (cashash.match): every option but
+// database_path.
+std::string CheckRunOptions(const MatcherCommandOptions& options);
+
+// The devices of --FeatureMatching.gpu_index: "-1" (the first device, 0),
+// "2", or a comma-separated list "0,1" (one matcher per device), repeats
+// dropped. The one parser of the option: returns "" or a message naming it.
+std::string ParseGpuIndices(const std::string& gpu_index, std::vector<int>* indices);
+
 }  // namespace colmap
 }  // namespace cashash

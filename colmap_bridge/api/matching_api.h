@@ -42,6 +42,11 @@ struct MatchingCallbacks {
   const std::atomic<bool>* stop = nullptr;
 };
 
+// The one way a run says something: `warning` (stderr, "WARNING: ...",
+// where the callbacks set none) and `info` (nothing where none is set).
+void Warn(const MatchingCallbacks& callbacks, const std::string& text);
+void Info(const MatchingCallbacks& callbacks, const std::string& text);
+
 struct MatchingSummary {
   size_t pairs_requested = 0;  // pairs asked for, including those skipped
   size_t pairs_skipped = 0;    // already in the database and not overwritten

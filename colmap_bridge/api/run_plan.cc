@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <iomanip>
-#include <iostream>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -18,14 +17,10 @@
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
-#include "colmap_bridge/api/matcher_factory.h"
 #include "colmap_bridge/api/verifier_selection.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "distributed/mpi_distributed.h"
 #include "distributed/mpi_world.h"
-#ifdef CASHASH_WITH_CUDA
-#include "cashash_cuda/matchers/gpu_feature_matcher.h"
-#endif
 
 namespace cashash {
 namespace colmap {
@@ -35,7 +30,6 @@ using distributed::ChunksOfRank;
 using distributed::LockedSink;
 using distributed::MpiAbortJob;
 using distributed::MpiBarrier;
-using distributed::MpiLocalRank;
 using distributed::MpiMax;
 using distributed::MpiMin;
 using distributed::MpiRank;
@@ -43,20 +37,6 @@ using distributed::MpiResultReceiver;
 using distributed::MpiResultSender;
 using distributed::MpiSize;
 using distributed::RankReport;
-
-// Callers that set no warning sink still see warnings, on stderr as the
-// command line prints them.
-void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.warning) {
-    callbacks.warning(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
-}
-
-void Info(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.info) callbacks.info(text);
-}
 
 namespace {
 
@@ -146,8 +126,9 @@ struct RunShare {
 // each other (the pipeline's features into the cache, wrappers into the
 // matcher), so a plan is neither copied nor moved once built.
 struct RunPlan {
+  explicit RunPlan(const ResolvedRun& resolved) : run(resolved) {}
   RunShare share;
-  ResolvedRun run;  // the request's, with this rank's GPU
+  const ResolvedRun& run;  // the request's, as ResolveRun made it
   std::unique_ptr<GroupFeatureCache> cache;
   std::unique_ptr<KeypointRecordingSource> keypoint_source;  // guided only
   FeatureSource* features = nullptr;
@@ -216,7 +197,7 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
     plan->keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
     auto guided = std::make_unique<GuidedFeatureMatcher>(
         std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr),
-        CreateFundamentalEstimatorForOptions(options), plan->keypoint_source.get(), options.guided,
+        CreateFundamentalEstimatorOnDevice(options, plan->run.gpu_index), plan->keypoint_source.get(), options.guided,
         options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
     plan->guided = guided.get();
     plan->matcher = std::move(guided);
@@ -272,15 +253,7 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   plan->features = plan->cache ? static_cast<FeatureSource*>(plan->cache.get()) : request.source;
   clock.Mark("starting the feature reader");
 
-  plan->run = request.run;
-#ifdef CASHASH_WITH_CUDA
-  // Ranks sharing a machine share its GPUs unless a device is named.
-  if (plan->share.num_ranks > 1 && request.run.options.gpu_index == "-1") {
-    const int devices = cuda::NumCudaDevices();
-    if (devices > 1) plan->run.options.gpu_index = std::to_string(MpiLocalRank() % devices);
-  }
-#endif
-  plan->gpu_memory = std::make_unique<GpuMemorySampler>(GpuIndexForRun(plan->run.options));
+  plan->gpu_memory = std::make_unique<GpuMemorySampler>(plan->run.gpu_index);
   clock.Mark("starting the GPU and sizing the run");
   const MeanDescriptor& mean = request.mean.get();
   clock.Mark("waiting for the hashing mean");
@@ -292,10 +265,9 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   clock.Mark("making the matcher");
   OpenSink(plan);
   clock.Mark("opening the database for writing");
-  // Verification on the GPU too when use_gpu is set (the matcher has
-  // already warned when no GPU can be used).
+  // Verification on the run's first device, where matching runs too.
   if (!plan->run.options.skip_geometric_verification) {
-    plan->verifier = CreateBatchVerifierForOptions(plan->run.options, nullptr);
+    plan->verifier = CreateBatchVerifierOnDevice(plan->run.options, plan->run.gpu_index);
     clock.Mark("making the verifier");
   }
 }
@@ -455,7 +427,7 @@ MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbac
     return summary;
   }
   request.clock.Mark("finding the pairs left to match");
-  RunPlan plan;
+  RunPlan plan(request.run);
   PlanRun(request, std::move(share), callbacks, &plan);
   MatchingSummary result = ExecutePlan(plan, request.image_ids.size(), request.clock, callbacks);
   DismantlePlan(plan, request.clock);

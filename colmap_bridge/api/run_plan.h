@@ -45,10 +45,5 @@ struct RunRequest {
 // everything (distributed/mpi_distributed.h).
 MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks);
 
-// Callers that set no warning sink still see warnings, on stderr as the
-// command line prints them.
-void Warn(const MatchingCallbacks& callbacks, const std::string& text);
-void Info(const MatchingCallbacks& callbacks, const std::string& text);
-
 }  // namespace colmap
 }  // namespace cashash

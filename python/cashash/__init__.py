@@ -162,7 +162,10 @@ def match(descriptors1, descriptors2, keypoints1=None, keypoints2=None, camera1=
     pycolmap.Camera objects; without them the camera is guessed as COLMAP
     does and only F/H are estimated. Returns a dict: matches (M x 2 uint32),
     verified, config, config_name, inlier_matches (K x 2), F, E, H, qvec,
-    tvec.
+    tvec; and run, how the pair was resolved (as match_exhaustive's). The
+    options are checked as match_exhaustive checks them, and the pair is
+    matched as a run of two images is: use_gpu without a usable GPU
+    matches as use_gpu=False does.
     """
     if options is None and "use_gpu" not in kwargs:
         kwargs["use_gpu"] = False

@@ -54,6 +54,40 @@ def test_bad_input_raises():
         cashash.make_options(no_such_option=1)
 
 
+def test_match_checks_options_as_the_runs_do(views):
+    a, b = views[0], views[1]
+    with pytest.raises(ValueError, match="--max_gpu_memory must be a size such as 16G"):
+        cashash.match(a.descriptors, b.descriptors, max_gpu_memory="abc")
+    with pytest.raises(ValueError, match="--FeatureMatching.gpu_index: expected an integer"):
+        cashash.match(a.descriptors, b.descriptors, gpu_index="first")
+    with pytest.raises(ValueError, match="gpu_verifications_in_flight must be 1 to 8"):
+        cashash.match(a.descriptors, b.descriptors, gpu_verifications_in_flight=0)
+
+
+def test_use_gpu_without_a_usable_gpu_matches_as_the_cpu():
+    # 40 shared features under heavy descriptor noise among 300 others each:
+    # the cascade misses a few of them, the CPU run's exact rematch of the
+    # pairs with 12 to 63 cascade matches finds them. Which algorithm ran
+    # shows in the matches.
+    rng = np.random.default_rng(0)
+
+    def sift_like(n):
+        raw = rng.integers(0, 61, (n, 128)).astype(np.float64)
+        return np.round(raw * 512.0 / np.linalg.norm(raw, axis=1, keepdims=True))
+
+    shared = sift_like(40)
+    d1 = np.vstack([shared, sift_like(300)]).astype(np.uint8)
+    d2 = np.vstack([np.clip(shared + rng.integers(-16, 17, shared.shape), 0, 255), sift_like(300)]).astype(np.uint8)
+    cpu = cashash.match(d1, d2, use_gpu=False)
+    asked = cashash.match(d1, d2, use_gpu=True)
+    if asked["run"]["gpu_index"] >= 0:
+        pytest.skip("a usable GPU matched the pair")
+    assert asked["run"] == cpu["run"]
+    assert cpu["run"]["exact_rematch_max_matches"] > 0  # the CPU's rematch window
+    np.testing.assert_array_equal(asked["matches"], cpu["matches"])
+    assert len(cpu["matches"]) == 40
+
+
 def test_exact_rematch_is_the_runs_default_and_can_be_turned_off(scene_database):
     # Runs match the pairs that may verify again exactly (12 cascade matches).
     # -1: chosen for the run (12, or 8 with the bucket screening tables).

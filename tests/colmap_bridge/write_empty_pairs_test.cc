@@ -115,6 +115,26 @@ TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty)
   EXPECT_EQ(db.ReadCompletedPairIds().count(ImagePairToPairId(1, 25)), 1u);
 }
 
+// --overwrite 1 with --skip_geometric_verification 1 rewrites the matches
+// of its pairs; their old two_view_geometries rows would describe other
+// matches and make a resumed run take the pairs as done. They go, so the
+// next verifying run matches and verifies those pairs again.
+TEST_F(WriteEmptyPairsTest, OverwriteWithoutVerificationDropsTheOldGeometries) {
+  colmap::MatchPairs(path_, NearAndFarPairs(), options_);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
+  colmap::MatcherCommandOptions rewrite = options_;
+  rewrite.overwrite = true;
+  rewrite.skip_geometric_verification = true;
+  const colmap::MatchingSummary rewritten = colmap::MatchPairs(path_, NearAndFarPairs(), rewrite);
+  EXPECT_EQ(rewritten.pipeline.pairs_done, 8u);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 8);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
+  const colmap::MatchingSummary resumed = colmap::MatchPairs(path_, NearAndFarPairs(), options_);
+  EXPECT_EQ(resumed.pairs_skipped, 0u);
+  EXPECT_EQ(resumed.pipeline.pairs_done, 8u);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
+}
+
 TEST(PairIdRunsTest, RoundTripsRunsAndRejectsDamage) {
   const std::vector<pair_t> ids = {ImagePairToPairId(3, 9), 5, 6, 7, 1, 5, ImagePairToPairId(3, 10), 0};
   const std::vector<uint8_t> blob = colmap::EncodePairIdRuns(ids);

@@ -15,7 +15,7 @@
 #include "cashash/geometry/launch_order.h"
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/geometry/ransac.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/utils/device_memory.cuh"
 #include "cashash_cuda/geometry/ransac.cuh"

@@ -71,18 +71,13 @@ class GpuTwoViewRansac {
 };
 
 // Chunks the GPU verifier keeps on the device at once (its
-// MaxConcurrentCalls), by default. On the H200 more chunks
-// at once help where verification sets
-// the pace (guided matching: 23.5k, 25.6k and 26.9k pairs/s at 300 images
-// with 1, 2 and 3) and cost a little where matching does (exhaustive: 20.6k,
-// 20.4k, 19.7k), since their E blocks hold SMs the matching kernels want;
-// 2 takes most of the first and little of the second. One at a time keeps
-// the matching stage closer to its matching-only time (1.19-1.22x against
-// 1.39-1.58x at 300 images) but the whole command is 2-5 %
-// slower, so the default stays at 2; the pipeline's second verification
-// thread takes a chunk only on a backlog or after matching
-// (the verification stage in matching_pipeline.cc), which gives the first
-// without the second.
+// MaxConcurrentCalls), by default. More chunks at once help where
+// verification sets the pace and cost a little where matching does, since
+// their E blocks hold SMs the matching kernels want; 2 takes most of the
+// first and little of the second. The pipeline's second verification
+// thread takes a chunk only on a backlog or after matching (the
+// verification stage in matching_pipeline.cc), which keeps the gain without
+// the cost. docs/gpu_verification.md has the figures.
 constexpr int kDefaultGpuVerificationsInFlight = 2;
 constexpr int kMaxGpuVerificationsInFlight = 8;
 

@@ -1,7 +1,7 @@
 // What a GPU matcher is set up with beyond the matching options: its
 // device, its share of device memory and which cascade kernels it runs.
 // Given to the matcher's constructor (CreateGpuFeatureMatcher); the run
-// fills it from its resolved options (colmap_bridge/api/matcher_factory.cc).
+// fills it from the resolved run (colmap_bridge/api/matcher_factory.cc).
 // Plain C++ header.
 #pragma once
 

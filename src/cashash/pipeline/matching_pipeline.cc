@@ -308,13 +308,6 @@ class PipelineRun {
 
 }  // namespace
 
-TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
-                           const ImageFeatures& image2, const FeatureMatches& matches,
-                           const TwoViewGeometryOptions& options) {
-  return EstimateTwoViewGeometry(camera1, KeypointPositions(image1.keypoints), camera2,
-                                 KeypointPositions(image2.keypoints), matches, options);
-}
-
 std::shared_ptr<const ImageFeatures> FeatureSource::LoadSharedFeatures(image_t image_id) {
   return std::make_shared<const ImageFeatures>(LoadFeatures(image_id));
 }

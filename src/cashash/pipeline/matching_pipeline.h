@@ -146,9 +146,4 @@ class MatchingPipeline {
   BatchVerifier* verifier_ = nullptr;
 };
 
-// Verifies one pair (exposed for tests and for the verify-only mode).
-TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
-                           const ImageFeatures& image2, const FeatureMatches& matches,
-                           const TwoViewGeometryOptions& options);
-
 }  // namespace cashash

@@ -4,10 +4,10 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
-#include <thread>
 #include <unordered_set>
 
 #include "cashash/base/pair_id.h"
+#include "cashash/base/parallel_for.h"
 
 namespace cashash {
 namespace {
@@ -90,12 +90,6 @@ class KnnSweep {
   std::vector<int> rank_;   // position of each point in order_
 };
 
-int ThreadCount(int num_threads, size_t work) {
-  const int all = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  const int wanted = num_threads > 0 ? num_threads : all;
-  return static_cast<int>(std::max<size_t>(1, std::min<size_t>(static_cast<size_t>(wanted), work / 256 + 1)));
-}
-
 }  // namespace
 
 std::string SpatialPairingOptions::Check() const {
@@ -166,24 +160,18 @@ std::vector<ImagePair> SpatialPairs(std::vector<PositionPrior> priors, const Spa
   const double max_distance_squared = static_cast<float>(options.max_distance * options.max_distance);
   const KnnSweep sweep(rounded);
   std::vector<std::vector<int>> neighbours(positions.size());
-  auto search = [&](int begin, int end) {
-    std::vector<Candidate> nearest;
-    for (int i = begin; i < end; ++i) {
-      sweep.Nearest(i, knn, &nearest);
-      for (int rank = 0; rank < knn; ++rank) {
-        // The image itself is skipped but keeps its rank: COLMAP counts it
-        // in min_num_neighbors' test.
-        if (nearest[rank].index == i) continue;
-        if (nearest[rank].distance_squared > max_distance_squared && rank > options.min_num_neighbors) break;
-        neighbours[i].push_back(nearest[rank].index);
-      }
+  std::vector<std::vector<Candidate>> scratch(static_cast<size_t>(ResolveNumThreads(options.num_threads)));
+  ParallelForWorkers(positions.size(), options.num_threads, [&](size_t i, size_t worker) {
+    std::vector<Candidate>& nearest = scratch[worker];
+    sweep.Nearest(static_cast<int>(i), knn, &nearest);
+    for (int rank = 0; rank < knn; ++rank) {
+      // The image itself is skipped but keeps its rank: COLMAP counts it
+      // in min_num_neighbors' test.
+      if (nearest[rank].index == static_cast<int>(i)) continue;
+      if (nearest[rank].distance_squared > max_distance_squared && rank > options.min_num_neighbors) break;
+      neighbours[i].push_back(nearest[rank].index);
     }
-  };
-  const int threads = ThreadCount(options.num_threads, static_cast<size_t>(n));
-  std::vector<std::thread> workers;
-  for (int t = 1; t < threads; ++t) workers.emplace_back(search, t * n / threads, (t + 1) * n / threads);
-  search(0, n / threads);
-  for (std::thread& worker : workers) worker.join();
+  });
 
   std::vector<ImagePair> pairs;
   std::unordered_set<pair_t> seen;
