@@ -34,6 +34,8 @@ void PrintUsage() {
                "Usage:\n"
                "  cashash exhaustive_matcher --database_path DB [options]\n"
                "  cashash guided_matcher --database_path DB [options]   (two-stage Ga-CasHash, all pairs)\n"
+               "  cashash sequential_matcher --database_path DB [--SequentialMatching.overlap 10 ...]\n"
+               "  cashash spatial_matcher --database_path DB [--SpatialMatching.max_distance 100 ...]\n"
                "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
                "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n"
                "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n"
@@ -62,6 +64,8 @@ int main(int argc, char** argv) {
   }
   if (command == "exhaustive_matcher") return cashash::colmap::RunExhaustiveMatcher(argc - 1, argv + 1);
   if (command == "guided_matcher") return cashash::colmap::RunGuidedMatcher(argc - 1, argv + 1);
+  if (command == "sequential_matcher") return cashash::colmap::RunSequentialMatcher(argc - 1, argv + 1);
+  if (command == "spatial_matcher") return cashash::colmap::RunSpatialMatcher(argc - 1, argv + 1);
   if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
   if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
   if (command == "generate_database") return cashash::colmap::RunGenerateDatabase(argc - 1, argv + 1);

@@ -326,6 +326,17 @@ Database::Database(const std::string& path, bool read_only, const DatabaseOption
 Database::~Database() = default;
 
 const SchemaInfo& Database::schema() const { return impl_->schema; }
+
+bool Database::HasTable(const std::string& table) const { return impl_->has_table(table); }
+
+bool Database::HasColumn(const std::string& table, const std::string& column) const {
+  return impl_->has_table(table) && impl_->TableHasColumn(table, column);
+}
+
+void Database::UseStatement(const std::string& sql, const std::function<void(SqliteStatement&)>& use) const {
+  SqliteStatement statement(impl_->db, sql);
+  use(statement);
+}
 const std::string& Database::path() const { return impl_->path; }
 
 std::vector<Camera> Database::ReadAllCameras() const {

@@ -17,6 +17,8 @@ struct sqlite3;
 namespace cashash {
 namespace colmap {
 
+class SqliteStatement;
+
 // Every error names the table, image or file at fault.
 class DatabaseError : public std::runtime_error {
  public:
@@ -154,6 +156,15 @@ class Database {
   void WriteDescriptors(image_t image_id, const FeatureDescriptors& descriptors);
   // Float32 columns (2, 4 or 6) of an image's keypoints row; 0 when it has none.
   int KeypointColumns(image_t image_id) const;
+
+  // For tables this class does not model (pose priors, rig frames:
+  // position_priors.h, image_frames.h): whether the file had `table` when
+  // it was opened, whether `table` has `column`, and a statement prepared on
+  // this connection from `sql` for `use` to bind, step and read (finalized
+  // when it returns or throws).
+  bool HasTable(const std::string& table) const;
+  bool HasColumn(const std::string& table, const std::string& column) const;
+  void UseStatement(const std::string& sql, const std::function<void(SqliteStatement&)>& use) const;
 
   void BeginTransaction();
   void Commit();

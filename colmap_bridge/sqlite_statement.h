@@ -24,6 +24,7 @@ class SqliteStatement {
 
   // Parameter indices are 1-based, as in SQLite.
   void BindInt64(int index, int64_t value);
+  void BindDouble(int index, double value);
   void BindNull(int index);
   // Binds NULL when num_bytes is 0 (what COLMAP stores for empty matrices).
   // The bytes must stay alive until Step() returned.
@@ -37,6 +38,9 @@ class SqliteStatement {
 
   // Column indices are 0-based, as in SQLite.
   int64_t ColumnInt64(int col) const;
+  bool ColumnIsNull(int col) const;
+  // SQLite's conversion: NULL reads as 0, text as its leading number.
+  double ColumnDouble(int col) const;
   const void* ColumnBlob(int col) const;
   size_t ColumnBytes(int col) const;
   std::string ColumnText(int col) const;

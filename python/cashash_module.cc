@@ -258,11 +258,42 @@ void BindOptions(py::module_& m) {
       .def_readwrite("max_num_trials", &TwoViewGeometryOptions::max_num_trials)
       .def_readwrite("min_inlier_ratio", &TwoViewGeometryOptions::min_inlier_ratio)
       .def_readwrite("random_seed", &TwoViewGeometryOptions::random_seed);
+  // COLMAP's SequentialMatching.* and SpatialMatching.*, named as pycolmap
+  // names them.
+  py::class_<SequentialPairingOptions>(m, "SequentialPairingOptions")
+      .def(py::init<>())
+      .def_readwrite("overlap", &SequentialPairingOptions::overlap)
+      .def_readwrite("quadratic_overlap", &SequentialPairingOptions::quadratic_overlap)
+      .def_readwrite("expand_rig_images", &SequentialPairingOptions::expand_rig_images)
+      .def_readwrite("loop_detection", &SequentialPairingOptions::loop_detection)
+      .def_readwrite("loop_detection_period", &SequentialPairingOptions::loop_detection_period)
+      .def_readwrite("loop_detection_num_images", &SequentialPairingOptions::loop_detection_num_images)
+      .def_readwrite("loop_detection_min_index_distance", &SequentialPairingOptions::loop_detection_min_index_distance)
+      .def_readwrite("loop_detection_num_nearest_neighbors",
+                     &SequentialPairingOptions::loop_detection_num_nearest_neighbors)
+      .def_readwrite("loop_detection_num_checks", &SequentialPairingOptions::loop_detection_num_checks)
+      .def_readwrite("loop_detection_num_images_after_verification",
+                     &SequentialPairingOptions::loop_detection_num_images_after_verification)
+      .def_readwrite("loop_detection_max_num_features", &SequentialPairingOptions::loop_detection_max_num_features)
+      .def_readwrite("vocab_tree_path", &SequentialPairingOptions::vocab_tree_path)
+      .def_readwrite("num_threads", &SequentialPairingOptions::num_threads)
+      .def("check", &SequentialPairingOptions::Check);
+  py::class_<SpatialPairingOptions>(m, "SpatialPairingOptions")
+      .def(py::init<>())
+      .def_readwrite("ignore_z", &SpatialPairingOptions::ignore_z)
+      .def_readwrite("max_num_neighbors", &SpatialPairingOptions::max_num_neighbors)
+      .def_readwrite("min_num_neighbors", &SpatialPairingOptions::min_num_neighbors)
+      .def_readwrite("max_distance", &SpatialPairingOptions::max_distance)
+      .def_readwrite("is_gps", &SpatialPairingOptions::is_gps)
+      .def_readwrite("num_threads", &SpatialPairingOptions::num_threads)
+      .def("check", &SpatialPairingOptions::Check);
   py::class_<MatcherCommandOptions>(m, "MatchingOptions")
       .def(py::init<>())
       .def_readwrite("sift", &MatcherCommandOptions::sift)
       .def_readwrite("cashash", &MatcherCommandOptions::cashash)
       .def_readwrite("two_view", &MatcherCommandOptions::two_view)
+      .def_readwrite("sequential", &MatcherCommandOptions::sequential)
+      .def_readwrite("spatial", &MatcherCommandOptions::spatial)
       .def_readwrite("block_size", &MatcherCommandOptions::block_size)
       .def_readwrite("use_gpu", &MatcherCommandOptions::use_gpu)
       .def_readwrite("gpu_index", &MatcherCommandOptions::gpu_index)
@@ -301,6 +332,22 @@ PYBIND11_MODULE(_core, m) {
         });
       },
       py::arg("database_path"), py::arg("pairs"), py::arg("options"), py::arg("progress") = py::none());
+  m.def(
+      "match_sequential",
+      [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchSequential(database_path, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());
+  m.def(
+      "match_spatial",
+      [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchSpatial(database_path, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());
   m.def("match", &MatchInMemory, py::arg("descriptors1"), py::arg("descriptors2"), py::arg("keypoints1"),
         py::arg("keypoints2"), py::arg("camera1"), py::arg("camera2"), py::arg("options"));
   m.def("build_info", []() {

@@ -22,6 +22,7 @@
 #include "cashash/base/parallel_for.h"
 #include "colmap_bridge/colmap38_schema.h"
 #include "colmap_bridge/database.h"
+#include "colmap_bridge/position_priors.h"
 #include "synthetic/sift_descriptor_variation.h"
 #include "synthetic/synthetic_street_scene.h"
 
@@ -361,6 +362,32 @@ void RemoveDatabaseFiles(const std::string& path) {
 
 bool Finite(double value) { return std::isfinite(value); }
 
+// Where the "gps" street lies: latitude, longitude (degrees), altitude (m).
+constexpr double kGpsOriginLatitude = 47.3769;
+constexpr double kGpsOriginLongitude = 8.5417;
+constexpr double kGpsOriginAltitude = 408.0;
+constexpr double kEarthRadius = 6378137.0;  // metres; a sphere is close enough for a few km
+
+// The true centre of image k as --position_priors asks: scene x along the
+// street is east, its depth axis z north, and its y (down) the negated
+// height.
+PositionPrior PriorOfImage(const SyntheticStreetScene& scene, int image_index, const std::string& kind) {
+  const Eigen::Vector3d centre = scene.Centre(image_index);
+  const Eigen::Vector3d enu(centre.x(), centre.z(), -centre.y());
+  PositionPrior prior;
+  if (kind == "gps") {
+    const double lat0 = kGpsOriginLatitude * M_PI / 180.0;
+    prior.position = Eigen::Vector3d(kGpsOriginLatitude + enu.y() / kEarthRadius * 180.0 / M_PI,
+                                     kGpsOriginLongitude + enu.x() / (kEarthRadius * std::cos(lat0)) * 180.0 / M_PI,
+                                     kGpsOriginAltitude + enu.z());
+    prior.coordinate_system = PriorCoordinateSystem::kWgs84;
+  } else {
+    prior.position = enu;
+    prior.coordinate_system = PriorCoordinateSystem::kCartesian;
+  }
+  return prior;
+}
+
 }  // namespace
 
 int FeatureCountOfImage(const DatabaseGeneratorOptions& options, int image_index) {
@@ -411,6 +438,9 @@ std::string DatabaseGeneratorOptions::Check() const {
     return "--descriptor_noise must be between 0 and 255";
   }
   if (images_per_transaction < 1) return "--images_per_transaction must be >= 1";
+  if (position_priors != "none" && position_priors != "cartesian" && position_priors != "gps") {
+    return "--position_priors must be none, cartesian or gps, got '" + position_priors + "'";
+  }
   if (num_threads == 0 || num_threads < -1) return "--num_threads must be -1 (all cores) or at least 1";
   if (source_max_images < 1 || source_max_images > 1000) return "--source_max_images must be between 1 and 1000";
   return "";
@@ -483,6 +513,9 @@ GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
         const GeneratedImage& image = batch[static_cast<size_t>(k - first)];
         const camera_t camera_id = database.WriteCamera(camera);
         const image_t image_id = database.WriteImage(ImageName(k, options.num_images), camera_id);
+        if (options.position_priors != "none") {
+          WritePositionPrior(database, image_id, camera_id, PriorOfImage(scene, k, options.position_priors));
+        }
         database.WriteKeypoints(image_id, image.keypoints, pool.keypoint_columns);
         database.WriteDescriptors(image_id, image.descriptors);
         summary.num_features += static_cast<int64_t>(image.keypoints.size());

@@ -56,6 +56,12 @@ struct DatabaseGeneratorOptions {
   // Views of one point in several of them are kept once; finding those costs
   // a matching of every pair of them.
   int source_max_images = 24;
+  // Position priors of the images, for spatial matching: "none", "cartesian"
+  // (the true camera centres as east, north, up in street units, taken as
+  // metres) or "gps" (the same centres as WGS84 latitude, longitude and
+  // altitude around kGpsOrigin). This schema (COLMAP 3.8) keeps them in the
+  // prior_tx, prior_ty, prior_tz columns of table images.
+  std::string position_priors = "none";
   // When set: a folder that receives the true cameras as a COLMAP text model
   // (cameras.txt, images.txt, an empty points3D.txt), for comparing a
   // reconstruction (scripts/summarize_model.py --gt).

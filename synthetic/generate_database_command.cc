@@ -53,6 +53,9 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
       "Threads making images (-1 = all cores); any count writes the same database")(
       "source_max_images", po::value(&o.source_max_images)->default_value(o.source_max_images),
       "Source images whose descriptors are used (their repeated views of a point are kept once)")(
+      "position_priors", po::value(&o.position_priors)->default_value(o.position_priors),
+      "Position priors of the images (for spatial_matcher): none, cartesian (true centres, street units as "
+      "metres) or gps (the same as WGS84 latitude, longitude, altitude)")(
       "ground_truth_path", po::value(&o.ground_truth_path),
       "Folder for the true cameras as a COLMAP text model (optional)");
   po::variables_map vm;

@@ -50,6 +50,50 @@ class OptionTable {
   po::options_description* description_;
 };
 
+// COLMAP's SequentialMatching.* options, with its names and defaults.
+void AddSequentialMatchingOptions(OptionTable* table, SequentialPairingOptions* o) {
+  table->Add({"SequentialMatching.overlap"}, &o->overlap, "Images after each image (in name order) it is matched with");
+  table->Add({"SequentialMatching.quadratic_overlap"}, &o->quadratic_overlap,
+             "Match the images 1, 2, 4, ..., 2^(overlap-1) places on instead of the next overlap images");
+  table->Add({"SequentialMatching.expand_rig_images"}, &o->expand_rig_images,
+             "Match the images of a rig frame with each other and with the neighbouring frames' images (databases "
+             "with rigs and frames)");
+  table->Add({"SequentialMatching.loop_detection"}, &o->loop_detection,
+             "Also match every loop_detection_period-th image with the images most like it (image retrieval from "
+             "the cascade's codes; no vocabulary tree)");
+  table->Add({"SequentialMatching.loop_detection_period"}, &o->loop_detection_period,
+             "Every how many images (in name order) a loop query is made");
+  table->Add({"SequentialMatching.loop_detection_num_images"}, &o->loop_detection_num_images,
+             "Images retrieved per loop query");
+  table->Add({"SequentialMatching.loop_detection_min_index_distance"}, &o->loop_detection_min_index_distance,
+             "Retrieved images fewer than this many places from the query are no loop pairs (0: no limit)");
+  const std::string ignored = " (COLMAP's vocabulary tree; accepted and not used)";
+  table->Add({"SequentialMatching.loop_detection_num_nearest_neighbors"}, &o->loop_detection_num_nearest_neighbors,
+             "Visual words per query feature" + ignored);
+  table->Add({"SequentialMatching.loop_detection_num_checks"}, &o->loop_detection_num_checks,
+             "Nearest-neighbour checks of the tree search" + ignored);
+  table->Add({"SequentialMatching.loop_detection_num_images_after_verification"},
+             &o->loop_detection_num_images_after_verification, "Images kept after spatial verification" + ignored);
+  table->Add({"SequentialMatching.loop_detection_max_num_features"}, &o->loop_detection_max_num_features,
+             "Features per image indexed" + ignored);
+  table->Add({"SequentialMatching.vocab_tree_path"}, &o->vocab_tree_path, "Vocabulary tree file" + ignored);
+  table->Add({"SequentialMatching.num_threads"}, &o->num_threads, "Threads of the loop retrieval, -1 for all cores");
+}
+
+// COLMAP's SpatialMatching.* options, with its names and defaults.
+void AddSpatialMatchingOptions(OptionTable* table, SpatialPairingOptions* o) {
+  table->Add({"SpatialMatching.ignore_z"}, &o->ignore_z, "Compare positions without their height");
+  table->Add({"SpatialMatching.max_num_neighbors"}, &o->max_num_neighbors, "Most neighbours matched per image");
+  table->Add({"SpatialMatching.min_num_neighbors"}, &o->min_num_neighbors,
+             "Fewest neighbours matched per image, beyond max_distance if need be");
+  table->Add({"SpatialMatching.max_distance"}, &o->max_distance,
+             "Largest distance to a neighbour (metres for GPS priors, else the priors' unit)");
+  table->Add({"SpatialMatching.is_gps"}, &o->is_gps,
+             "COLMAP 3.8 databases: read the prior_tx, prior_ty, prior_tz columns of table images as latitude, "
+             "longitude, altitude (0: as Cartesian); pose_priors name their own coordinate system");
+  table->Add({"SpatialMatching.num_threads"}, &o->num_threads, "Threads of the neighbour search, -1 for all cores");
+}
+
 }  // namespace
 
 // One function because the option table reads best as one list in --help
@@ -65,6 +109,8 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
     table.Add({"match_list_path"}, &o.match_list_path, "Text file with one 'name1 name2' pair per line");
     table.Add({"match_type"}, &o.match_type, "Only 'pairs' is supported: match and verify the listed pairs");
   }
+  if (command == "sequential_matcher") AddSequentialMatchingOptions(&table, &o.sequential);
+  if (command == "spatial_matcher") AddSpatialMatchingOptions(&table, &o.spatial);
   table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
   table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
   table.Add({"write_empty_pairs"}, &o.write_empty_pairs,
@@ -231,6 +277,10 @@ std::string CheckRunOptions(const MatcherCommandOptions& o) {
     return "gpu_verifications_in_flight must be 1 to 8, got " + std::to_string(o.gpu_verifications_in_flight);
   }
   std::string message = o.sift.Check();
+  if (!message.empty()) return message;
+  message = o.sequential.Check();
+  if (!message.empty()) return message;
+  message = o.spatial.Check();
   if (!message.empty()) return message;
   CasHashOptions cashash = o.cashash;
   if (cashash.exact_rematch_min_matches == kRematchMinMatchesChosen) {

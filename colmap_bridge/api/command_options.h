@@ -10,6 +10,8 @@
 #include "cashash/matching/guided_matching.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/geometry/two_view_geometry.h"
+#include "cashash/pipeline/sequential_pairs.h"
+#include "cashash/pipeline/spatial_pairs.h"
 
 namespace cashash {
 namespace colmap {
@@ -74,6 +76,10 @@ struct MatcherCommandOptions {
   // OFF; DiskSync (database.h) says what NORMAL and OFF risk on a power loss.
   std::string database_synchronous = "FULL";
   uint64_t random_seed = 0;
+  // sequential_matcher only (SequentialMatching.*).
+  SequentialPairingOptions sequential;
+  // spatial_matcher only (SpatialMatching.*).
+  SpatialPairingOptions spatial;
   // matches_importer only.
   std::string match_list_path;
   std::string match_type = "pairs";
@@ -90,8 +96,8 @@ struct MatcherCommandOptions {
 enum class ParseOutcome { kRun, kHelpShown, kError };
 
 // Parses argv (after the command name). On error prints one line naming the
-// option to stderr. `command` is "exhaustive_matcher", "guided_matcher" or
-// "matches_importer".
+// option to stderr. `command` is "exhaustive_matcher", "guided_matcher",
+// "matches_importer", "sequential_matcher" or "spatial_matcher".
 ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
                                         MatcherCommandOptions* options);
 

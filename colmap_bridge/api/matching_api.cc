@@ -12,6 +12,7 @@
 #include "cashash/pipeline/pair_generation.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
+#include "colmap_bridge/api/pair_selection.h"
 #include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/run_plan.h"
 #include "colmap_bridge/database.h"
@@ -280,6 +281,51 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
     std::ifstream file(match_list_path);
     if (!file) throw std::runtime_error("cannot open --match_list_path " + match_list_path);
     return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), clock, callbacks);
+  });
+}
+
+namespace {
+
+// Reports the chosen pairs and matches them; the pair list's path.
+MatchingSummary MatchSelectedPairs(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
+                                   const SelectedPairs& selected, PhaseClock clock,
+                                   const MatchingCallbacks& callbacks) {
+  for (const std::string& note : selected.notes) Info(callbacks, note);
+  for (const std::string& warning : selected.warnings) Warn(callbacks, warning);
+  clock.Mark("choosing the pairs");
+  if (selected.pairs.empty()) {
+    Info(callbacks, "Nothing to match.");
+    return MatchingSummary();
+  }
+  return MatchIdPairs(options, source, selected.pairs, clock, callbacks);
+}
+
+}  // namespace
+
+MatchingSummary MatchSequential(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& all_callbacks, ImageRetrieval* retrieval) {
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
+    std::unique_ptr<ImageRetrieval> own_retrieval;
+    if (checked.sequential.loop_detection && retrieval == nullptr) {
+      own_retrieval = CreateImageRetrievalForRun(checked, database_path);
+      if (!own_retrieval) throw std::invalid_argument(LoopDetectionUnavailableMessage());
+      retrieval = own_retrieval.get();
+    }
+    const SelectedPairs selected =
+        SelectSequentialPairs(source.database(), source.images(), checked.sequential, retrieval);
+    return MatchSelectedPairs(checked, source, selected, clock, callbacks);
+  });
+}
+
+MatchingSummary MatchSpatial(const std::string& database_path, const MatcherCommandOptions& options,
+                             const MatchingCallbacks& all_callbacks) {
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
+    const SelectedPairs selected = SelectSpatialPairs(source.database(), source.images(), checked.spatial);
+    return MatchSelectedPairs(checked, source, selected, clock, callbacks);
   });
 }
 

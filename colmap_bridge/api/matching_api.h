@@ -1,5 +1,5 @@
-// The library entry points behind `cashash exhaustive_matcher` and
-// `cashash matches_importer`: match the pairs of a COLMAP database and write
+// The library entry points behind `cashash exhaustive_matcher`,
+// `sequential_matcher`, `spatial_matcher` and `matches_importer`: match the pairs of a COLMAP database and write
 // matches and two_view_geometries. The command line and the Python module
 // both call these, so they behave and fail alike.
 #pragma once
@@ -14,6 +14,7 @@
 #include "cashash/base/phase_clock.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
+#include "cashash/pipeline/image_retrieval.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/api/command_options.h"
 #include "colmap_bridge/api/run_gpu_resources.h"
@@ -90,6 +91,23 @@ MatchingSummary MatchPairs(const std::string& database_path,
 // line).
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
                               const MatcherCommandOptions& options, const MatchingCallbacks& callbacks = {});
+
+// Matches the pairs of COLMAP's sequential_matcher (options.sequential):
+// images in name order, each with its next overlap images (quadratic
+// overlap: 1, 2, 4, ... places on), rig frames expanded; with
+// loop_detection also every loop_detection_period-th image with the images
+// `retrieval` finds most like it. Without a retrieval of the caller's, the
+// run's own (CreateImageRetrievalForRun, pair_selection.h); where there is
+// none, loop detection is refused (std::invalid_argument naming the option).
+MatchingSummary MatchSequential(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& callbacks = {}, ImageRetrieval* retrieval = nullptr);
+
+// Matches the pairs of COLMAP's spatial_matcher (options.spatial): each
+// image with a position prior with its nearest neighbours by that prior.
+// Images without a prior are named in a warning and left out, as COLMAP
+// leaves them out; none with one is an error (std::runtime_error).
+MatchingSummary MatchSpatial(const std::string& database_path, const MatcherCommandOptions& options,
+                             const MatchingCallbacks& callbacks = {});
 
 // The matcher backend the resolved run asks for: the GPU one when use_gpu is
 // set and a device is usable (each GPU matcher within

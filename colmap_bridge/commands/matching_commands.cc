@@ -171,6 +171,24 @@ int RunGuidedMatcher(int argc, const char* const* argv) {
   });
 }
 
+int RunSequentialMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("sequential_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded("Sequential feature matching", [&](const MatchingCallbacks& callbacks) {
+    return MatchSequential(options.database_path, options, callbacks);
+  });
+}
+
+int RunSpatialMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("spatial_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded("Spatial feature matching", [&](const MatchingCallbacks& callbacks) {
+    return MatchSpatial(options.database_path, options, callbacks);
+  });
+}
+
 int RunMatchesImporter(int argc, const char* const* argv) {
   MatcherCommandOptions options;
   const int early = PrepareOptions("matches_importer", argc, argv, &options);

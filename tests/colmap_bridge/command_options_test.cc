@@ -310,6 +310,64 @@ TEST(CommandOptions, HelpListsOptions) {
   }
 }
 
+ParseOutcome ParseCommand(const char* command, std::vector<const char*> args, MatcherCommandOptions* options) {
+  args.insert(args.begin(), command);
+  return ParseMatcherCommandOptions(command, static_cast<int>(args.size()), args.data(), options);
+}
+
+TEST(CommandOptions, SequentialMatchingUnderColmapsNames) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(ParseCommand("sequential_matcher",
+                         {"--database_path", "x", "--SequentialMatching.overlap", "5",
+                          "--SequentialMatching.quadratic_overlap", "0", "--SequentialMatching.loop_detection", "1",
+                          "--SequentialMatching.loop_detection_period", "7",
+                          "--SequentialMatching.loop_detection_num_images", "30",
+                          "--SequentialMatching.loop_detection_min_index_distance", "20",
+                          "--SequentialMatching.expand_rig_images", "false",
+                          "--SequentialMatching.vocab_tree_path", "tree.bin",
+                          "--SequentialMatching.loop_detection_num_checks", "128"},
+                         &o),
+            ParseOutcome::kRun);
+  EXPECT_EQ(o.sequential.overlap, 5);
+  EXPECT_FALSE(o.sequential.quadratic_overlap);
+  EXPECT_TRUE(o.sequential.loop_detection);
+  EXPECT_EQ(o.sequential.loop_detection_period, 7);
+  EXPECT_EQ(o.sequential.loop_detection_num_images, 30);
+  EXPECT_EQ(o.sequential.loop_detection_min_index_distance, 20);
+  EXPECT_FALSE(o.sequential.expand_rig_images);
+  EXPECT_EQ(o.sequential.vocab_tree_path, "tree.bin");
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+  o = MatcherCommandOptions();
+  ASSERT_EQ(ParseCommand("sequential_matcher", {"--database_path", "x", "--SequentialMatching.overlap", "0"}, &o),
+            ParseOutcome::kRun);
+  EXPECT_NE(CheckMatcherCommandOptions(o).find("--SequentialMatching.overlap"), std::string::npos);
+  // Another command's options are unknown options.
+  EXPECT_EQ(ParseCommand("sequential_matcher", {"--database_path", "x", "--SpatialMatching.max_distance", "5"}, &o),
+            ParseOutcome::kError);
+  EXPECT_EQ(ParseCommand("exhaustive_matcher", {"--database_path", "x", "--SequentialMatching.overlap", "5"}, &o),
+            ParseOutcome::kError);
+}
+
+TEST(CommandOptions, SpatialMatchingUnderColmapsNames) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(ParseCommand("spatial_matcher",
+                         {"--database_path", "x", "--SpatialMatching.max_num_neighbors", "20",
+                          "--SpatialMatching.min_num_neighbors", "3", "--SpatialMatching.max_distance", "25.5",
+                          "--SpatialMatching.ignore_z", "0", "--SpatialMatching.is_gps", "0"},
+                         &o),
+            ParseOutcome::kRun);
+  EXPECT_EQ(o.spatial.max_num_neighbors, 20);
+  EXPECT_EQ(o.spatial.min_num_neighbors, 3);
+  EXPECT_DOUBLE_EQ(o.spatial.max_distance, 25.5);
+  EXPECT_FALSE(o.spatial.ignore_z);
+  EXPECT_FALSE(o.spatial.is_gps);
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+  o.spatial.min_num_neighbors = 21;
+  EXPECT_NE(CheckMatcherCommandOptions(o).find("--SpatialMatching.min_num_neighbors"), std::string::npos);
+  EXPECT_EQ(ParseCommand("spatial_matcher", {"--database_path", "x", "--SpatialMatching.max_neighbors", "5"}, &o),
+            ParseOutcome::kError);
+}
+
 }  // namespace
 }  // namespace colmap
 }  // namespace cashash
