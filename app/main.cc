@@ -36,6 +36,8 @@ void PrintUsage() {
                "  cashash guided_matcher --database_path DB [options]   (two-stage Ga-CasHash, all pairs)\n"
                "  cashash retrieval_matcher --database_path DB [--VocabTreeMatching.num_images 100] [options]\n"
                "      (also as vocab_tree_matcher: pairs from visual words of the hash codes, no tree)\n"
+               "  cashash sequential_matcher --database_path DB [--SequentialMatching.overlap 10 ...]\n"
+               "  cashash spatial_matcher --database_path DB [--SpatialMatching.max_distance 100 ...]\n"
                "  cashash matches_importer --database_path DB --match_list_path PAIRS.txt --match_type pairs\n"
                "  cashash geometric_verifier --database_path DB   (verifies the stored matches only)\n"
                "  cashash generate_database --database_path NEW.db --source_database_path REAL.db --num_images N\n"
@@ -67,6 +69,8 @@ int main(int argc, char** argv) {
   if (command == "retrieval_matcher" || command == "vocab_tree_matcher") {
     return cashash::colmap::RunRetrievalMatcher(command, argc - 1, argv + 1);
   }
+  if (command == "sequential_matcher") return cashash::colmap::RunSequentialMatcher(argc - 1, argv + 1);
+  if (command == "spatial_matcher") return cashash::colmap::RunSpatialMatcher(argc - 1, argv + 1);
   if (command == "matches_importer") return cashash::colmap::RunMatchesImporter(argc - 1, argv + 1);
   if (command == "geometric_verifier") return cashash::colmap::RunGeometricVerifier(argc - 1, argv + 1);
   if (command == "generate_database") return cashash::colmap::RunGenerateDatabase(argc - 1, argv + 1);

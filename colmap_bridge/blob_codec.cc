@@ -1,6 +1,7 @@
 #include "colmap_bridge/blob_codec.h"
 
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 
 #include "colmap_bridge/database.h"
@@ -154,6 +155,12 @@ std::vector<uint32_t> EncodeMatches(const FeatureMatches& matches, bool swap) {
   }
   return values;
 }
+
+static_assert(sizeof(FeatureMatch) == 2 * sizeof(uint32_t) && offsetof(FeatureMatch, point2D_idx1) == 0 &&
+                  offsetof(FeatureMatch, point2D_idx2) == sizeof(uint32_t) && sizeof(point2D_t) == sizeof(uint32_t),
+              "FeatureMatch must be laid out as a stored match row");
+
+const void* MatchesAsStored(const FeatureMatches& matches) { return matches.data(); }
 
 std::array<double, 9> EncodeMatrix3d(const Eigen::Matrix3d& matrix) {
   std::array<double, 9> values;

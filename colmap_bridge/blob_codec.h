@@ -48,6 +48,9 @@ FeatureDescriptors DecodeSiftDescriptors(const MatrixBlob& blob, const std::stri
 // pair was requested in the order opposite to storage).
 FeatureMatches DecodeMatches(const MatrixBlob& blob, bool swap, const std::string& owner);
 std::vector<uint32_t> EncodeMatches(const FeatureMatches& matches, bool swap);
+// The blob of EncodeMatches(matches, false) without a copy: FeatureMatch is
+// two uint32 (point2D_idx1, point2D_idx2), the stored row's layout.
+const void* MatchesAsStored(const FeatureMatches& matches);
 
 // 3x3 float64 matrices are stored row-major (checked against COLMAP 3.8 and
 // pycolmap 4.2.1 databases: x2 ~ H x1 holds only with row-major reading).

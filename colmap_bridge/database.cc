@@ -17,6 +17,7 @@
 #include "colmap_bridge/database.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -53,6 +54,16 @@ MatrixBlob MatrixBlobAt(const SqliteStatement& s, int first_col) {
 
 }  // namespace
 
+bool ParseDiskSync(const std::string& text, DiskSync* sync) {
+  std::string upper = text;
+  for (char& c : upper) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  if (upper == "FULL") *sync = DiskSync::kFull;
+  else if (upper == "NORMAL") *sync = DiskSync::kNormal;
+  else if (upper == "OFF") *sync = DiskSync::kOff;
+  else return false;
+  return true;
+}
+
 std::string SchemaInfo::Describe() const {
   const bool is_4x = descriptors_have_type || user_version >= kFirstUserVersion4x;
   return std::string(is_4x ? "4.x-style" : "3.8-style") + " (user_version " +
@@ -76,6 +87,8 @@ struct Database::Impl {
       write_image, write_keypoints, write_descriptors, keypoint_columns, record_empty_pairs,
       delete_matches, delete_geometry;
   bool empty_pairs_table_ready = false;  // kEmptyPairsTable created by this connection
+  // WriteMatchesRows / WriteTwoViewGeometryRows: kRowsPerStatement rows each.
+  std::unique_ptr<SqliteStatement> write_matches_rows, write_geometry_rows;
 
   // Asks the file, not the list read when opening: another connection (or
   // this one) may have created the table since.
@@ -174,7 +187,7 @@ struct Database::Impl {
     // closes, but only a connection that may write can, so a run whose reader
     // closed after its writer left both files beside the database. A
     // write-protected file still opens (read-only) for reading.
-    const int flags = SQLITE_OPEN_READWRITE;
+    const int flags = SQLITE_OPEN_READWRITE | (options.one_thread_at_a_time ? SQLITE_OPEN_NOMUTEX : 0);
     if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
       const std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
       throw DatabaseError("cannot open database " + path + ": " + message);
@@ -182,6 +195,12 @@ struct Database::Impl {
     sqlite3_busy_timeout(db, std::max(0, options.busy_timeout_ms));
     // Nothing can be written through a reader (SQLITE_READONLY otherwise).
     if (read_only) ExecuteSql(db, "PRAGMA query_only = 1");
+    if (!read_only && options.cache_mib > 0) {
+      ExecuteSql(db, "PRAGMA cache_size = -" + std::to_string(static_cast<int64_t>(options.cache_mib) * 1024));
+    }
+    if (!read_only && options.disk_sync != DiskSync::kFull) {
+      ExecuteSql(db, options.disk_sync == DiskSync::kNormal ? "PRAGMA synchronous = NORMAL" : "PRAGMA synchronous = OFF");
+    }
     // SQLite silently opens a write-protected file read-only; say so now
     // rather than after matching everything.
     if (!read_only && sqlite3_db_readonly(db, "main") == 1) {
@@ -227,15 +246,51 @@ struct Database::Impl {
     }
   }
 
-  void BindGeometry(SqliteStatement& s, pair_t pair_id, const TwoViewGeometry& stored,
+  // Binds a matches row's 4 parameters after `first - 1`. `swapped`
+  // receives the blob when the pair is stored in the other order (bound
+  // from there: alive until the statement ran).
+  static void BindMatches(SqliteStatement& s, int first, image_t image_id1, image_t image_id2,
+                          const FeatureMatches& matches, std::vector<uint32_t>& swapped) {
+    const bool swap = SwapImagePair(image_id1, image_id2);
+    s.BindInt64(first, static_cast<int64_t>(ImagePairToPairId(image_id1, image_id2)));
+    s.BindInt64(first + 1, static_cast<int64_t>(matches.size()));
+    s.BindInt64(first + 2, 2);
+    if (swap) {
+      swapped = EncodeMatches(matches, true);
+      s.BindBlob(first + 3, swapped.data(), swapped.size() * sizeof(uint32_t));
+    } else {
+      // In storage order the matches are the blob's bytes: bound in place.
+      s.BindBlob(first + 3, MatchesAsStored(matches), matches.size() * 2 * sizeof(uint32_t));
+    }
+  }
+
+  // Binds a two_view_geometries row's 10 parameters after `first - 1`.
+  // `inverted` receives the geometry when the pair is stored in the other
+  // order and `matrices` the encoded matrices (both alive until the
+  // statement ran).
+  void BindGeometryRow(SqliteStatement& s, int first, image_t image_id1, image_t image_id2,
+                       const TwoViewGeometry& geometry, TwoViewGeometry& inverted,
+                       std::array<std::array<double, 9>, 3>& matrices) {
+    // What is unset is decided on the caller's geometry, before inverting.
+    const bool F_set = !IsZero(geometry.F);
+    const bool E_set = !IsZero(geometry.E);
+    const bool H_set = !IsZero(geometry.H);
+    const bool pose_set = !PoseIsUnset(geometry);
+    const bool swap = SwapImagePair(image_id1, image_id2);
+    if (swap) inverted = geometry.Inverted();
+    BindGeometry(s, first, ImagePairToPairId(image_id1, image_id2), swap ? inverted : geometry, F_set, E_set, H_set,
+                 pose_set, matrices);
+  }
+
+  void BindGeometry(SqliteStatement& s, int first, pair_t pair_id, const TwoViewGeometry& stored,
                     bool F_set, bool E_set, bool H_set, bool pose_set,
-                    const std::vector<uint32_t>& inliers,
                     std::array<std::array<double, 9>, 3>& matrices) {
-    s.BindInt64(1, static_cast<int64_t>(pair_id));
-    s.BindInt64(2, static_cast<int64_t>(stored.inlier_matches.size()));
-    s.BindInt64(3, 2);
-    s.BindBlob(4, inliers.data(), inliers.size() * sizeof(uint32_t));
-    s.BindInt64(5, stored.config);
+    const int o = first - 1;
+    s.BindInt64(o + 1, static_cast<int64_t>(pair_id));
+    s.BindInt64(o + 2, static_cast<int64_t>(stored.inlier_matches.size()));
+    s.BindInt64(o + 3, 2);
+    s.BindBlob(o + 4, MatchesAsStored(stored.inlier_matches), stored.inlier_matches.size() * 2 * sizeof(uint32_t));
+    s.BindInt64(o + 5, stored.config);
 
     // 3.8 writes no geometry at all for pairs without inliers.
     const bool legacy_empty = !write_nulls_for_unset && stored.inlier_matches.empty();
@@ -244,18 +299,18 @@ struct Database::Impl {
     for (int i = 0; i < 3; ++i) {
       const bool write_null = legacy_empty || (write_nulls_for_unset && !set[i]);
       if (write_null) {
-        s.BindNull(6 + i);
+        s.BindNull(o + 6 + i);
         continue;
       }
       matrices[i] = set[i] ? EncodeMatrix3d(*sources[i]) : std::array<double, 9>{};
-      s.BindBlob(6 + i, matrices[i].data(), sizeof(matrices[i]));
+      s.BindBlob(o + 6 + i, matrices[i].data(), sizeof(matrices[i]));
     }
     if (legacy_empty || (write_nulls_for_unset && !pose_set)) {
-      s.BindNull(9);
-      s.BindNull(10);
+      s.BindNull(o + 9);
+      s.BindNull(o + 10);
     } else {
-      s.BindBlob(9, stored.qvec.data(), 4 * sizeof(double));
-      s.BindBlob(10, stored.tvec.data(), 3 * sizeof(double));
+      s.BindBlob(o + 9, stored.qvec.data(), 4 * sizeof(double));
+      s.BindBlob(o + 10, stored.tvec.data(), 3 * sizeof(double));
     }
   }
 };
@@ -271,6 +326,17 @@ Database::Database(const std::string& path, bool read_only, const DatabaseOption
 Database::~Database() = default;
 
 const SchemaInfo& Database::schema() const { return impl_->schema; }
+
+bool Database::HasTable(const std::string& table) const { return impl_->has_table(table); }
+
+bool Database::HasColumn(const std::string& table, const std::string& column) const {
+  return impl_->has_table(table) && impl_->TableHasColumn(table, column);
+}
+
+void Database::UseStatement(const std::string& sql, const std::function<void(SqliteStatement&)>& use) const {
+  SqliteStatement statement(impl_->db, sql);
+  use(statement);
+}
 const std::string& Database::path() const { return impl_->path; }
 
 std::vector<Camera> Database::ReadAllCameras() const {
@@ -408,6 +474,12 @@ void Database::DeleteMatchesAndGeometry(image_t image_id1, image_t image_id2) {
   StatementScope m(impl_->Prepared(impl_->delete_matches, "DELETE FROM matches WHERE pair_id = ?"));
   m->BindInt64(1, pair_id);
   m->Execute();
+  DeleteTwoViewGeometry(image_id1, image_id2);
+}
+
+void Database::DeleteTwoViewGeometry(image_t image_id1, image_t image_id2) {
+  impl_->RequireWritable();
+  const int64_t pair_id = static_cast<int64_t>(ImagePairToPairId(image_id1, image_id2));
   StatementScope g(impl_->Prepared(impl_->delete_geometry, "DELETE FROM two_view_geometries WHERE pair_id = ?"));
   g->BindInt64(1, pair_id);
   g->Execute();
@@ -452,42 +524,88 @@ TwoViewGeometry Database::ReadTwoViewGeometry(image_t image_id1, image_t image_i
   return inverted;
 }
 
+namespace {
+
+constexpr const char* kInsertMatches = "INSERT OR REPLACE INTO matches(pair_id, rows, cols, data) VALUES ";
+constexpr const char* kMatchesValues = "(?, ?, ?, ?)";
+// camera1 / camera2 (4.x) are left out of the column list: INSERT OR
+// REPLACE then stores NULL, as COLMAP does for fixed-intrinsics geometries.
+constexpr const char* kInsertGeometries =
+    "INSERT OR REPLACE INTO two_view_geometries(pair_id, rows, cols, data, config, F, E, H, qvec, tvec) VALUES ";
+constexpr const char* kGeometryValues = "(?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
+
+// Rows per statement of the *Rows writes: at 64, a statement's own cost is
+// small beside its rows', and 640 parameters stay far below SQLite's limit.
+constexpr size_t kRowsPerStatement = 64;
+
+std::string RepeatedValues(const char* insert, const char* values, size_t rows) {
+  std::string sql = insert;
+  for (size_t k = 0; k < rows; ++k) sql += (k == 0 ? "" : ", ") + std::string(values);
+  return sql;
+}
+
+}  // namespace
+
 void Database::WriteMatches(image_t image_id1, image_t image_id2, const FeatureMatches& matches) {
   impl_->RequireWritable();
-  const std::vector<uint32_t> values =
-      EncodeMatches(matches, SwapImagePair(image_id1, image_id2));
-  StatementScope s(impl_->Prepared(
-      impl_->write_matches,
-      "INSERT OR REPLACE INTO matches(pair_id, rows, cols, data) VALUES (?, ?, ?, ?)"));
-  s->BindInt64(1, static_cast<int64_t>(ImagePairToPairId(image_id1, image_id2)));
-  s->BindInt64(2, static_cast<int64_t>(matches.size()));
-  s->BindInt64(3, 2);
-  s->BindBlob(4, values.data(), values.size() * sizeof(uint32_t));
-  s->Execute();
+  SqliteStatement& s = impl_->Prepared(impl_->write_matches, RepeatedValues(kInsertMatches, kMatchesValues, 1));
+  // Every parameter is bound again below: a reset, no clearing.
+  s.ResetKeepingBindings();
+  std::vector<uint32_t> swapped;
+  Impl::BindMatches(s, 1, image_id1, image_id2, matches, swapped);
+  s.Execute();
 }
 
 void Database::WriteTwoViewGeometry(image_t image_id1, image_t image_id2,
                                     const TwoViewGeometry& geometry) {
   impl_->RequireWritable();
-  // What is unset is decided on the caller's geometry, before inverting.
-  const bool F_set = !IsZero(geometry.F);
-  const bool E_set = !IsZero(geometry.E);
-  const bool H_set = !IsZero(geometry.H);
-  const bool pose_set = !PoseIsUnset(geometry);
-  const bool swap = SwapImagePair(image_id1, image_id2);
-  const TwoViewGeometry stored = swap ? geometry.Inverted() : geometry;
-  const std::vector<uint32_t> inliers = EncodeMatches(stored.inlier_matches, false);
+  SqliteStatement& s =
+      impl_->Prepared(impl_->write_geometry, RepeatedValues(kInsertGeometries, kGeometryValues, 1));
+  s.ResetKeepingBindings();  // BindGeometryRow binds every parameter
+  TwoViewGeometry inverted;
+  std::array<std::array<double, 9>, 3> matrices{};
+  impl_->BindGeometryRow(s, 1, image_id1, image_id2, geometry, inverted, matrices);
+  s.Execute();
+}
 
-  // camera1 / camera2 (4.x) are left out of the column list: INSERT OR
-  // REPLACE then stores NULL, as COLMAP does for fixed-intrinsics geometries.
-  StatementScope s(impl_->Prepared(
-      impl_->write_geometry,
-      "INSERT OR REPLACE INTO two_view_geometries(pair_id, rows, cols, data, config, F, E, H, "
-      "qvec, tvec) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"));
-  std::array<std::array<double, 9>, 3> matrices{};  // alive until Execute()
-  impl_->BindGeometry(*s, ImagePairToPairId(image_id1, image_id2), stored, F_set,
-                      E_set, H_set, pose_set, inliers, matrices);
-  s->Execute();
+void Database::WriteMatchesRows(const std::vector<PairRowsRef>& pairs) {
+  impl_->RequireWritable();
+  size_t k = 0;
+  if (pairs.size() >= kRowsPerStatement) {
+    SqliteStatement& s = impl_->Prepared(impl_->write_matches_rows,
+                                         RepeatedValues(kInsertMatches, kMatchesValues, kRowsPerStatement));
+    std::vector<std::vector<uint32_t>> swapped(kRowsPerStatement);
+    for (; k + kRowsPerStatement <= pairs.size(); k += kRowsPerStatement) {
+      s.ResetKeepingBindings();
+      for (size_t r = 0; r < kRowsPerStatement; ++r) {
+        const PairRowsRef& p = pairs[k + r];
+        Impl::BindMatches(s, static_cast<int>(4 * r + 1), p.image_id1, p.image_id2, *p.matches, swapped[r]);
+      }
+      s.Execute();
+    }
+  }
+  for (; k < pairs.size(); ++k) WriteMatches(pairs[k].image_id1, pairs[k].image_id2, *pairs[k].matches);
+}
+
+void Database::WriteTwoViewGeometryRows(const std::vector<PairRowsRef>& pairs) {
+  impl_->RequireWritable();
+  size_t k = 0;
+  if (pairs.size() >= kRowsPerStatement) {
+    SqliteStatement& s = impl_->Prepared(impl_->write_geometry_rows,
+                                         RepeatedValues(kInsertGeometries, kGeometryValues, kRowsPerStatement));
+    std::vector<TwoViewGeometry> inverted(kRowsPerStatement);
+    std::vector<std::array<std::array<double, 9>, 3>> matrices(kRowsPerStatement);
+    for (; k + kRowsPerStatement <= pairs.size(); k += kRowsPerStatement) {
+      s.ResetKeepingBindings();
+      for (size_t r = 0; r < kRowsPerStatement; ++r) {
+        const PairRowsRef& p = pairs[k + r];
+        impl_->BindGeometryRow(s, static_cast<int>(10 * r + 1), p.image_id1, p.image_id2, *p.geometry, inverted[r],
+                               matrices[r]);
+      }
+      s.Execute();
+    }
+  }
+  for (; k < pairs.size(); ++k) WriteTwoViewGeometry(pairs[k].image_id1, pairs[k].image_id2, *pairs[k].geometry);
 }
 
 void Database::ClearMatchesAndGeometries() {

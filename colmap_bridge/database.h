@@ -17,6 +17,8 @@ struct sqlite3;
 namespace cashash {
 namespace colmap {
 
+class SqliteStatement;
+
 // Every error names the table, image or file at fault.
 class DatabaseError : public std::runtime_error {
  public:
@@ -35,10 +37,47 @@ struct SchemaInfo {
   std::string Describe() const;
 };
 
+// SQLite's PRAGMA synchronous of a writing connection: when it waits for
+// the disk. Full is SQLite's default and the safe one.
+enum class DiskSync {
+  // Every commit is on disk before the next one starts: a power loss or an
+  // operating-system crash loses nothing committed.
+  kFull,
+  // With the write-ahead log (COLMAP's databases): the log reaches the disk
+  // when it is folded into the file, not at each commit. A power loss or an
+  // OS crash may undo the last commits; the file stays valid and a rerun
+  // matches those pairs again. A killed process loses nothing committed.
+  kNormal,
+  // Never waits for the disk (what COLMAP's own database connection uses).
+  // A power loss or an OS crash may leave the file damaged.
+  kOff,
+};
+
+// "FULL", "NORMAL", "OFF" (any case); false for anything else.
+bool ParseDiskSync(const std::string& text, DiskSync* sync);
+
 struct DatabaseOptions {
   // How long a connection waits for a lock another process holds (COLMAP's
   // GUI, another matcher) before a statement fails naming the busy timeout.
   int busy_timeout_ms = 60000;
+  // Page cache of a writing connection in MiB; 0 keeps SQLite's 2 MiB. A
+  // transaction whose changed pages fit writes each of them to the log once
+  // at its commit; beyond the cache SQLite writes them early, and again when
+  // they change again.
+  int cache_mib = 0;
+  DiskSync disk_sync = DiskSync::kFull;
+  // The connection is used by one thread at a time (the caller makes sure):
+  // SQLite then takes no lock of its own around each call.
+  bool one_thread_at_a_time = false;
+};
+
+// One pair's results as WriteMatchesRows / WriteTwoViewGeometryRows take
+// them: pointers to the caller's values, alive during the call.
+struct PairRowsRef {
+  image_t image_id1 = 0;
+  image_t image_id2 = 0;
+  const FeatureMatches* matches = nullptr;
+  const TwoViewGeometry* geometry = nullptr;
 };
 
 class Database {
@@ -83,6 +122,9 @@ class Database {
   // Removes a pair's rows from matches and two_view_geometries (a pair
   // matched again, now without matches, under --write_empty_pairs 0).
   void DeleteMatchesAndGeometry(image_t image_id1, image_t image_id2);
+  // Removes a pair's two_view_geometries row (its matches rewritten without
+  // verification under --overwrite: the old row describes other matches).
+  void DeleteTwoViewGeometry(image_t image_id1, image_t image_id2);
 
   FeatureMatches ReadMatches(image_t image_id1, image_t image_id2) const;
   TwoViewGeometry ReadTwoViewGeometry(image_t image_id1, image_t image_id2) const;
@@ -92,6 +134,13 @@ class Database {
   // existing row of the same pair.
   void WriteMatches(image_t image_id1, image_t image_id2, const FeatureMatches& matches);
   void WriteTwoViewGeometry(image_t image_id1, image_t image_id2, const TwoViewGeometry& geometry);
+  // The same rows for many pairs, in their order, several pairs per
+  // statement: a statement's cursor stays where the last row went, so rows
+  // in pair-id order each land next to the one before, and the statement's
+  // own cost is shared. Rows are bound in place, without copies, unless the
+  // pair is stored in the other order.
+  void WriteMatchesRows(const std::vector<PairRowsRef>& pairs);
+  void WriteTwoViewGeometryRows(const std::vector<PairRowsRef>& pairs);
 
   // Removes every row of matches and two_view_geometries (--overwrite of an
   // exhaustive run).
@@ -107,6 +156,15 @@ class Database {
   void WriteDescriptors(image_t image_id, const FeatureDescriptors& descriptors);
   // Float32 columns (2, 4 or 6) of an image's keypoints row; 0 when it has none.
   int KeypointColumns(image_t image_id) const;
+
+  // For tables this class does not model (pose priors, rig frames:
+  // position_priors.h, image_frames.h): whether the file had `table` when
+  // it was opened, whether `table` has `column`, and a statement prepared on
+  // this connection from `sql` for `use` to bind, step and read (finalized
+  // when it returns or throws).
+  bool HasTable(const std::string& table) const;
+  bool HasColumn(const std::string& table, const std::string& column) const;
+  void UseStatement(const std::string& sql, const std::function<void(SqliteStatement&)>& use) const;
 
   void BeginTransaction();
   void Commit();

@@ -1,5 +1,6 @@
 #include "colmap_bridge/database_pipeline_io.h"
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 
@@ -9,9 +10,11 @@
 namespace cashash {
 namespace colmap {
 
-DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path)
+DatabaseFeatureSource::DatabaseFeatureSource(const std::string& database_path,
+                                             std::function<void(const std::string&)> warning)
     : database_(database_path, /*read_only=*/true),
-      readers_([database_path]() { return std::make_unique<Database>(database_path, /*read_only=*/true); }) {
+      readers_([database_path]() { return std::make_unique<Database>(database_path, /*read_only=*/true); }),
+      warning_(std::move(warning)) {
   images_ = database_.ReadAllImages();
   for (Camera& camera : database_.ReadAllCameras()) {
     CheckCamera(camera);
@@ -41,8 +44,8 @@ void DatabaseFeatureSource::CheckCamera(const Camera& camera) {
   if (expected < 0) {
     // A model of a newer COLMAP, or garbage: verification needs no intrinsics
     // unless both cameras of a pair have a focal prior.
-    std::cerr << "WARNING: " << label << " has model id " << camera.model_id
-              << ", unknown to cashash; its images are verified with F and H only" << std::endl;
+    Warn(label + " has model id " + std::to_string(camera.model_id) +
+         ", unknown to cashash; its images are verified with F and H only");
     return;
   }
   if (static_cast<int>(camera.params.size()) != expected) {
@@ -57,8 +60,12 @@ void DatabaseFeatureSource::CheckCamera(const Camera& camera) {
   }
 }
 
-void DatabaseFeatureSource::SetWarningCallback(std::function<void(const std::string&)> warning) {
-  warning_ = std::move(warning);
+void DatabaseFeatureSource::Warn(const std::string& text) {
+  if (warning_) {
+    warning_(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
 }
 
 const Image& DatabaseFeatureSource::image(image_t image_id) const { return images_.at(image_index_.at(image_id)); }
@@ -87,11 +94,7 @@ void DatabaseFeatureSource::WarnAboutKeypointsOutside(image_t image_id, const Ke
                            " keypoints lie outside the " + std::to_string(camera.width) + " x " +
                            std::to_string(camera.height) + " image (first: row " + std::to_string(first) + " at " +
                            std::to_string(kp.x) + ", " + std::to_string(kp.y) + "); matching them anyway";
-  if (warning_) {
-    warning_(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
+  Warn(text);
 }
 
 ImageFeatures DatabaseFeatureSource::LoadFeatures(image_t image_id) {
@@ -123,7 +126,9 @@ DatabaseResultSink::DatabaseResultSink(const std::string& database_path, bool wr
 
 DatabaseResultSink::DatabaseResultSink(const std::string& database_path, const Options& options)
     : lock_(database_path),
-      database_(database_path, /*read_only=*/false, DatabaseOptions{options.busy_timeout_ms}),
+      database_(database_path, /*read_only=*/false,
+                // One thread at a time: the pipeline's writer (LockedSink under MPI).
+                DatabaseOptions{options.busy_timeout_ms, options.cache_mib, options.disk_sync, true}),
       options_(options) {
   if (database_.UsesWriteAheadLog()) {
     checkpointer_ = std::make_unique<WalCheckpointer>(database_path);
@@ -131,31 +136,87 @@ DatabaseResultSink::DatabaseResultSink(const std::string& database_path, const O
   }
 }
 
-void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
-  std::vector<pair_t> empty_pairs;
-  size_t rows = 0;
-  database_.BeginTransaction();
+DatabaseResultSink::~DatabaseResultSink() {
   try {
-    for (const PairResult& result : results) {
-      if (!options_.write_empty_pairs && result.matches.empty()) {
-        empty_pairs.push_back(ImagePairToPairId(result.pair.first, result.pair.second));
-        if (options_.replace_existing) database_.DeleteMatchesAndGeometry(result.pair.first, result.pair.second);
-        continue;
-      }
-      database_.WriteMatches(result.pair.first, result.pair.second, result.matches);
-      ++rows;
-      if (options_.write_two_view_geometries) {
-        database_.WriteTwoViewGeometry(result.pair.first, result.pair.second, result.geometry);
-        ++rows;
-      }
+    Flush();
+  } catch (const std::exception& e) {
+    // Nothing half-written stays: the failed commit was rolled back.
+    std::cerr << "WARNING: " << e.what() << "; the chunks not yet committed are matched again by the next run"
+              << std::endl;
+  }
+}
+
+void DatabaseResultSink::WriteRows(const std::vector<PairResult>& results) {
+  // By pair id and table by table: each statement then lands next to the
+  // last one in its table's key order.
+  order_.clear();
+  empty_pairs_.clear();
+  for (size_t k = 0; k < results.size(); ++k) {
+    const PairResult& result = results[k];
+    if (!options_.write_empty_pairs && result.matches.empty()) {
+      empty_pairs_.push_back(ImagePairToPairId(result.pair.first, result.pair.second));
+      if (options_.replace_existing) database_.DeleteMatchesAndGeometry(result.pair.first, result.pair.second);
+      continue;
     }
-    // In the chunk's transaction: recorded exactly when the chunk is.
-    database_.RecordEmptyPairs(empty_pairs);
-    database_.Commit();
+    order_.push_back(k);
+  }
+  const auto pair_id_of = [&](size_t k) { return ImagePairToPairId(results[k].pair.first, results[k].pair.second); };
+  std::sort(order_.begin(), order_.end(), [&](size_t a, size_t b) { return pair_id_of(a) < pair_id_of(b); });
+  rows_.clear();
+  for (size_t k : order_) {
+    const PairResult& r = results[k];
+    rows_.push_back(PairRowsRef{r.pair.first, r.pair.second, &r.matches, &r.geometry});
+  }
+  database_.WriteMatchesRows(rows_);
+  if (options_.write_two_view_geometries) {
+    database_.WriteTwoViewGeometryRows(rows_);
+  } else if (options_.replace_existing) {
+    // An old verification of other matches: kept, it would make the pair
+    // look done to a resumed run.
+    for (const PairRowsRef& row : rows_) database_.DeleteTwoViewGeometry(row.image_id1, row.image_id2);
+  }
+  // In the chunk's transaction: recorded exactly when the chunk is.
+  database_.RecordEmptyPairs(empty_pairs_);
+  pending_rows_ += order_.size() * (options_.write_two_view_geometries ? 2 : 1);
+  pending_empty_pairs_ += empty_pairs_.size();
+}
+
+void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
+  if (!in_transaction_) {
+    database_.BeginTransaction();
+    in_transaction_ = true;
+    transaction_start_ = std::chrono::steady_clock::now();
+  }
+  try {
+    WriteRows(results);
   } catch (...) {
+    in_transaction_ = false;
+    pending_rows_ = pending_empty_pairs_ = 0;
     database_.Rollback();
     throw;
   }
+  const double open_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - transaction_start_).count();
+  if (open_seconds >= options_.commit_seconds) Commit();
+}
+
+void DatabaseResultSink::Flush() {
+  if (in_transaction_) Commit();
+}
+
+void DatabaseResultSink::Commit() {
+  in_transaction_ = false;
+  try {
+    database_.Commit();
+  } catch (...) {
+    pending_rows_ = pending_empty_pairs_ = 0;
+    database_.Rollback();
+    throw;
+  }
+  ++commits_;
+  rows_written_ += pending_rows_;
+  empty_pairs_recorded_ += pending_empty_pairs_;
+  pending_rows_ = pending_empty_pairs_ = 0;
   if (checkpointer_) {
     if (logged_pages_ >= options_.log_pages_before_catch_up) {
       checkpointer_->CatchUp();
@@ -163,8 +224,6 @@ void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
       checkpointer_->Nudge();
     }
   }
-  rows_written_ += rows;
-  empty_pairs_recorded_ += empty_pairs.size();
 }
 
 }  // namespace colmap

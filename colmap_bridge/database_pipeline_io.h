@@ -1,8 +1,10 @@
 // The matching pipeline's source and sink on a COLMAP database: features are
-// read through one connection, results written through another in one
-// transaction per chunk, so that a stopped run leaves whole chunks only.
+// read through one connection, results written through another in
+// transactions of whole chunks, so that a stopped run leaves whole chunks
+// only.
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -24,12 +26,12 @@ class DatabaseFeatureSource : public FeatureSource {
  public:
   // Reads the images and cameras tables; throws DatabaseError if an image
   // refers to a camera that does not exist or two images share a name.
-  explicit DatabaseFeatureSource(const std::string& database_path);
-
-  // Where warnings about usable but suspicious data go (keypoints outside
-  // their image); by default "WARNING: ..." lines on stderr. Called from the
-  // loading threads, one call at a time.
-  void SetWarningCallback(std::function<void(const std::string&)> warning);
+  // `warning` hears about usable but suspicious data (a camera model
+  // unknown to cashash, keypoints outside their image), one call at a time,
+  // from the constructor and the loading threads; unset: "WARNING: ..."
+  // lines on stderr. The runs pass their callbacks' warning.
+  explicit DatabaseFeatureSource(const std::string& database_path,
+                                 std::function<void(const std::string&)> warning = nullptr);
 
   const std::vector<Image>& images() const { return images_; }
   const Image& image(image_t image_id) const;
@@ -51,8 +53,9 @@ class DatabaseFeatureSource : public FeatureSource {
 
  private:
   // Throws when the params do not fit a known model; warns for unknown models.
-  static void CheckCamera(const Camera& camera);
+  void CheckCamera(const Camera& camera);
   void WarnAboutKeypointsOutside(image_t image_id, const Keypoints& keypoints);
+  void Warn(const std::string& text);
 
   Database database_;
   ObjectPool<Database> readers_;  // LoadFeatures' connections, one per caller at a time
@@ -76,7 +79,9 @@ class DatabaseResultSink : public ResultSink {
     // record and would match those pairs again.
     bool write_empty_pairs = true;
     // The pairs may have rows from an earlier run (--overwrite): a pair now
-    // without a match has its old rows deleted when no rows are written for it.
+    // without a match has its old rows deleted when no rows are written for
+    // it, and without write_two_view_geometries its old two_view_geometries
+    // row goes (it verified other matches; a resumed run would skip the pair).
     bool replace_existing = false;
     // With a write-ahead log (COLMAP's databases): its size in pages at which
     // the writer waits for the checkpointer to fold it, so that the next
@@ -85,22 +90,47 @@ class DatabaseResultSink : public ResultSink {
     int log_pages_before_catch_up = 16384;
     // DatabaseOptions::busy_timeout_ms of the writer's connection.
     int busy_timeout_ms = DatabaseOptions().busy_timeout_ms;
+    // A transaction takes the chunks that come until it has been open this
+    // long, then commits after a whole chunk (0: one transaction per
+    // chunk). Chunks of one row of block pairs share their images' key
+    // ranges, so one commit writes the pages they share to the log once
+    // instead of once per chunk. What a kill -9 loses is bounded by it:
+    // the uncommitted chunks are matched again by the next run.
+    double commit_seconds = 1.0;
+    // DatabaseOptions::cache_mib of the writer's connection: room for a
+    // transaction's changed pages.
+    int cache_mib = 256;
+    // DatabaseOptions::disk_sync of the writer's connection (see DiskSync
+    // for what each setting risks).
+    DiskSync disk_sync = DiskSync::kFull;
   };
 
   // Throws DatabaseError when another cashash process writes to the same
   // database (see DatabaseWriterLock).
   DatabaseResultSink(const std::string& database_path, bool write_two_view_geometries);
   DatabaseResultSink(const std::string& database_path, const Options& options);
-  // One transaction per chunk, through prepared statements, from the one
-  // writer thread of the pipeline.
+  // Commits what is written (Flush); a failure then rolls back the chunks
+  // not yet committed, which the next run matches again.
+  ~DatabaseResultSink() override;
+  // Writes the chunk into the open transaction (opening one if needed),
+  // rows sorted by pair id, table by table, through prepared statements,
+  // from the one writer thread of the pipeline; commits when the
+  // transaction is commit_seconds old. On failure the transaction's chunks
+  // are rolled back.
   void WriteChunk(const std::vector<PairResult>& results) override;
+  // Commits the open transaction, if any.
+  void Flush() override;
 
-  // Rows written to matches and two_view_geometries so far.
+  // Rows written to matches and two_view_geometries and committed so far.
   size_t rows_written() const { return rows_written_; }
-  // Pairs recorded as empty instead of written (write_empty_pairs off).
+  // Pairs recorded as empty instead of written (write_empty_pairs off), committed.
   size_t empty_pairs_recorded() const { return empty_pairs_recorded_; }
+  // Transactions committed so far.
+  size_t commits() const { return commits_; }
 
  private:
+  void WriteRows(const std::vector<PairResult>& results);
+  void Commit();
 
   DatabaseWriterLock lock_;  // taken before opening, released after closing
   Database database_;
@@ -109,8 +139,16 @@ class DatabaseResultSink : public ResultSink {
   std::unique_ptr<WalCheckpointer> checkpointer_;
   Options options_;
   int logged_pages_ = 0;  // in the log after the last commit
+  bool in_transaction_ = false;
+  std::chrono::steady_clock::time_point transaction_start_;
+  std::vector<size_t> order_;  // a chunk's rows by pair id, reused
+  std::vector<PairRowsRef> rows_;  // the same, as written, reused
+  std::vector<pair_t> empty_pairs_;  // reused
+  size_t pending_rows_ = 0;          // in the open transaction
+  size_t pending_empty_pairs_ = 0;
   size_t rows_written_ = 0;
   size_t empty_pairs_recorded_ = 0;
+  size_t commits_ = 0;
 };
 
 }  // namespace colmap

@@ -56,6 +56,10 @@ void SqliteStatement::BindInt64(int index, int64_t value) {
   if (sqlite3_bind_int64(stmt_, index, value) != SQLITE_OK) Fail("binding");
 }
 
+void SqliteStatement::BindDouble(int index, double value) {
+  if (sqlite3_bind_double(stmt_, index, value) != SQLITE_OK) Fail("binding");
+}
+
 void SqliteStatement::BindNull(int index) {
   if (sqlite3_bind_null(stmt_, index) != SQLITE_OK) Fail("binding");
 }
@@ -95,6 +99,8 @@ bool SqliteStatement::ColumnIsNull(int col) const {
   return sqlite3_column_type(stmt_, col) == SQLITE_NULL;
 }
 
+double SqliteStatement::ColumnDouble(int col) const { return sqlite3_column_double(stmt_, col); }
+
 const void* SqliteStatement::ColumnBlob(int col) const { return sqlite3_column_blob(stmt_, col); }
 
 size_t SqliteStatement::ColumnBytes(int col) const {
@@ -113,6 +119,8 @@ void SqliteStatement::Reset() {
   sqlite3_reset(stmt_);
   sqlite3_clear_bindings(stmt_);
 }
+
+void SqliteStatement::ResetKeepingBindings() { sqlite3_reset(stmt_); }
 
 void ExecuteSql(sqlite3* db, const std::string& sql) {
   char* message = nullptr;

@@ -24,6 +24,7 @@ class SqliteStatement {
 
   // Parameter indices are 1-based, as in SQLite.
   void BindInt64(int index, int64_t value);
+  void BindDouble(int index, double value);
   void BindNull(int index);
   // Binds NULL when num_bytes is 0 (what COLMAP stores for empty matrices).
   // The bytes must stay alive until Step() returned.
@@ -38,12 +39,17 @@ class SqliteStatement {
   // Column indices are 0-based, as in SQLite.
   int64_t ColumnInt64(int col) const;
   bool ColumnIsNull(int col) const;
+  // SQLite's conversion: NULL reads as 0, text as its leading number.
+  double ColumnDouble(int col) const;
   const void* ColumnBlob(int col) const;
   size_t ColumnBytes(int col) const;
   std::string ColumnText(int col) const;
 
   // Makes the statement reusable and releases the read snapshot it holds.
   void Reset();
+  // As Reset, but keeps the bound values: for a write whose every
+  // parameter is bound again before it runs.
+  void ResetKeepingBindings();
 
  private:
   [[noreturn]] void Fail(const char* action) const;

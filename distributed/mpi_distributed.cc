@@ -1,5 +1,6 @@
 #include "distributed/mpi_distributed.h"
 
+#include <algorithm>
 #include <exception>
 #include <map>
 
@@ -13,25 +14,16 @@ constexpr size_t kMaxMessageBytes = size_t{256} << 20;
 
 }  // namespace
 
-std::vector<PairChunk> ChunksOfRank(const std::vector<PairChunk>& chunks, int rank, int size) {
-  std::vector<PairChunk> mine;
-  for (size_t k = static_cast<size_t>(rank); k < chunks.size(); k += static_cast<size_t>(size)) {
-    mine.push_back(chunks[k]);
-  }
-  return mine;
+ChunksOfRank::ChunksOfRank(const PairChunkSource* chunks, int rank, int size)
+    : chunks_(chunks), rank_(static_cast<size_t>(rank)), step_(static_cast<size_t>(std::max(1, size))) {
+  if (rank_ < chunks_->size()) size_ = (chunks_->size() - rank_ + step_ - 1) / step_;
+  for (size_t k = 0; k < size_; ++k) num_pairs_ += chunks_->NumPairs(Of(k));
 }
 
-uint64_t ChunkListChecksum(const std::vector<PairChunk>& chunks) {
-  uint64_t hash = 1469598103934665603ull;  // FNV-1a over the pair ids
-  auto mix = [&hash](uint64_t value) {
-    for (int byte = 0; byte < 8; ++byte) {
-      hash ^= (value >> (8 * byte)) & 0xff;
-      hash *= 1099511628211ull;
-    }
-  };
-  for (const PairChunk& chunk : chunks) {
-    mix(chunk.pairs.size());
-    for (const ImagePair& pair : chunk.pairs) mix(ImagePairToPairId(pair.first, pair.second));
+uint64_t ChunksOfRank::Checksum() const {
+  uint64_t hash = chunks_->Checksum();
+  for (uint64_t value : {static_cast<uint64_t>(rank_), static_cast<uint64_t>(step_)}) {
+    hash ^= value + 0x9e3779b97f4a7c15ull + (hash << 6) + (hash >> 2);
   }
   return hash;
 }
@@ -42,23 +34,22 @@ void LockedSink::WriteChunk(const std::vector<PairResult>& results) {
   pairs_written_ += results.size();
 }
 
-
-MpiResultSender::MpiResultSender(const std::vector<PairChunk>& chunks) {
-  for (const PairChunk& chunk : chunks) {
-    if (!chunk.pairs.empty()) {
-      chunk_of_first_pair_[ImagePairToPairId(chunk.pairs[0].first, chunk.pairs[0].second)] = &chunk;
-    }
-  }
+void LockedSink::Flush() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  sink_->Flush();
 }
+
+
+MpiResultSender::MpiResultSender(const PairChunkSource* chunks) : chunks_(chunks) {}
 
 void MpiResultSender::WriteChunk(const std::vector<PairResult>& results) {
   if (results.empty()) return;
   PairChunk header;
-  const auto it = chunk_of_first_pair_.find(ImagePairToPairId(results[0].pair.first, results[0].pair.second));
-  if (it != chunk_of_first_pair_.end()) {
-    header.block_i = it->second->block_i;
-    header.block_j = it->second->block_j;
-    header.num_blocks = it->second->num_blocks;
+  if (next_chunk_ < chunks_->size()) {
+    const PairChunk chunk = chunks_->Outline(next_chunk_++);
+    header.block_i = chunk.block_i;
+    header.block_j = chunk.block_j;
+    header.num_blocks = chunk.num_blocks;
   }
   for (const std::vector<uint8_t>& part : EncodeChunkInParts(header, results, kMaxMessageBytes)) {
     MpiSendBytes(part, 0, kMpiTagChunk);

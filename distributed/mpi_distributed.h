@@ -10,22 +10,36 @@
 #include <functional>
 #include <mutex>
 #include <thread>
-#include <unordered_map>
 #include <vector>
 
 #include "cashash/pipeline/matching_pipeline.h"
+#include "cashash/pipeline/pair_chunk_source.h"
 #include "cashash/base/pair_id.h"
 #include "distributed/mpi_result_codec.h"
 
 namespace cashash {
 namespace distributed {
 
-// Chunks k with k % size == rank.
-std::vector<PairChunk> ChunksOfRank(const std::vector<PairChunk>& chunks, int rank, int size);
+// This rank's share of the run's chunks: chunks k of `chunks` with
+// k % size == rank, made when asked for. Ranks check that they agree on
+// the run's chunks by comparing chunks.Checksum().
+class ChunksOfRank : public PairChunkSource {
+ public:
+  // `chunks` must outlive this share.
+  ChunksOfRank(const PairChunkSource* chunks, int rank, int size);
+  size_t size() const override { return size_; }
+  size_t num_pairs() const override { return num_pairs_; }
+  size_t NumPairs(size_t k) const override { return chunks_->NumPairs(Of(k)); }
+  PairChunk Chunk(size_t k) const override { return chunks_->Chunk(Of(k)); }
+  PairChunk Outline(size_t k) const override { return chunks_->Outline(Of(k)); }
+  uint64_t Checksum() const override;
 
-// A checksum of the chunk list (pairs and their order), so that ranks can
-// check they agree on what to match.
-uint64_t ChunkListChecksum(const std::vector<PairChunk>& chunks);
+ private:
+  size_t Of(size_t k) const { return rank_ + k * step_; }
+
+  const PairChunkSource* chunks_;
+  size_t rank_, step_, size_ = 0, num_pairs_ = 0;
+};
 
 // Serialises WriteChunk calls from several threads onto one sink and counts
 // the pairs written.
@@ -33,6 +47,7 @@ class LockedSink : public ResultSink {
  public:
   explicit LockedSink(ResultSink* sink) : sink_(sink) {}
   void WriteChunk(const std::vector<PairResult>& results) override;
+  void Flush() override;
   size_t pairs_written() const { return pairs_written_; }
 
  private:
@@ -42,16 +57,19 @@ class LockedSink : public ResultSink {
 };
 
 // The sink of ranks > 0: each chunk goes to rank 0 (in parts of at most
-// 256 MiB). `chunks` are this rank's chunks, to name them in the messages.
+// 256 MiB). `chunks` are this rank's chunks (not owned), to name them in
+// the messages: the pipeline writes them in their order, so the k-th call
+// of WriteChunk is chunk k.
 class MpiResultSender : public ResultSink {
  public:
-  explicit MpiResultSender(const std::vector<PairChunk>& chunks);
+  explicit MpiResultSender(const PairChunkSource* chunks);
   void WriteChunk(const std::vector<PairResult>& results) override;
   // Sent once, after the pipeline has finished.
   static void SendReport(const RankReport& report);
 
  private:
-  std::unordered_map<pair_t, const PairChunk*> chunk_of_first_pair_;
+  const PairChunkSource* chunks_;
+  size_t next_chunk_ = 0;
 };
 
 // Rank 0's receiving thread: writes every chunk the other ranks send into

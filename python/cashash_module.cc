@@ -15,7 +15,7 @@
 #include "cashash/matching/pair_matching.h"
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/build_info.h"
-#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/api/retrieval_api.h"
 
@@ -75,6 +75,23 @@ py::array_t<double> EigenToArray(const Matrix& m) {
   return array;
 }
 
+py::dict RunToDict(const colmap::ResolvedRun& resolved) {
+  py::dict run;
+  run["matcher"] = MatcherTypeToString(resolved.options.cashash.matcher);
+  run["num_tables"] = resolved.options.cashash.num_tables;
+  run["bits_per_table"] = resolved.options.cashash.bits_per_table;
+  run["tau"] = resolved.options.cashash.tau;
+  run["exact_rematch_min_matches"] = resolved.options.cashash.exact_rematch_min_matches;
+  run["exact_rematch_max_matches"] = resolved.options.cashash.exact_rematch_max_matches;
+  run["rematch_on_matching_thread"] = resolved.rematch_on_matching_thread;
+  run["block_size"] = resolved.options.block_size;
+  run["blocks_per_group"] = resolved.schedule.blocks_per_group;
+  run["gpu_index"] = resolved.gpu_index;
+  run["gpu_memory_budget_bytes"] = resolved.gpu_memory_budget_bytes;
+  run["max_host_bytes"] = resolved.max_host_bytes;
+  return run;
+}
+
 py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   py::dict d;
   d["pairs_requested"] = s.pairs_requested;
@@ -86,22 +103,13 @@ py::dict SummaryToDict(const colmap::MatchingSummary& s) {
   d["inlier_matches"] = s.pipeline.inlier_matches;
   d["seconds"] = s.pipeline.seconds_total;
   d["stopped"] = s.pipeline.stopped;
+  // The run's owner of GPU memory: at most this much held (0 without a GPU),
+  // and how often a GPU part went on on the CPU for want of device memory.
+  d["gpu_memory_peak_held_bytes"] = s.gpu_memory.peak_held_bytes;
+  d["gpu_memory_fallbacks"] = s.gpu_memory_fallbacks;
   // How the run was resolved (ResolveRun): the same for the same inputs as
   // on the command line.
-  py::dict run;
-  run["matcher"] = MatcherTypeToString(s.run.options.cashash.matcher);
-  run["num_tables"] = s.run.options.cashash.num_tables;
-  run["bits_per_table"] = s.run.options.cashash.bits_per_table;
-  run["tau"] = s.run.options.cashash.tau;
-  run["exact_rematch_min_matches"] = s.run.options.cashash.exact_rematch_min_matches;
-  run["exact_rematch_max_matches"] = s.run.options.cashash.exact_rematch_max_matches;
-  run["rematch_on_matching_thread"] = s.run.rematch_on_matching_thread;
-  run["block_size"] = s.run.options.block_size;
-  run["blocks_per_group"] = s.run.schedule.blocks_per_group;
-  run["gpu_index"] = s.run.gpu_index;
-  run["gpu_memory_budget_bytes"] = s.run.gpu_memory_budget_bytes;
-  run["max_host_bytes"] = s.run.max_host_bytes;
-  d["run"] = run;
+  d["run"] = RunToDict(s.run);
   return d;
 }
 
@@ -171,20 +179,17 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   std::optional<Camera> c1, c2;
   if (camera1) c1 = CameraFromDict(*camera1);
   if (camera2) c2 = CameraFromDict(*camera2);
-  // The pair resolves as a run of two images does (ResolveRun), except
-  // that without the GPU MatchImagePair's own CPU matcher keeps the
-  // cascade's matches (no exact rematch), so its tables and tau are the
-  // ones for recall and precision.
-  MatcherCommandOptions requested = options;
-  if (!options.use_gpu) {
-    requested.cashash.exact_rematch_min_matches = 0;
-    requested.cashash.exact_rematch_max_matches = 0;
-  }
+  // The pair is checked and resolved as a run of two images is: the same
+  // option check (CheckRunOptions), the devices ChooseRunDevices finds
+  // (none without use_gpu), ResolveRun, and the matcher CreateMatcherForRun
+  // builds; so use_gpu without a usable GPU matches as use_gpu=False does.
+  const std::string problem = colmap::CheckRunOptions(options);
+  if (!problem.empty()) throw std::invalid_argument(problem);
   colmap::RunFacts facts;
   facts.rows_per_image = {d1.rows(), d2.rows()};
   facts.exhaustive = false;
-  facts.gpu_index = options.use_gpu ? colmap::GpuIndexForRun(options) : -1;
-  const colmap::ResolvedRun run = colmap::ResolveRun(requested, facts);
+  facts.gpu_indices = colmap::ChooseRunDevices(options, colmap::MachineDeviceFacts()).gpu_indices;
+  const colmap::ResolvedRun run = colmap::ResolveRun(options, facts);
   PairMatchingOptions pair_options;
   pair_options.sift = run.options.sift;
   pair_options.cashash = run.options.cashash;
@@ -194,10 +199,8 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   PairMatchingResult result;
   {
     py::gil_scoped_release no_gil;
-    std::unique_ptr<FeatureMatcher> matcher;
-    if (options.use_gpu) {
-      matcher = colmap::CreateMatcherForRun(run, ComputeMeanDescriptor({&d1, &d2}), nullptr);
-    }
+    const std::unique_ptr<FeatureMatcher> matcher =
+        colmap::CreateMatcherForRun(run, ComputeMeanDescriptor({&d1, &d2}), nullptr);
     result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get());
   }
   py::dict out;
@@ -211,6 +214,7 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   out["H"] = EigenToArray(g.H);
   out["qvec"] = EigenToArray(g.qvec);
   out["tvec"] = EigenToArray(g.tvec);
+  out["run"] = RunToDict(run);
   return out;
 }
 
@@ -262,6 +266,35 @@ void BindOptions(py::module_& m) {
       .def_readwrite("max_num_features", &RetrievalOptions::max_num_features)
       .def_readwrite("num_tables", &RetrievalOptions::num_tables)
       .def_readwrite("bits_per_word", &RetrievalOptions::bits_per_word);
+  // COLMAP's SequentialMatching.* and SpatialMatching.*, named as pycolmap
+  // names them.
+  py::class_<SequentialPairingOptions>(m, "SequentialPairingOptions")
+      .def(py::init<>())
+      .def_readwrite("overlap", &SequentialPairingOptions::overlap)
+      .def_readwrite("quadratic_overlap", &SequentialPairingOptions::quadratic_overlap)
+      .def_readwrite("expand_rig_images", &SequentialPairingOptions::expand_rig_images)
+      .def_readwrite("loop_detection", &SequentialPairingOptions::loop_detection)
+      .def_readwrite("loop_detection_period", &SequentialPairingOptions::loop_detection_period)
+      .def_readwrite("loop_detection_num_images", &SequentialPairingOptions::loop_detection_num_images)
+      .def_readwrite("loop_detection_min_index_distance", &SequentialPairingOptions::loop_detection_min_index_distance)
+      .def_readwrite("loop_detection_num_nearest_neighbors",
+                     &SequentialPairingOptions::loop_detection_num_nearest_neighbors)
+      .def_readwrite("loop_detection_num_checks", &SequentialPairingOptions::loop_detection_num_checks)
+      .def_readwrite("loop_detection_num_images_after_verification",
+                     &SequentialPairingOptions::loop_detection_num_images_after_verification)
+      .def_readwrite("loop_detection_max_num_features", &SequentialPairingOptions::loop_detection_max_num_features)
+      .def_readwrite("vocab_tree_path", &SequentialPairingOptions::vocab_tree_path)
+      .def_readwrite("num_threads", &SequentialPairingOptions::num_threads)
+      .def("check", &SequentialPairingOptions::Check);
+  py::class_<SpatialPairingOptions>(m, "SpatialPairingOptions")
+      .def(py::init<>())
+      .def_readwrite("ignore_z", &SpatialPairingOptions::ignore_z)
+      .def_readwrite("max_num_neighbors", &SpatialPairingOptions::max_num_neighbors)
+      .def_readwrite("min_num_neighbors", &SpatialPairingOptions::min_num_neighbors)
+      .def_readwrite("max_distance", &SpatialPairingOptions::max_distance)
+      .def_readwrite("is_gps", &SpatialPairingOptions::is_gps)
+      .def_readwrite("num_threads", &SpatialPairingOptions::num_threads)
+      .def("check", &SpatialPairingOptions::Check);
   py::class_<MatcherCommandOptions>(m, "MatchingOptions")
       .def(py::init<>())
       .def_readwrite("sift", &MatcherCommandOptions::sift)
@@ -270,12 +303,16 @@ void BindOptions(py::module_& m) {
       .def_readwrite("retrieval", &MatcherCommandOptions::retrieval)
       .def_readwrite("vocab_tree_path", &MatcherCommandOptions::vocab_tree_path)
       .def_readwrite("transitive_rounds", &MatcherCommandOptions::transitive_rounds)
+      .def_readwrite("sequential", &MatcherCommandOptions::sequential)
+      .def_readwrite("spatial", &MatcherCommandOptions::spatial)
       .def_readwrite("block_size", &MatcherCommandOptions::block_size)
       .def_readwrite("use_gpu", &MatcherCommandOptions::use_gpu)
       .def_readwrite("gpu_index", &MatcherCommandOptions::gpu_index)
       .def_readwrite("skip_geometric_verification", &MatcherCommandOptions::skip_geometric_verification)
       .def_readwrite("overwrite", &MatcherCommandOptions::overwrite)
       .def_readwrite("write_empty_pairs", &MatcherCommandOptions::write_empty_pairs)
+      .def_readwrite("database_commit_seconds", &MatcherCommandOptions::database_commit_seconds)
+      .def_readwrite("database_synchronous", &MatcherCommandOptions::database_synchronous)
       .def_readwrite("max_host_memory", &MatcherCommandOptions::max_host_memory)
       .def_readwrite("max_gpu_memory", &MatcherCommandOptions::max_gpu_memory)
       .def_readwrite("pipeline_trace_path", &MatcherCommandOptions::pipeline_trace_path)
@@ -311,6 +348,22 @@ PYBIND11_MODULE(_core, m) {
       [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
         return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
           return colmap::MatchRetrieval(database_path, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());
+  m.def(
+      "match_sequential",
+      [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchSequential(database_path, options, callbacks);
+        });
+      },
+      py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());
+  m.def(
+      "match_spatial",
+      [](const std::string& database_path, const MatcherCommandOptions& options, const py::object& progress) {
+        return RunWithProgress(progress, [&](const colmap::MatchingCallbacks& callbacks) {
+          return colmap::MatchSpatial(database_path, options, callbacks);
         });
       },
       py::arg("database_path"), py::arg("options"), py::arg("progress") = py::none());

@@ -6,7 +6,8 @@
 # Usage: scripts/demo.sh [WORK_DIR]        (default: demo_out/ in the repo)
 # Environment:
 #   CASHASH_BUILD_DIR   build folder (default: build/ in the repo)
-#   CASHASH_MATCHER     cascade (default) or bruteforce
+#   CASHASH_MATCHER     auto (default: the cascade with the rule of the device
+#                       the run matches on), cascade (the same) or bruteforce
 #   CASHASH_SKIP_DEPS=1 do not call install_deps.sh
 #   CASHASH_NUM_VIEWS   number of rendered views (default 10)
 set -euo pipefail
@@ -14,7 +15,7 @@ set -euo pipefail
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 WORK="${1:-$REPO/demo_out}"
 BUILD="${CASHASH_BUILD_DIR:-$REPO/build}"
-MATCHER="${CASHASH_MATCHER:-cascade}"
+MATCHER="${CASHASH_MATCHER:-auto}"
 NUM_VIEWS="${CASHASH_NUM_VIEWS:-10}"
 JOBS="$(nproc)"
 export QT_QPA_PLATFORM=offscreen
@@ -28,9 +29,17 @@ if [[ "${CASHASH_SKIP_DEPS:-0}" != 1 ]]; then
   "$REPO/scripts/install_deps.sh"
 fi
 
-step "Building cashash (Release; CUDA backend if nvcc is found) in $BUILD"
+# The CUDA backend only where a GPU can run it: without one nvcc would
+# compile it for five architectures (minutes on a small machine) that the
+# run cannot use. scripts/test.sh still builds and checks the CUDA code.
+if command -v nvidia-smi >/dev/null && nvidia-smi -L 2>/dev/null | grep -q GPU; then
+  CUDA=AUTO
+else
+  CUDA=OFF
+fi
+step "Building cashash (Release; CUDA backend: $CUDA, OFF where nvidia-smi lists no GPU) in $BUILD"
 mkdir -p "$BUILD"
-cmake -S "$REPO" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >"$BUILD/configure.log" 2>&1 ||
+cmake -S "$REPO" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DCASHASH_CUDA="$CUDA" >"$BUILD/configure.log" 2>&1 ||
   { cat "$BUILD/configure.log"; exit 1; }
 cmake --build "$BUILD" -j"$JOBS" --target cashash
 CASHASH="$BUILD/colmap_bridge/cashash"

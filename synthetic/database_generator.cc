@@ -19,9 +19,10 @@
 
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/geometry/random_sampler.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "colmap_bridge/colmap38_schema.h"
 #include "colmap_bridge/database.h"
+#include "colmap_bridge/position_priors.h"
 #include "synthetic/sift_descriptor_variation.h"
 #include "synthetic/synthetic_street_scene.h"
 
@@ -45,6 +46,7 @@ constexpr int kSimpleRadialModel = 2;
 constexpr uint64_t kImageTag = 0x494d414745000000ULL;
 constexpr uint64_t kPointDescriptorTag = 0x504f494e54000000ULL;
 constexpr uint64_t kStretchTag = 0x5354524554434800ULL;
+constexpr uint64_t kFeatureCountTag = 0x434f554e54000000ULL;
 // Cells (street units) that share one descriptor order: about what an image
 // sees, so that images that see nothing in common rarely share an order.
 constexpr int64_t kCellsPerStretch = 12;
@@ -240,6 +242,7 @@ struct GeneratedImage {
   Keypoints keypoints;
   FeatureDescriptors descriptors;
   size_t observed = 0;  // features that are 3D points
+  size_t planned = 0;   // 3D points it was meant to see
 };
 
 class ImageGenerator {
@@ -249,23 +252,20 @@ class ImageGenerator {
       : options_(options),
         pool_(pool),
         scene_(scene),
-        point_descriptors_(pool.size(), options.random_seed),
-        planned_points_(static_cast<size_t>(
-            std::llround(options.num_features * (1.0 - options.distractor_ratio)))) {}
-
-  size_t planned_points() const { return planned_points_; }
+        point_descriptors_(pool.size(), options.random_seed) {}
 
   GeneratedImage Generate(int image_index) const {
     SplitMix64 rng(DeriveSeed(options_.random_seed ^ kImageTag, static_cast<uint64_t>(image_index)));
+    const size_t n = static_cast<size_t>(FeatureCountOfImage(options_, image_index));
+    const size_t planned_points = static_cast<size_t>(std::llround(n * (1.0 - options_.distractor_ratio)));
     std::vector<PointObservation> seen = scene_.Observe(image_index);
     // A detector does not fire on every point in view: keep a random subset.
-    if (seen.size() > planned_points_) {
-      for (size_t i = 0; i < planned_points_; ++i) {
+    if (seen.size() > planned_points) {
+      for (size_t i = 0; i < planned_points; ++i) {
         std::swap(seen[i], seen[i + rng.Below(static_cast<uint32_t>(seen.size() - i))]);
       }
-      seen.resize(planned_points_);
+      seen.resize(planned_points);
     }
-    const size_t n = static_cast<size_t>(options_.num_features);
     // Features are stored in a random order: rows say nothing about points.
     std::vector<uint32_t> slots(n);
     std::iota(slots.begin(), slots.end(), 0u);
@@ -273,6 +273,7 @@ class ImageGenerator {
 
     GeneratedImage image;
     image.observed = seen.size();
+    image.planned = planned_points;
     image.keypoints.resize(n);
     image.descriptors.data.resize(n * kDescriptorDim);
     StretchPermutations permutations(options_.random_seed);
@@ -317,7 +318,6 @@ class ImageGenerator {
   const SourcePool& pool_;
   const SyntheticStreetScene& scene_;
   PointDescriptors point_descriptors_;
-  size_t planned_points_;
 };
 
 const char* ModelName(int model_id) {
@@ -362,7 +362,43 @@ void RemoveDatabaseFiles(const std::string& path) {
 
 bool Finite(double value) { return std::isfinite(value); }
 
+// Where the "gps" street lies: latitude, longitude (degrees), altitude (m).
+constexpr double kGpsOriginLatitude = 47.3769;
+constexpr double kGpsOriginLongitude = 8.5417;
+constexpr double kGpsOriginAltitude = 408.0;
+constexpr double kEarthRadius = 6378137.0;  // metres; a sphere is close enough for a few km
+
+// The true centre of image k as --position_priors asks: scene x along the
+// street is east, its depth axis z north, and its y (down) the negated
+// height.
+PositionPrior PriorOfImage(const SyntheticStreetScene& scene, int image_index, const std::string& kind) {
+  const Eigen::Vector3d centre = scene.Centre(image_index);
+  const Eigen::Vector3d enu(centre.x(), centre.z(), -centre.y());
+  PositionPrior prior;
+  if (kind == "gps") {
+    const double lat0 = kGpsOriginLatitude * M_PI / 180.0;
+    prior.position = Eigen::Vector3d(kGpsOriginLatitude + enu.y() / kEarthRadius * 180.0 / M_PI,
+                                     kGpsOriginLongitude + enu.x() / (kEarthRadius * std::cos(lat0)) * 180.0 / M_PI,
+                                     kGpsOriginAltitude + enu.z());
+    prior.coordinate_system = PriorCoordinateSystem::kWgs84;
+  } else {
+    prior.position = enu;
+    prior.coordinate_system = PriorCoordinateSystem::kCartesian;
+  }
+  return prior;
+}
+
 }  // namespace
+
+int FeatureCountOfImage(const DatabaseGeneratorOptions& options, int image_index) {
+  if (options.num_features_distribution != "extraction") return options.num_features;
+  const int low = options.min_num_features > 0 ? options.min_num_features : std::max(1, options.num_features / 8);
+  SplitMix64 rng(DeriveSeed(options.random_seed ^ kFeatureCountTag, static_cast<uint64_t>(image_index)));
+  if (UniformUnit(rng) < options.num_features_at_cap_share || low >= options.num_features) {
+    return options.num_features;
+  }
+  return low + static_cast<int>(rng.Below(static_cast<uint32_t>(options.num_features - low)));
+}
 
 std::string DatabaseGeneratorOptions::Check() const {
   if (database_path.empty()) return "--database_path is required";
@@ -373,6 +409,15 @@ std::string DatabaseGeneratorOptions::Check() const {
   }
   if (num_images < 1 || num_images > 2147483646) return "--num_images must be between 1 and 2147483646";
   if (num_features < 1 || num_features > (1 << 24)) return "--num_features must be between 1 and 16777216";
+  if (num_features_distribution != "equal" && num_features_distribution != "extraction") {
+    return "--num_features_distribution must be equal or extraction, got '" + num_features_distribution + "'";
+  }
+  if (min_num_features < 0 || min_num_features > num_features) {
+    return "--min_num_features must be between 0 (num_features / 8) and --num_features";
+  }
+  if (!Finite(num_features_at_cap_share) || num_features_at_cap_share < 0 || num_features_at_cap_share > 1) {
+    return "--num_features_at_cap_share must be between 0 and 1";
+  }
   if (num_points < 0) return "--num_points must be >= 0 (0 = as many as the images need)";
   if (image_width < 16 || image_height < 16 || image_width > 100000 || image_height > 100000) {
     return "--image_width and --image_height must be between 16 and 100000";
@@ -393,6 +438,9 @@ std::string DatabaseGeneratorOptions::Check() const {
     return "--descriptor_noise must be between 0 and 255";
   }
   if (images_per_transaction < 1) return "--images_per_transaction must be >= 1";
+  if (position_priors != "none" && position_priors != "cartesian" && position_priors != "gps") {
+    return "--position_priors must be none, cartesian or gps, got '" + position_priors + "'";
+  }
   if (num_threads == 0 || num_threads < -1) return "--num_threads must be -1 (all cores) or at least 1";
   if (source_max_images < 1 || source_max_images > 1000) return "--source_max_images must be between 1 and 1000";
   return "";
@@ -465,11 +513,16 @@ GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
         const GeneratedImage& image = batch[static_cast<size_t>(k - first)];
         const camera_t camera_id = database.WriteCamera(camera);
         const image_t image_id = database.WriteImage(ImageName(k, options.num_images), camera_id);
+        if (options.position_priors != "none") {
+          WritePositionPrior(database, image_id, camera_id, PriorOfImage(scene, k, options.position_priors));
+        }
         database.WriteKeypoints(image_id, image.keypoints, pool.keypoint_columns);
         database.WriteDescriptors(image_id, image.descriptors);
         summary.num_features += static_cast<int64_t>(image.keypoints.size());
         summary.observed_features += static_cast<int64_t>(image.observed);
-        if (image.observed < generator.planned_points()) ++summary.images_short_of_points;
+        if (image.observed < image.planned) ++summary.images_short_of_points;
+        summary.min_features = k == 0 ? image.keypoints.size() : std::min(summary.min_features, image.keypoints.size());
+        summary.max_features = std::max(summary.max_features, image.keypoints.size());
       }
       database.Commit();
       summary.num_images = end;

@@ -7,6 +7,14 @@
 // places fill each image up to exactly num_features (what a detector finds
 // on clutter, sky, cars). Images are generated and written one at a time:
 // memory does not grow with the number of images.
+//
+// Feature counts: by default every image has num_features. With
+// num_features_distribution "extraction" they look like a SIFT extraction
+// (COLMAP's feature_extractor, whose --SiftExtraction.max_num_features caps
+// every image): a share of the images sits at the cap, num_features, and
+// the rest spread evenly between min_num_features and the cap (see
+// FeatureCountOfImage). Textured photographs fill the extractor's cap;
+// plain walls, sky, blur and small images fall below it, some far below.
 #pragma once
 
 #include <cstdint>
@@ -20,7 +28,13 @@ struct DatabaseGeneratorOptions {
   std::string database_path;         // created; must not exist
   std::string source_database_path;  // COLMAP database with SIFT features
   int num_images = 0;
-  int num_features = 8192;  // per image, exactly
+  int num_features = 8192;  // per image: exactly ("equal"), or the cap ("extraction")
+  // "equal": every image has num_features. "extraction": a share
+  // num_features_at_cap_share of the images has num_features, the others
+  // a count drawn evenly from [min_num_features, num_features).
+  std::string num_features_distribution = "equal";
+  int min_num_features = 0;                // "extraction": 0 = num_features / 8
+  double num_features_at_cap_share = 0.4;  // "extraction": images at the cap
   // 3D points of the whole scene; 0 chooses enough for every image to see
   // num_features x (1 - distractor_ratio) of them.
   int64_t num_points = 0;
@@ -42,6 +56,12 @@ struct DatabaseGeneratorOptions {
   // Views of one point in several of them are kept once; finding those costs
   // a matching of every pair of them.
   int source_max_images = 24;
+  // Position priors of the images, for spatial matching: "none", "cartesian"
+  // (the true camera centres as east, north, up in street units, taken as
+  // metres) or "gps" (the same centres as WGS84 latitude, longitude and
+  // altitude around kGpsOrigin). This schema (COLMAP 3.8) keeps them in the
+  // prior_tx, prior_ty, prior_tz columns of table images.
+  std::string position_priors = "none";
   // When set: a folder that receives the true cameras as a COLMAP text model
   // (cameras.txt, images.txt, an empty points3D.txt), for comparing a
   // reconstruction (scripts/summarize_model.py --gt).
@@ -60,6 +80,8 @@ struct GeneratorProgress {
 struct GeneratorSummary {
   int num_images = 0;
   int64_t num_features = 0;      // all images together
+  size_t min_features = 0;       // of one image
+  size_t max_features = 0;
   int64_t num_scene_points = 0;  // 3D points of the scene
   int64_t observed_features = 0;  // features that are projections of 3D points
   int images_short_of_points = 0;  // saw fewer points than planned (filled up with distractors)
@@ -70,6 +92,12 @@ struct GeneratorSummary {
   uint64_t file_bytes = 0;
   double seconds = 0;
 };
+
+// The features of image `image_index` (0-based) under the options'
+// distribution: the same for a seed whatever the threads or the other
+// images, drawn from a random stream of its own so that "equal" databases
+// stay as they were. Expects checked options.
+int FeatureCountOfImage(const DatabaseGeneratorOptions& options, int image_index);
 
 // Throws std::invalid_argument for bad options and std::runtime_error
 // (DatabaseError included) for an unusable source or output; a partly

@@ -22,7 +22,16 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
       "source_database_path", po::value(&o.source_database_path),
       "COLMAP database with SIFT features whose descriptors are sampled (only read)")(
       "num_images", po::value(&o.num_images), "Images (cameras along a street)")(
-      "num_features", po::value(&o.num_features)->default_value(o.num_features), "Features per image, exactly")(
+      "num_features", po::value(&o.num_features)->default_value(o.num_features),
+      "Features per image: exactly (equal), or the extractor's cap (extraction)")(
+      "num_features_distribution", po::value(&o.num_features_distribution)->default_value(o.num_features_distribution),
+      "equal: every image has num_features. extraction: like COLMAP's SIFT extraction, where textured images "
+      "fill the cap and plain, blurred or small ones fall below it: a share num_features_at_cap_share of the "
+      "images has num_features, the others a count drawn evenly from [min_num_features, num_features)")(
+      "min_num_features", po::value(&o.min_num_features)->default_value(o.min_num_features),
+      "extraction: fewest features of an image; 0 = num_features / 8")(
+      "num_features_at_cap_share", po::value(&o.num_features_at_cap_share)->default_value(o.num_features_at_cap_share),
+      "extraction: share of the images at num_features")(
       "num_points", po::value(&o.num_points)->default_value(o.num_points),
       "3D points of the scene; 0 = enough for each image to see num_features x (1 - distractor_ratio)")(
       "random_seed", po::value(&o.random_seed)->default_value(o.random_seed), "Seed: same seed, same database")(
@@ -44,6 +53,9 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
       "Threads making images (-1 = all cores); any count writes the same database")(
       "source_max_images", po::value(&o.source_max_images)->default_value(o.source_max_images),
       "Source images whose descriptors are used (their repeated views of a point are kept once)")(
+      "position_priors", po::value(&o.position_priors)->default_value(o.position_priors),
+      "Position priors of the images (for spatial_matcher): none, cartesian (true centres, street units as "
+      "metres) or gps (the same as WGS84 latitude, longitude, altitude)")(
       "ground_truth_path", po::value(&o.ground_truth_path),
       "Folder for the true cameras as a COLMAP text model (optional)");
   po::variables_map vm;
@@ -74,8 +86,14 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
               << "% of the features are 3D points, " << summary.images_short_of_points
               << " images saw fewer points than planned; keypoints with " << summary.keypoint_columns
               << " columns" << std::endl;
-    std::cout << "Wrote " << summary.num_images << " images x " << o.num_features << " features to "
-              << o.database_path << ": " << std::setprecision(1) << mib << " MiB in " << std::setprecision(2)
+    std::cout << "Wrote " << summary.num_images << " images x ";
+    if (summary.min_features == summary.max_features) {
+      std::cout << summary.max_features << " features";
+    } else {
+      std::cout << summary.min_features << "-" << summary.max_features << " features (mean " << std::setprecision(0)
+                << static_cast<double>(summary.num_features) / std::max(1, summary.num_images) << ")";
+    }
+    std::cout << " to " << o.database_path << ": " << std::setprecision(1) << mib << " MiB in " << std::setprecision(2)
               << summary.seconds << " s" << std::endl;
   } catch (const std::exception& e) {
     std::cerr << "ERROR: " << e.what() << std::endl;

@@ -1,5 +1,6 @@
 #include "colmap_bridge/api/command_options.h"
 
+#include <algorithm>
 #include <iostream>
 #include <sstream>
 
@@ -7,6 +8,7 @@
 
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/run_resolution.h"
+#include "colmap_bridge/database.h"
 
 namespace po = boost::program_options;
 
@@ -72,6 +74,50 @@ void AddRetrievalOptions(OptionTable* table, MatcherCommandOptions* o) {
              "verified: i-k), as COLMAP's transitive_matcher; 0 = none");
 }
 
+// COLMAP's SequentialMatching.* options, with its names and defaults.
+void AddSequentialMatchingOptions(OptionTable* table, SequentialPairingOptions* o) {
+  table->Add({"SequentialMatching.overlap"}, &o->overlap, "Images after each image (in name order) it is matched with");
+  table->Add({"SequentialMatching.quadratic_overlap"}, &o->quadratic_overlap,
+             "Match the images 1, 2, 4, ..., 2^(overlap-1) places on instead of the next overlap images");
+  table->Add({"SequentialMatching.expand_rig_images"}, &o->expand_rig_images,
+             "Match the images of a rig frame with each other and with the neighbouring frames' images (databases "
+             "with rigs and frames)");
+  table->Add({"SequentialMatching.loop_detection"}, &o->loop_detection,
+             "Also match every loop_detection_period-th image with the images most like it (image retrieval from "
+             "the cascade's codes; no vocabulary tree)");
+  table->Add({"SequentialMatching.loop_detection_period"}, &o->loop_detection_period,
+             "Every how many images (in name order) a loop query is made");
+  table->Add({"SequentialMatching.loop_detection_num_images"}, &o->loop_detection_num_images,
+             "Images retrieved per loop query");
+  table->Add({"SequentialMatching.loop_detection_min_index_distance"}, &o->loop_detection_min_index_distance,
+             "Retrieved images fewer than this many places from the query are no loop pairs (0: no limit)");
+  const std::string ignored = " (COLMAP's vocabulary tree; accepted and not used)";
+  table->Add({"SequentialMatching.loop_detection_num_nearest_neighbors"}, &o->loop_detection_num_nearest_neighbors,
+             "Visual words per query feature" + ignored);
+  table->Add({"SequentialMatching.loop_detection_num_checks"}, &o->loop_detection_num_checks,
+             "Nearest-neighbour checks of the tree search" + ignored);
+  table->Add({"SequentialMatching.loop_detection_num_images_after_verification"},
+             &o->loop_detection_num_images_after_verification, "Images kept after spatial verification" + ignored);
+  table->Add({"SequentialMatching.loop_detection_max_num_features"}, &o->loop_detection_max_num_features,
+             "Features per image indexed" + ignored);
+  table->Add({"SequentialMatching.vocab_tree_path"}, &o->vocab_tree_path, "Vocabulary tree file" + ignored);
+  table->Add({"SequentialMatching.num_threads"}, &o->num_threads, "Threads of the loop retrieval, -1 for all cores");
+}
+
+// COLMAP's SpatialMatching.* options, with its names and defaults.
+void AddSpatialMatchingOptions(OptionTable* table, SpatialPairingOptions* o) {
+  table->Add({"SpatialMatching.ignore_z"}, &o->ignore_z, "Compare positions without their height");
+  table->Add({"SpatialMatching.max_num_neighbors"}, &o->max_num_neighbors, "Most neighbours matched per image");
+  table->Add({"SpatialMatching.min_num_neighbors"}, &o->min_num_neighbors,
+             "Fewest neighbours matched per image, beyond max_distance if need be");
+  table->Add({"SpatialMatching.max_distance"}, &o->max_distance,
+             "Largest distance to a neighbour (metres for GPS priors, else the priors' unit)");
+  table->Add({"SpatialMatching.is_gps"}, &o->is_gps,
+             "COLMAP 3.8 databases: read the prior_tx, prior_ty, prior_tz columns of table images as latitude, "
+             "longitude, altitude (0: as Cartesian); pose_priors name their own coordinate system");
+  table->Add({"SpatialMatching.num_threads"}, &o->num_threads, "Threads of the neighbour search, -1 for all cores");
+}
+
 }  // namespace
 
 // One function because the option table reads best as one list in --help
@@ -90,11 +136,20 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   if (command == "retrieval_matcher" || command == "vocab_tree_matcher") {
     AddRetrievalOptions(&table, &o);
   }
+  if (command == "sequential_matcher") AddSequentialMatchingOptions(&table, &o.sequential);
+  if (command == "spatial_matcher") AddSpatialMatchingOptions(&table, &o.spatial);
   table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
   table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
   table.Add({"write_empty_pairs"}, &o.write_empty_pairs,
             "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
             "them in table cashash_empty_pairs only, so that a rerun skips them)");
+  table.Add({"database_commit_seconds"}, &o.database_commit_seconds,
+            "Seconds a write transaction takes chunks before it commits (0: one transaction per chunk); a kill "
+            "loses the chunks not yet committed, which a rerun matches again");
+  table.Add({"database_synchronous"}, &o.database_synchronous,
+            "SQLite's synchronous setting for writing: FULL (safe), NORMAL (a power loss or OS crash may undo "
+            "the last commits; the file stays valid) or OFF (a power loss or OS crash may damage the database; "
+            "COLMAP's own setting)");
 
   table.Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o.sift.num_threads,
             "CPU threads, -1 for all cores");
@@ -221,6 +276,10 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
 
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
   if (o.database_path.empty()) return "--database_path is required";
+  return CheckRunOptions(o);
+}
+
+std::string CheckRunOptions(const MatcherCommandOptions& o) {
   // 0: chosen for the run.
   if (o.block_size < 0 || o.block_size == 1) return "--ExhaustiveMatching.block_size must be >= 2";
   for (const auto& [name, text] : {std::make_pair("--max_host_memory", &o.max_host_memory),
@@ -230,6 +289,9 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
       return std::string(name) + " must be a size such as 16G, 512M or 4096 (MiB), got '" + *text + "'";
     }
   }
+  std::vector<int> gpu_indices;
+  const std::string gpu_index_problem = ParseGpuIndices(o.gpu_index, &gpu_indices);
+  if (!gpu_index_problem.empty()) return gpu_index_problem;
   if (o.guided_matching) return "--FeatureMatching.guided_matching is not supported by cashash";
   if (o.transitive_rounds < 0) {
     return "--TransitiveMatching.num_iterations must be >= 0, got " + std::to_string(o.transitive_rounds);
@@ -238,10 +300,21 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
     const std::string retrieval_problem = o.retrieval.Check();
     if (!retrieval_problem.empty()) return retrieval_problem;
   }
+  if (!(o.database_commit_seconds >= 0 && o.database_commit_seconds <= 3600)) {
+    return "--database_commit_seconds must be 0 to 3600, got " + std::to_string(o.database_commit_seconds);
+  }
+  DiskSync sync;
+  if (!ParseDiskSync(o.database_synchronous, &sync)) {
+    return "--database_synchronous must be FULL, NORMAL or OFF, got '" + o.database_synchronous + "'";
+  }
   if (o.gpu_verifications_in_flight < 1 || o.gpu_verifications_in_flight > 8) {
     return "gpu_verifications_in_flight must be 1 to 8, got " + std::to_string(o.gpu_verifications_in_flight);
   }
   std::string message = o.sift.Check();
+  if (!message.empty()) return message;
+  message = o.sequential.Check();
+  if (!message.empty()) return message;
+  message = o.spatial.Check();
   if (!message.empty()) return message;
   CasHashOptions cashash = o.cashash;
   if (cashash.exact_rematch_min_matches == kRematchMinMatchesChosen) {
@@ -259,6 +332,31 @@ std::string CheckMatcherCommandOptions(const MatcherCommandOptions& o) {
     }
   }
   return o.two_view.Check();
+}
+
+std::string ParseGpuIndices(const std::string& gpu_index, std::vector<int>* indices) {
+  indices->clear();
+  size_t at = 0;
+  while (at <= gpu_index.size()) {
+    const size_t comma = std::min(gpu_index.find(',', at), gpu_index.size());
+    const std::string item = gpu_index.substr(at, comma - at);
+    size_t used = 0;
+    int value = -1;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size()) {
+      indices->clear();
+      return "--FeatureMatching.gpu_index: expected an integer or a comma-separated list, got '" +
+             gpu_index + "'";
+    }
+    value = std::max(0, value);
+    if (std::find(indices->begin(), indices->end(), value) == indices->end()) indices->push_back(value);
+    at = comma + 1;
+  }
+  return "";
 }
 
 }  // namespace colmap

@@ -10,6 +10,8 @@
 #include "cashash/matching/guided_matching.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/geometry/two_view_geometry.h"
+#include "cashash/pipeline/sequential_pairs.h"
+#include "cashash/pipeline/spatial_pairs.h"
 #include "cashash/retrieval/retrieval_options.h"
 
 namespace cashash {
@@ -67,7 +69,18 @@ struct MatcherCommandOptions {
   // COLMAP writes rows for every matched pair, rows = 0 included; 0 writes
   // only pairs with matches and records the others compactly for resuming.
   bool write_empty_pairs = true;
+  // The writer's transactions: chunks are committed together once a
+  // transaction has been open this many seconds (0: each chunk alone). A
+  // kill -9 loses the chunks not yet committed (matched again on resume).
+  double database_commit_seconds = 1.0;
+  // PRAGMA synchronous of the writer: FULL (SQLite's default), NORMAL or
+  // OFF; DiskSync (database.h) says what NORMAL and OFF risk on a power loss.
+  std::string database_synchronous = "FULL";
   uint64_t random_seed = 0;
+  // sequential_matcher only (SequentialMatching.*).
+  SequentialPairingOptions sequential;
+  // spatial_matcher only (SpatialMatching.*).
+  SpatialPairingOptions spatial;
   // matches_importer only.
   std::string match_list_path;
   std::string match_type = "pairs";
@@ -94,13 +107,23 @@ struct MatcherCommandOptions {
 enum class ParseOutcome { kRun, kHelpShown, kError };
 
 // Parses argv (after the command name). On error prints one line naming the
-// option to stderr. `command` is "exhaustive_matcher", "guided_matcher" or
-// "matches_importer".
+// option to stderr. `command` is "exhaustive_matcher", "guided_matcher",
+// "matches_importer", "sequential_matcher", "spatial_matcher",
+// "retrieval_matcher" or "vocab_tree_matcher".
 ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
                                         MatcherCommandOptions* options);
 
 // Checks every option's range; returns "" or a message naming the option.
 std::string CheckMatcherCommandOptions(const MatcherCommandOptions& options);
+
+// The same for a run without a database (cashash.match): every option but
+// database_path.
+std::string CheckRunOptions(const MatcherCommandOptions& options);
+
+// The devices of --FeatureMatching.gpu_index: "-1" (the first device, 0),
+// "2", or a comma-separated list "0,1" (one matcher per device), repeats
+// dropped. The one parser of the option: returns "" or a message naming it.
+std::string ParseGpuIndices(const std::string& gpu_index, std::vector<int>* indices);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -12,7 +12,8 @@
 #include "cashash/pipeline/pair_generation.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
-#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/pair_selection.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/run_plan.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -26,6 +27,18 @@ using distributed::MpiAbortJob;
 using distributed::MpiMin;
 using distributed::MpiRank;
 using distributed::MpiSize;
+
+void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.warning) {
+    callbacks.warning(text);
+  } else {
+    std::cerr << "WARNING: " << text << std::endl;
+  }
+}
+
+void Info(const MatchingCallbacks& callbacks, const std::string& text) {
+  if (callbacks.info) callbacks.info(text);
+}
 
 namespace {
 
@@ -84,21 +97,23 @@ std::vector<size_t> RowsOfImages(DatabaseFeatureSource& source, const std::vecto
 }
 
 // What the database and the machine say about a run, for ResolveRun: the
-// images' feature rows, the run's device and, for an exhaustive run, the
-// memory to size its blocks and groups from (the smallest over MPI ranks,
-// so that all cut the same).
+// images' feature rows, the run's usable devices and, for an exhaustive
+// run, the memory to size its blocks and groups from; reduced over MPI
+// ranks, so that all resolve the same run.
 RunFacts GatherRunFacts(const MatcherCommandOptions& options, std::vector<size_t> rows_per_image, bool exhaustive) {
   RunFacts facts;
   facts.rows_per_image = std::move(rows_per_image);
   facts.exhaustive = exhaustive;
-  facts.gpu_index = GpuIndexForRun(options);
+  RunDevices devices = ChooseRunDevices(options, MachineDeviceFacts());
+  facts.gpu_indices = std::move(devices.gpu_indices);
+  facts.device_warnings = std::move(devices.warnings);
   if (exhaustive) {
     facts.physical_memory_bytes = PhysicalMemoryBytes();
-    if (facts.gpu_index >= 0 && options.max_gpu_memory.empty()) {
-      facts.gpu_free_bytes = GpuFreeMemoryBytes(facts.gpu_index);
+    if (!facts.gpu_indices.empty() && options.max_gpu_memory.empty()) {
+      facts.gpu_free_bytes = GpuFreeMemoryBytes(facts.gpu_indices.front());
     }
-    facts.smallest_over_ranks = [](uint64_t value) { return MpiMin(value); };
   }
+  facts.smallest_over_ranks = [](uint64_t value) { return MpiMin(value); };
   return facts;
 }
 
@@ -194,15 +209,34 @@ MatchingSummary EndAllRanksOnError(Body body) {
 
 }  // namespace
 
-MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
-                                const MatchingCallbacks& all_callbacks) {
+namespace {
+
+// What each public entry point does first, once: under MPI an error on any
+// rank ends them all; this rank's callbacks; the options checked as the
+// command line checks them; the database opened (its data warnings through
+// the callbacks). `body(checked options, source, clock, callbacks)` does
+// the rest.
+template <typename Body>
+MatchingSummary RunOnDatabase(const std::string& database_path, const MatcherCommandOptions& options,
+                              const MatchingCallbacks& all_callbacks, Body body) {
   return EndAllRanksOnError([&]() {
     PhaseClock clock;
     const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
     const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path);
+    DatabaseFeatureSource source(database_path, [&callbacks](const std::string& text) { Warn(callbacks, text); });
     if (callbacks.database_opened) callbacks.database_opened();
     clock.Mark("opening the database");
+    return body(checked, source, clock, callbacks);
+  });
+}
+
+}  // namespace
+
+MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& all_callbacks) {
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
     const std::vector<image_t> image_ids = ImageIds(source);
     if (image_ids.size() < 2) {
       Warn(callbacks, "table images of " + database_path + " holds " + std::to_string(image_ids.size()) + " image" +
@@ -216,13 +250,11 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
     RunRequest request;
     request.run = ResolveAndReport(checked, facts, callbacks);
     clock.Mark("starting the GPU and sizing the run");
-    const ScheduleSizes& sizes = request.run.schedule;
     const size_t n = image_ids.size();
     request.source = &source;
     request.image_ids = image_ids;
-    request.chunks = ScheduledPairChunks(image_ids, sizes.block_size, sizes.blocks_per_group);
+    request.exhaustive = true;
     request.num_pairs_requested = n * (n - 1) / 2;
-    request.cache_groups = true;
     request.mean = std::move(mean);
     request.clock = clock;
     return MatchChunks(std::move(request), callbacks);
@@ -232,31 +264,68 @@ MatchingSummary MatchExhaustive(const std::string& database_path, const MatcherC
 MatchingSummary MatchPairs(const std::string& database_path,
                            const std::vector<std::pair<std::string, std::string>>& image_name_pairs,
                            const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
-  return EndAllRanksOnError([&]() {
-    PhaseClock clock;
-    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
-    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path);
-    if (callbacks.database_opened) callbacks.database_opened();
-    clock.Mark("opening the database");
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
     return MatchIdPairs(checked, source, PairsOfNames(image_name_pairs, source), clock, callbacks);
   });
 }
 
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
                               const MatcherCommandOptions& options, const MatchingCallbacks& all_callbacks) {
-  return EndAllRanksOnError([&]() {
-    PhaseClock clock;
-    const MatchingCallbacks callbacks = CallbacksOfRank(all_callbacks);
-    const MatcherCommandOptions checked = CheckedOptions(database_path, options);
-    DatabaseFeatureSource source(database_path);
-    if (callbacks.database_opened) callbacks.database_opened();
-    clock.Mark("opening the database");
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
     std::unordered_map<std::string, image_t> ids_by_name;
     for (const Image& image : source.images()) ids_by_name.emplace(image.name, image.image_id);
     std::ifstream file(match_list_path);
     if (!file) throw std::runtime_error("cannot open --match_list_path " + match_list_path);
     return MatchIdPairs(checked, source, ParsePairList(file, match_list_path, ids_by_name), clock, callbacks);
+  });
+}
+
+namespace {
+
+// Reports the chosen pairs and matches them; the pair list's path.
+MatchingSummary MatchSelectedPairs(const MatcherCommandOptions& options, DatabaseFeatureSource& source,
+                                   const SelectedPairs& selected, PhaseClock clock,
+                                   const MatchingCallbacks& callbacks) {
+  for (const std::string& note : selected.notes) Info(callbacks, note);
+  for (const std::string& warning : selected.warnings) Warn(callbacks, warning);
+  clock.Mark("choosing the pairs");
+  if (selected.pairs.empty()) {
+    Info(callbacks, "Nothing to match.");
+    return MatchingSummary();
+  }
+  return MatchIdPairs(options, source, selected.pairs, clock, callbacks);
+}
+
+}  // namespace
+
+MatchingSummary MatchSequential(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& all_callbacks, ImageRetrieval* retrieval) {
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
+    std::unique_ptr<ImageRetrieval> own_retrieval;
+    if (checked.sequential.loop_detection && retrieval == nullptr) {
+      own_retrieval = CreateImageRetrievalForRun(checked, database_path);
+      if (!own_retrieval) throw std::invalid_argument(LoopDetectionUnavailableMessage());
+      retrieval = own_retrieval.get();
+    }
+    const SelectedPairs selected =
+        SelectSequentialPairs(source.database(), source.images(), checked.sequential, retrieval);
+    return MatchSelectedPairs(checked, source, selected, clock, callbacks);
+  });
+}
+
+MatchingSummary MatchSpatial(const std::string& database_path, const MatcherCommandOptions& options,
+                             const MatchingCallbacks& all_callbacks) {
+  return RunOnDatabase(database_path, options, all_callbacks,
+                       [&](const MatcherCommandOptions& checked, DatabaseFeatureSource& source, PhaseClock clock,
+                           const MatchingCallbacks& callbacks) {
+    const SelectedPairs selected = SelectSpatialPairs(source.database(), source.images(), checked.spatial);
+    return MatchSelectedPairs(checked, source, selected, clock, callbacks);
   });
 }
 

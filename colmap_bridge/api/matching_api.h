@@ -1,5 +1,5 @@
-// The library entry points behind `cashash exhaustive_matcher` and
-// `cashash matches_importer`: match the pairs of a COLMAP database and write
+// The library entry points behind `cashash exhaustive_matcher`,
+// `sequential_matcher`, `spatial_matcher` and `matches_importer`: match the pairs of a COLMAP database and write
 // matches and two_view_geometries. The command line and the Python module
 // both call these, so they behave and fail alike.
 #pragma once
@@ -14,8 +14,10 @@
 #include "cashash/base/phase_clock.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
+#include "cashash/pipeline/image_retrieval.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/run_gpu_resources.h"
 #include "colmap_bridge/api/run_resolution.h"
 
 namespace cashash {
@@ -41,6 +43,11 @@ struct MatchingCallbacks {
   const std::atomic<bool>* stop = nullptr;
 };
 
+// The one way a run says something: `warning` (stderr, "WARNING: ...",
+// where the callbacks set none) and `info` (nothing where none is set).
+void Warn(const MatchingCallbacks& callbacks, const std::string& text);
+void Info(const MatchingCallbacks& callbacks, const std::string& text);
+
 struct MatchingSummary {
   size_t pairs_requested = 0;  // pairs asked for, including those skipped
   size_t pairs_skipped = 0;    // already in the database and not overwritten
@@ -53,6 +60,11 @@ struct MatchingSummary {
   size_t gpu_total_bytes = 0;
   size_t gpu_used_before_bytes = 0;  // in use before the matcher was made
   size_t gpu_peak_used_bytes = 0;    // most in use at a sample
+  // The run's own books of GPU memory (RunGpuResources): what its owner of
+  // the device's memory held at most against the budget, and how often a
+  // GPU part went on on the CPU for want of device memory (0: never).
+  RunGpuMemoryBooks gpu_memory;
+  size_t gpu_memory_fallbacks = 0;
   // Where the call's time outside the pipeline went, phase by phase: before
   // it (opening the database, starting the GPU, making the matcher) and
   // after it (closing the database, freeing GPU memory).
@@ -80,6 +92,23 @@ MatchingSummary MatchPairs(const std::string& database_path,
 MatchingSummary MatchPairList(const std::string& database_path, const std::string& match_list_path,
                               const MatcherCommandOptions& options, const MatchingCallbacks& callbacks = {});
 
+// Matches the pairs of COLMAP's sequential_matcher (options.sequential):
+// images in name order, each with its next overlap images (quadratic
+// overlap: 1, 2, 4, ... places on), rig frames expanded; with
+// loop_detection also every loop_detection_period-th image with the images
+// `retrieval` finds most like it. Without a retrieval of the caller's, the
+// run's own (CreateImageRetrievalForRun, pair_selection.h); where there is
+// none, loop detection is refused (std::invalid_argument naming the option).
+MatchingSummary MatchSequential(const std::string& database_path, const MatcherCommandOptions& options,
+                                const MatchingCallbacks& callbacks = {}, ImageRetrieval* retrieval = nullptr);
+
+// Matches the pairs of COLMAP's spatial_matcher (options.spatial): each
+// image with a position prior with its nearest neighbours by that prior.
+// Images without a prior are named in a warning and left out, as COLMAP
+// leaves them out; none with one is an error (std::runtime_error).
+MatchingSummary MatchSpatial(const std::string& database_path, const MatcherCommandOptions& options,
+                             const MatchingCallbacks& callbacks = {});
+
 // The matcher backend the resolved run asks for: the GPU one when use_gpu is
 // set and a device is usable (each GPU matcher within
 // run.gpu_memory_budget_bytes), else the CPU one (reporting why through
@@ -93,10 +122,14 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 // verify (with fewer cascade matches than the window's upper bound
 // exact_rematch_max_matches, where that is set) are matched again by brute
 // force, from the descriptors the cascade holds, on the matching thread or
-// deferred as run.rematch_on_matching_thread says.
+// deferred as run.rematch_on_matching_thread says. With `gpu`, every GPU
+// part takes its device memory from that device's owner in it (one budget
+// for the run); without, each GPU matcher owns its memory under
+// run.gpu_memory_budget_bytes.
 std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                     const std::function<void(const std::string&)>& warning,
-                                                    const std::shared_ptr<ExactRematchCounts>& counts = nullptr);
+                                                    const std::shared_ptr<ExactRematchCounts>& counts = nullptr,
+                                                    RunGpuResources* gpu = nullptr);
 
 }  // namespace colmap
 }  // namespace cashash

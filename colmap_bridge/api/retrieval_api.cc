@@ -11,7 +11,7 @@
 
 #include "cashash/base/pair_id.h"
 #include "cashash/matching/mean_descriptor.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "colmap_bridge/api/run_plan.h"
 #include "colmap_bridge/database.h"
 

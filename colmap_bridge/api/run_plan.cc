@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <iomanip>
-#include <iostream>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -11,31 +10,29 @@
 #include <string>
 #include <utility>
 
+#include "cashash/base/caching_block_allocator.h"
 #include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/retaining_feature_matcher.h"
 #include "cashash/matching/guided_matching.h"
 #include "cashash/pipeline/feature_cache.h"
+#include "cashash/pipeline/pair_chunk_source.h"
+#include "cashash/pipeline/pair_triangle.h"
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/gpu_memory_query.h"
-#include "colmap_bridge/api/matcher_factory.h"
+#include "colmap_bridge/api/run_gpu_resources.h"
 #include "colmap_bridge/api/verifier_selection.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "distributed/mpi_distributed.h"
 #include "distributed/mpi_world.h"
-#ifdef CASHASH_WITH_CUDA
-#include "cashash_cuda/matchers/gpu_feature_matcher.h"
-#endif
 
 namespace cashash {
 namespace colmap {
 
-using distributed::ChunkListChecksum;
 using distributed::ChunksOfRank;
 using distributed::LockedSink;
 using distributed::MpiAbortJob;
 using distributed::MpiBarrier;
-using distributed::MpiLocalRank;
 using distributed::MpiMax;
 using distributed::MpiMin;
 using distributed::MpiRank;
@@ -43,20 +40,6 @@ using distributed::MpiResultReceiver;
 using distributed::MpiResultSender;
 using distributed::MpiSize;
 using distributed::RankReport;
-
-// Callers that set no warning sink still see warnings, on stderr as the
-// command line prints them.
-void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.warning) {
-    callbacks.warning(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
-}
-
-void Info(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.info) callbacks.info(text);
-}
 
 namespace {
 
@@ -97,7 +80,7 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
 }
 
 // Device memory in use on the run's GPU: before the matcher exists, then
-// after every committed block (the writer thread, and the MPI receiver's).
+// after every written block (the writer thread, and the MPI receiver's).
 class GpuMemorySampler {
  public:
   explicit GpuMemorySampler(int gpu_index) : gpu_index_(gpu_index) {
@@ -133,25 +116,34 @@ class GpuMemorySampler {
 };
 
 // What this process matches: the pairs not yet in the database, and of
-// those this rank's chunks.
+// those this rank's chunks. Exhaustive runs make their chunks as the
+// pipeline asks for them; pair lists hold theirs.
 struct RunShare {
   int rank = 0;
   int num_ranks = 1;
   size_t num_pairs = 0;  // of every rank
   size_t pairs_skipped = 0;
-  std::vector<PairChunk> my_chunks;
+  std::unique_ptr<std::vector<PairChunk>> listed;  // a pair list's chunks left
+  std::unique_ptr<PairChunkSource> all;            // every rank's chunks left
+  std::unique_ptr<PairChunkSource> mine;           // this rank's, under MPI
+
+  const PairChunkSource& my_chunks() const { return mine ? *mine : *all; }
 };
 
 // Everything a run is made of, built once by PlanRun. Members point into
 // each other (the pipeline's features into the cache, wrappers into the
 // matcher), so a plan is neither copied nor moved once built.
 struct RunPlan {
+  explicit RunPlan(const ResolvedRun& resolved) : run(resolved) {}
   RunShare share;
-  ResolvedRun run;  // the request's, with this rank's GPU
+  const ResolvedRun& run;  // the request's, as ResolveRun made it
   std::unique_ptr<GroupFeatureCache> cache;
   std::unique_ptr<KeypointRecordingSource> keypoint_source;  // guided only
   FeatureSource* features = nullptr;
   std::unique_ptr<GpuMemorySampler> gpu_memory;
+  // One owner of device memory per GPU, shared by the matchers, the
+  // rematch and the verifier under --max_gpu_memory.
+  std::unique_ptr<RunGpuResources> gpu_resources;
   std::shared_ptr<ExactRematchCounts> rematch_counts;
   std::unique_ptr<FeatureMatcher> matcher;
   GuidedFeatureMatcher* guided = nullptr;       // inside matcher, if any
@@ -166,37 +158,50 @@ struct RunPlan {
   std::unique_ptr<BatchVerifier> verifier;  // none when verification is skipped
 };
 
-// The pairs left of `chunks` (the request's, moved: at 20,000 images the
-// list is 1.6 GB) after resume, checked to be the same on every rank, and
-// this rank's share of them.
-RunShare ShareOfRun(std::vector<PairChunk> chunks, const RunRequest& request, const MatchingCallbacks& callbacks) {
+// The pairs left of the request's after resume, checked to be the same on
+// every rank, and this rank's share of them. An exhaustive run keeps one
+// bit per pair of the run, and only once the database holds one of them;
+// a pair list is thinned as it is.
+RunShare ShareOfRun(RunRequest& request, const MatchingCallbacks& callbacks) {
   RunShare share;
   share.rank = MpiRank();
   share.num_ranks = MpiSize();
-  if (!request.run.options.overwrite) {
-    // One bit per pair of the run, whatever the database holds.
-    const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, chunks);
-    if (done.num_completed() > 0) {
-      chunks = RemovePairs(std::move(chunks),
-                           [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
+  const bool resume = !request.run.options.overwrite;
+  if (request.exhaustive) {
+    PairTriangle done;
+    if (resume) {
+      CompletedPairs completed = ReadCompletedPairs(request.source->database(), request.image_ids);
+      if (completed.num_completed() > 0) done = completed.TakeTriangle();
     }
+    share.all = std::make_unique<ScheduledChunkSource>(request.image_ids, request.run.schedule.block_size,
+                                                       request.run.schedule.blocks_per_group, std::move(done));
+  } else {
+    share.listed = std::make_unique<std::vector<PairChunk>>(std::move(request.chunks));
+    if (resume) {
+      const CompletedPairs done = ReadCompletedPairs(request.source->database(), request.image_ids, *share.listed);
+      if (done.num_completed() > 0) {
+        *share.listed = RemovePairs(std::move(*share.listed),
+                                    [&](const ImagePair& pair) { return done.Contains(pair.first, pair.second); });
+      }
+    }
+    share.all = std::make_unique<ChunkList>(share.listed.get());
   }
   if (share.num_ranks > 1) {
-    const uint64_t checksum = ChunkListChecksum(chunks);
+    const uint64_t checksum = share.all->Checksum();
     if (MpiMin(checksum) != MpiMax(checksum)) {
       throw std::runtime_error("MPI ranks disagree on the pairs to match (same database and options on every rank?)");
     }
     // Every rank has read the completed pairs: rank 0 may start writing.
     MpiBarrier();
   }
-  for (const PairChunk& chunk : chunks) share.num_pairs += chunk.pairs.size();
+  share.num_pairs = share.all->num_pairs();
   share.pairs_skipped = request.num_pairs_requested - share.num_pairs;
   if (share.pairs_skipped > 0) {
     Info(callbacks, "Skipping " + std::to_string(share.pairs_skipped) + " of " +
                         std::to_string(request.num_pairs_requested) +
                         " pairs already in the database (use --overwrite 1 to match them again)");
   }
-  share.my_chunks = share.num_ranks > 1 ? ChunksOfRank(chunks, share.rank, share.num_ranks) : std::move(chunks);
+  if (share.num_ranks > 1) share.mine = std::make_unique<ChunksOfRank>(share.all.get(), share.rank, share.num_ranks);
   return share;
 }
 
@@ -208,15 +213,16 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
   const MatcherCommandOptions& options = plan->run.options;
   plan->rematch_counts = std::make_shared<ExactRematchCounts>();
   plan->matcher = CreateMatcherForRun(plan->run, mean, [&](const std::string& text) { Warn(callbacks, text); },
-                                      plan->rematch_counts);
+                                      plan->rematch_counts, plan->gpu_resources.get());
   // Guided matching (Ga-CasHash, cashash/matching/guided_matching.h): a
   // second matcher for the top-scale subsets, the stage-1 F estimator, and
   // the pipeline's features read through a source that keeps the keypoints.
   if (options.guided.enabled) {
     plan->keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
     auto guided = std::make_unique<GuidedFeatureMatcher>(
-        std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr),
-        CreateFundamentalEstimatorForOptions(options), plan->keypoint_source.get(), options.guided,
+        std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr, nullptr, plan->gpu_resources.get()),
+        CreateFundamentalEstimatorOnDevice(options, plan->run.gpu_index, plan->gpu_resources.get()),
+        plan->keypoint_source.get(), options.guided,
         options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
     plan->guided = guided.get();
     plan->matcher = std::move(guided);
@@ -229,10 +235,17 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
     const size_t position_bytes = options.guided.enabled ? 24 : 0;
     auto keeping = std::make_unique<RetainingFeatureMatcher>(
         std::move(plan->matcher), keep_bytes,
-        [max_rows, tables = options.cashash.num_tables, share, position_bytes](const FeatureDescriptors& d) {
+        [max_rows, tables = options.cashash.num_tables, share, position_bytes,
+         on_gpu = plan->run.gpu_index >= 0,
+         budget = plan->run.gpu_memory_budget_bytes > 0](const FeatureDescriptors& d) {
           const size_t rows = std::min(d.rows(), max_rows);
-          return static_cast<size_t>(share * static_cast<double>(MatcherBytesPerImage(rows, tables))) +
-                 rows * position_bytes;
+          // On the GPU, the size class of the image's block: what the
+          // device's owner of memory counts (ScheduleSizes does the same).
+          size_t bytes = MatcherBytesPerImage(rows, tables);
+          if (on_gpu) {
+            bytes = budget ? CachingBlockAllocator::SizeClass(bytes) : CachingBlockAllocator::SlabBlockClass(bytes);
+          }
+          return static_cast<size_t>(share * static_cast<double>(bytes)) + rows * position_bytes;
         });
     plan->retaining = keeping.get();
     plan->keep_bytes = keep_bytes;
@@ -245,13 +258,17 @@ void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const
 void OpenSink(RunPlan* plan) {
   const MatcherCommandOptions& options = plan->run.options;
   if (plan->share.rank == 0) {
-    plan->database_sink = std::make_unique<DatabaseResultSink>(
-        options.database_path, DatabaseResultSink::Options{!options.skip_geometric_verification,
-                                                           options.write_empty_pairs, options.overwrite});
+    DatabaseResultSink::Options writing;
+    writing.write_two_view_geometries = !options.skip_geometric_verification;
+    writing.write_empty_pairs = options.write_empty_pairs;
+    writing.replace_existing = options.overwrite;
+    writing.commit_seconds = options.database_commit_seconds;
+    ParseDiskSync(options.database_synchronous, &writing.disk_sync);  // checked with the options
+    plan->database_sink = std::make_unique<DatabaseResultSink>(options.database_path, writing);
     plan->locked_sink = std::make_unique<LockedSink>(plan->database_sink.get());
     plan->sink = plan->locked_sink.get();
   } else {
-    plan->sender = std::make_unique<MpiResultSender>(plan->share.my_chunks);
+    plan->sender = std::make_unique<MpiResultSender>(&plan->share.my_chunks());
     plan->sink = plan->sender.get();
   }
 }
@@ -266,21 +283,14 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   PhaseClock& clock = request.clock;
   plan->share = std::move(share);
   if (plan->share.rank == 0) WarnAboutSmallImages(*request.source, request.image_ids, callbacks);
-  if (request.cache_groups) {
-    plan->cache = std::make_unique<GroupFeatureCache>(request.source, plan->share.my_chunks);
+  if (request.exhaustive) {
+    plan->cache = std::make_unique<GroupFeatureCache>(request.source, plan->share.my_chunks());
   }
   plan->features = plan->cache ? static_cast<FeatureSource*>(plan->cache.get()) : request.source;
   clock.Mark("starting the feature reader");
 
-  plan->run = request.run;
-#ifdef CASHASH_WITH_CUDA
-  // Ranks sharing a machine share its GPUs unless a device is named.
-  if (plan->share.num_ranks > 1 && request.run.options.gpu_index == "-1") {
-    const int devices = cuda::NumCudaDevices();
-    if (devices > 1) plan->run.options.gpu_index = std::to_string(MpiLocalRank() % devices);
-  }
-#endif
-  plan->gpu_memory = std::make_unique<GpuMemorySampler>(GpuIndexForRun(plan->run.options));
+  plan->gpu_memory = std::make_unique<GpuMemorySampler>(plan->run.gpu_index);
+  plan->gpu_resources = std::make_unique<RunGpuResources>(plan->run.gpu_memory_budget_bytes);
   clock.Mark("starting the GPU and sizing the run");
   const MeanDescriptor& mean = request.mean.get();
   clock.Mark("waiting for the hashing mean");
@@ -292,10 +302,10 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   clock.Mark("making the matcher");
   OpenSink(plan);
   clock.Mark("opening the database for writing");
-  // Verification on the GPU too when use_gpu is set (the matcher has
-  // already warned when no GPU can be used).
+  // Verification on the run's first device, where matching runs too.
   if (!plan->run.options.skip_geometric_verification) {
-    plan->verifier = CreateBatchVerifierForOptions(plan->run.options, nullptr);
+    plan->verifier =
+        CreateBatchVerifierOnDevice(plan->run.options, plan->run.gpu_index, plan->gpu_resources.get());
     clock.Mark("making the verifier");
   }
 }
@@ -313,11 +323,30 @@ void DismantlePlan(RunPlan& plan, PhaseClock& clock) {
   clock.Mark("closing the database");
   plan.matcher.reset();
   plan.rematch_counts.reset();
+  plan.gpu_resources.reset();  // the blocks the owners still cache
   clock.Mark("freeing the matcher");
   plan.features = nullptr;
   plan.keypoint_source.reset();
   plan.cache.reset();
   clock.Mark("stopping the feature reader");
+}
+
+// The run's own books of GPU memory against its budget, and every fall
+// back to the CPU for want of device memory (rank 0's share).
+void ReportGpuMemory(const MatchingSummary& summary, const MatchingCallbacks& callbacks) {
+  const RunGpuMemoryBooks& books = summary.gpu_memory;
+  if (books.devices == 0) return;
+  Info(callbacks, "GPU memory: at most " + FormatMemorySize(books.peak_held_bytes) + " held (" +
+                      FormatMemorySize(books.peak_in_use_bytes) + " in use) of " +
+                      (books.budget_bytes > 0 ? "--max_gpu_memory " + FormatMemorySize(books.budget_bytes)
+                                              : std::string("the device (no --max_gpu_memory)")) +
+                      "; " + std::to_string(books.blocks_made) + " blocks allocated, " +
+                      std::to_string(books.blocks_reused) + " reused, " + std::to_string(books.blocks_trimmed) +
+                      " given back");
+  if (summary.gpu_memory_fallbacks > 0) {
+    Warn(callbacks, "CPU fallback: " + std::to_string(summary.gpu_memory_fallbacks) +
+                        " times a GPU part found no room in GPU memory and went on on the CPU");
+  }
 }
 
 // What the matcher's wrappers and the feature cache did, for the log.
@@ -405,7 +434,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   clock.Mark("starting the pipeline");
   if (share.rank > 0) {
     RankReport report;
-    report.stats = pipeline.Run(share.my_chunks);
+    report.stats = pipeline.Run(share.my_chunks());
     clock.Restart();
     WriteTrace(trace, trace_path, callbacks);
     report.matcher_name = plan.matcher->Name();
@@ -413,7 +442,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
     return MatchingSummary();  // rank 0 reports the run
   }
   if (share.num_ranks == 1) {
-    summary.pipeline = pipeline.Run(share.my_chunks);
+    summary.pipeline = pipeline.Run(share.my_chunks());
     clock.Restart();
   } else {
     MpiResultReceiver receiver(plan.sink, [&](const PairChunk& chunk) {
@@ -422,11 +451,12 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
       report_progress(progress);
     });
     try {
-      summary.pipeline = pipeline.Run(share.my_chunks);
+      summary.pipeline = pipeline.Run(share.my_chunks());
     } catch (const std::exception& e) {
       MpiAbortJob(e.what());  // the other ranks cannot be told otherwise
     }
     for (const RankReport& report : receiver.Join()) MergeStats(report.stats, &summary.pipeline);
+    plan.sink->Flush();  // what the receiver wrote after the pipeline's last flush
     clock.Restart();
   }
   WriteTrace(trace, trace_path, callbacks);
@@ -434,6 +464,10 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   summary.matcher_name = plan.matcher->Name();
   plan.gpu_memory->Sample();
   plan.gpu_memory->Fill(&summary);  // rank 0's device
+  summary.gpu_memory = plan.gpu_resources->Books();
+  summary.gpu_memory_fallbacks = summary.gpu_memory.matcher_fallbacks + plan.rematch_counts->tickets_without_memory +
+                                 (plan.verifier ? plan.verifier->CallsWithoutDeviceMemory() : 0);
+  ReportGpuMemory(summary, callbacks);
   ReportMatcherStats(plan, num_images, callbacks);  // rank 0's share
   if (share.num_ranks > 1) {
     Info(callbacks, "Matched by " + std::to_string(share.num_ranks) + " MPI processes");
@@ -446,7 +480,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
 }  // namespace
 
 MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks) {
-  RunShare share = ShareOfRun(std::move(request.chunks), request, callbacks);
+  RunShare share = ShareOfRun(request, callbacks);
   MatchingSummary summary;
   summary.pairs_requested = request.num_pairs_requested;
   summary.pairs_skipped = share.pairs_skipped;
@@ -455,7 +489,7 @@ MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbac
     return summary;
   }
   request.clock.Mark("finding the pairs left to match");
-  RunPlan plan;
+  RunPlan plan(request.run);
   PlanRun(request, std::move(share), callbacks, &plan);
   MatchingSummary result = ExecutePlan(plan, request.image_ids.size(), request.clock, callbacks);
   DismantlePlan(plan, request.clock);

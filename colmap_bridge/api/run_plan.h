@@ -27,11 +27,15 @@ struct RunRequest {
   ResolvedRun run;  // ResolveRun (run_resolution.h)
   DatabaseFeatureSource* source = nullptr;
   std::vector<image_t> image_ids;
+  // Exhaustive runs: every pair of image_ids, in the order of
+  // ScheduledPairChunks with the blocks and groups of run.schedule, each
+  // chunk made when the pipeline needs it (ScheduledChunkSource), and the
+  // features through a GroupFeatureCache: one group pair in host memory,
+  // the next one loaded meanwhile.
+  bool exhaustive = false;
+  // Otherwise the chunks of a pair list (ListPairChunks), held as they are.
   std::vector<PairChunk> chunks;
   size_t num_pairs_requested = 0;
-  // Features through a GroupFeatureCache (chunks of ScheduledPairChunks):
-  // one group pair in host memory, the next one loaded meanwhile.
-  bool cache_groups = false;
   std::shared_future<MeanDescriptor> mean;
   // Started by the caller on entry; the run marks its own phases on it and
   // hands them back in MatchingSummary::phases_outside_pipeline.
@@ -40,15 +44,10 @@ struct RunRequest {
 
 // Runs the pipeline over the request's chunks, leaving out pairs already in
 // the database unless options.overwrite is set. Under MPI every rank
-// computes the same chunk list (the database is read by all, read-only,
-// before rank 0 opens it for writing) and matches its share; rank 0 writes
+// computes the same chunks (the database is read by all, read-only, before
+// rank 0 opens it for writing) and matches its share; rank 0 writes
 // everything (distributed/mpi_distributed.h).
 MatchingSummary MatchChunks(RunRequest request, const MatchingCallbacks& callbacks);
-
-// Callers that set no warning sink still see warnings, on stderr as the
-// command line prints them.
-void Warn(const MatchingCallbacks& callbacks, const std::string& text);
-void Info(const MatchingCallbacks& callbacks, const std::string& text);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -1,6 +1,7 @@
 #include "colmap_bridge/api/run_resolution.h"
 
 #include <algorithm>
+#include <limits>
 #include <string>
 
 #include "cashash/matching/table_shape.h"
@@ -23,16 +24,26 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
   } else {
     ParseMemorySize(options.max_host_memory, &limits.max_host_bytes);  // checked with the options
   }
-  if (facts.gpu_index >= 0) {
+  // A rank on the CPU has no GPU cap: it takes the others' smallest.
+  uint64_t gpu_cap = std::numeric_limits<uint64_t>::max();
+  if (!facts.gpu_indices.empty()) {
     if (options.max_gpu_memory.empty()) {
-      limits.max_gpu_bytes = facts.gpu_free_bytes;
+      gpu_cap = facts.gpu_free_bytes;
+      // No budget: the images may take the share they took before the
+      // rematch and the verifier shared one (the rest of the card, a
+      // quarter, is far more than those need).
+      limits.gpu_image_share = ScheduleLimits::kImageShareWithoutBudget;
+      limits.gpu_without_budget = true;
     } else {
-      ParseMemorySize(options.max_gpu_memory, &limits.max_gpu_bytes);
+      size_t bytes = 0;
+      ParseMemorySize(options.max_gpu_memory, &bytes);  // checked with the options
+      gpu_cap = bytes;
     }
   }
   // Ranks must cut the same blocks and groups: the smallest caps of all.
   limits.max_host_bytes = SmallestOverRanks(facts, limits.max_host_bytes);
-  limits.max_gpu_bytes = SmallestOverRanks(facts, limits.max_gpu_bytes);
+  gpu_cap = SmallestOverRanks(facts, gpu_cap);
+  limits.max_gpu_bytes = gpu_cap == std::numeric_limits<uint64_t>::max() ? 0 : static_cast<size_t>(gpu_cap);
   const bool block_size_chosen = options.block_size == 0;
   limits.block_size = options.block_size;
   limits.max_num_matches = options.sift.max_num_matches;
@@ -82,7 +93,8 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   run.options = options;
   CasHashOptions& cashash = run.options.cashash;
   const bool guided = options.guided.enabled;
-  const bool on_gpu = facts.gpu_index >= 0;
+  // The GPU's rules where any rank matches on a GPU (ResolveRun's header).
+  const bool on_gpu = SmallestOverRanks(facts, facts.gpu_indices.empty() ? 1 : 0) == 0;
   const size_t features = TypicalFeatureCount(facts.rows_per_image, options.sift.max_num_matches);
 
   // The matcher and, for auto, the rematch threshold and window; then the
@@ -111,7 +123,7 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   const bool rematch_from_shape = options.cashash.exact_rematch_min_matches == kRematchMinMatchesChosen &&
                                   cashash.exact_rematch_min_matches != kDefaultRematchMinMatches;
   run.rematch_on_matching_thread = bucket_screen;
-  if (options.cashash.matcher == MatcherType::kAuto) run.notes.push_back("Matcher: " + choice.reason);
+  if (options.cashash.matcher != MatcherType::kBruteForce) run.notes.push_back("Matcher: " + choice.reason);
   // tau: where not given, for screening while the exact rematch decides the
   // pairs that may verify, for precision where the cascade's matches are kept.
   if (cashash.tau <= 0) {
@@ -132,7 +144,9 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
     run.notes.push_back(text);
   }
 
-  run.gpu_index = facts.gpu_index;
+  run.gpu_indices = facts.gpu_indices;
+  run.gpu_index = facts.gpu_indices.empty() ? -1 : facts.gpu_indices.front();
+  run.warnings.insert(run.warnings.begin(), facts.device_warnings.begin(), facts.device_warnings.end());
   if (!options.max_gpu_memory.empty()) {
     ParseMemorySize(options.max_gpu_memory, &run.gpu_memory_budget_bytes);  // checked with the options
   }

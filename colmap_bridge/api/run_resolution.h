@@ -29,17 +29,20 @@ struct RunFacts {
   bool exhaustive = true;
   // Physical memory of the machine; 0: unknown (the host cap is then 8 GiB).
   size_t physical_memory_bytes = 0;
-  // The device the run matches on (the first of --FeatureMatching.gpu_index
-  // that is usable), -1: none, the run matches on the CPU; and its free
-  // memory.
-  int gpu_index = -1;
+  // The devices the run matches and verifies on (ChooseRunDevices,
+  // run_devices.h: the usable ones of --FeatureMatching.gpu_index), empty:
+  // the CPU; the free memory of the first; and what the choice warned.
+  std::vector<int> gpu_indices;
   size_t gpu_free_bytes = 0;
-  // Under MPI: the smallest of a value over all ranks, so that every rank
-  // cuts the same blocks and groups (distributed::MpiMin); unset: one process.
+  std::vector<std::string> device_warnings;
+  // Under MPI: the smallest of a value over all ranks (distributed::MpiMin),
+  // so that every rank resolves the same run: the same matcher, tables and
+  // rematch, blocks and groups; unset: one process.
   std::function<uint64_t(uint64_t)> smallest_over_ranks;
 };
 
-// The run as it will be carried out. Built by ResolveRun only.
+// The run as it will be carried out. Built by ResolveRun only, and not
+// changed after: the plan of a run reads it (run_plan.cc).
 struct ResolvedRun {
   // The user's options with every "chosen" value decided: the matcher (auto
   // never stays auto: MatcherRule), the table shape, tau, the exact rematch
@@ -49,7 +52,9 @@ struct ResolvedRun {
   // Where a single GPU's exact rematch runs: on the matching thread (the
   // bucket screen leaves it room) or deferred to the verification threads.
   bool rematch_on_matching_thread = false;
-  // The device the run matches on, -1: the CPU (RunFacts::gpu_index).
+  // The devices the run matches on (RunFacts::gpu_indices), empty: the
+  // CPU; and the first of them, -1: the CPU: the verifier's device.
+  std::vector<int> gpu_indices;
   int gpu_index = -1;
   // Device memory each GPU matcher may take (cuda::GpuMatcherConfig::
   // memory_budget_bytes): --max_gpu_memory, 0 when not given (no cap but
@@ -71,7 +76,11 @@ struct ResolvedRun {
 // is cut into chunks of this many images squared.
 constexpr int kDefaultBlockSize = 50;
 
-// Resolves the options for a run over the given facts. Throws
+// Resolves the options for a run over the given facts. Under MPI every
+// rank resolves the same run from facts reduced over the ranks: the GPU's
+// rules where any rank matches on a GPU (the CPU matches the GPU's tables
+// and rematch identically, while a GPU cannot run the CPU's fine-bucket
+// tables), the CPU's where none does; the smallest memory caps. Throws
 // std::invalid_argument when the options cannot fit (ChooseScheduleSizes).
 ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& facts);
 

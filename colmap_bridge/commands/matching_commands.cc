@@ -1,8 +1,6 @@
 #include "colmap_bridge/commands/matching_commands.h"
 
 #include <algorithm>
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <iomanip>
 #include <iostream>
@@ -16,26 +14,11 @@
 #include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/api/process_clock.h"
 #include "colmap_bridge/api/retrieval_api.h"
+#include "colmap_bridge/commands/console.h"
 
 namespace cashash {
 namespace colmap {
 namespace {
-
-std::atomic<bool> g_stop_requested{false};
-
-// First Ctrl-C: finish and commit the chunks in flight, then stop. A second
-// one ends the process at once (the database stays valid: every chunk is one
-// transaction).
-extern "C" void HandleInterrupt(int) {
-  if (g_stop_requested.exchange(true)) {
-    std::signal(SIGINT, SIG_DFL);
-    std::raise(SIGINT);
-  }
-}
-
-void PrintHeading(const std::string& title) {
-  std::cout << "\n" << std::string(78, '=') << "\n" << title << "\n" << std::string(78, '=') << "\n" << std::endl;
-}
 
 std::string FormatDuration(double seconds) {
   const long s = static_cast<long>(seconds + 0.5);
@@ -56,17 +39,17 @@ void PrintProgress(const PipelineProgress& p) {
 }
 
 // COLMAP-style console output of a run: heading, notes on stdout, warnings
-// on stderr, one line per committed block; Ctrl-C stops it cleanly.
-MatchingCallbacks ConsoleCallbacks(const std::string& heading) {
+// on stderr, one line per written block; Ctrl-C stops it cleanly.
+MatchingCallbacks ConsoleCallbacks(const std::string& heading, const StopOnInterrupt& interrupt) {
   MatchingCallbacks callbacks;
   callbacks.database_opened = [heading]() {
     PrintHeading(heading);
     std::cout << BuildInfoLine() << std::endl;
   };
   callbacks.info = [](const std::string& text) { std::cout << text << std::endl; };
-  callbacks.warning = [](const std::string& text) { std::cerr << "WARNING: " << text << std::endl; };
+  callbacks.warning = PrintWarning;
   callbacks.progress = PrintProgress;
-  callbacks.stop = &g_stop_requested;
+  callbacks.stop = interrupt.stop_flag();
   return callbacks;
 }
 
@@ -159,17 +142,14 @@ int PrepareOptions(const std::string& command, int argc, const char* const* argv
 
 // Runs `body` with Ctrl-C handled; errors become "ERROR: ..." and exit 1.
 template <typename Body>
-int RunGuarded(Body body) {
-  g_stop_requested = false;
-  std::signal(SIGINT, HandleInterrupt);
-  int code = EXIT_FAILURE;
+int RunGuarded(const std::string& heading, Body body) {
+  const StopOnInterrupt interrupt;
   try {
-    code = ReportSummary(body());
+    return ReportSummary(body(ConsoleCallbacks(heading, interrupt)));
   } catch (const std::exception& e) {
     std::cerr << "ERROR: " << e.what() << std::endl;
   }
-  std::signal(SIGINT, SIG_DFL);
-  return code;
+  return EXIT_FAILURE;
 }
 
 }  // namespace
@@ -178,8 +158,8 @@ int RunExhaustiveMatcher(int argc, const char* const* argv) {
   MatcherCommandOptions options;
   const int early = PrepareOptions("exhaustive_matcher", argc, argv, &options);
   if (early >= 0) return early;
-  return RunGuarded([&]() {
-    return MatchExhaustive(options.database_path, options, ConsoleCallbacks("Exhaustive feature matching"));
+  return RunGuarded("Exhaustive feature matching", [&](const MatchingCallbacks& callbacks) {
+    return MatchExhaustive(options.database_path, options, callbacks);
   });
 }
 
@@ -187,8 +167,26 @@ int RunGuidedMatcher(int argc, const char* const* argv) {
   MatcherCommandOptions options;
   const int early = PrepareOptions("guided_matcher", argc, argv, &options);
   if (early >= 0) return early;
-  return RunGuarded([&]() {
-    return MatchExhaustive(options.database_path, options, ConsoleCallbacks("Guided feature matching (Ga-CasHash)"));
+  return RunGuarded("Guided feature matching (Ga-CasHash)", [&](const MatchingCallbacks& callbacks) {
+    return MatchExhaustive(options.database_path, options, callbacks);
+  });
+}
+
+int RunSequentialMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("sequential_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded("Sequential feature matching", [&](const MatchingCallbacks& callbacks) {
+    return MatchSequential(options.database_path, options, callbacks);
+  });
+}
+
+int RunSpatialMatcher(int argc, const char* const* argv) {
+  MatcherCommandOptions options;
+  const int early = PrepareOptions("spatial_matcher", argc, argv, &options);
+  if (early >= 0) return early;
+  return RunGuarded("Spatial feature matching", [&](const MatchingCallbacks& callbacks) {
+    return MatchSpatial(options.database_path, options, callbacks);
   });
 }
 
@@ -197,10 +195,10 @@ int RunRetrievalMatcher(const std::string& command, int argc, const char* const*
   MatcherCommandOptions options;
   const int early = PrepareOptions(command, argc, argv, &options);
   if (early >= 0) return early;
-  return RunGuarded([&]() {
-    return MatchRetrieval(options.database_path, options,
-                          ConsoleCallbacks("Retrieval feature matching (visual words from the hash codes)"));
-  });
+  return RunGuarded("Retrieval feature matching (visual words from the hash codes)",
+                    [&](const MatchingCallbacks& callbacks) {
+                      return MatchRetrieval(options.database_path, options, callbacks);
+                    });
 }
 
 int RunMatchesImporter(int argc, const char* const* argv) {
@@ -216,9 +214,8 @@ int RunMatchesImporter(int argc, const char* const* argv) {
     std::cerr << "ERROR: --match_list_path is required" << std::endl;
     return EXIT_FAILURE;
   }
-  return RunGuarded([&]() {
-    return MatchPairList(options.database_path, options.match_list_path, options,
-                         ConsoleCallbacks("Custom feature matching"));
+  return RunGuarded("Custom feature matching", [&](const MatchingCallbacks& callbacks) {
+    return MatchPairList(options.database_path, options.match_list_path, options, callbacks);
   });
 }
 

@@ -1,5 +1,6 @@
-// The cashash commands that stand in for COLMAP's: exhaustive_matcher and
-// matches_importer. Each returns the process exit code.
+// The cashash commands that stand in for COLMAP's: exhaustive_matcher,
+// sequential_matcher, spatial_matcher and matches_importer. Each returns the
+// process exit code.
 #pragma once
 
 #include <string>
@@ -9,6 +10,8 @@ namespace colmap {
 
 int RunExhaustiveMatcher(int argc, const char* const* argv);
 int RunMatchesImporter(int argc, const char* const* argv);
+int RunSequentialMatcher(int argc, const char* const* argv);
+int RunSpatialMatcher(int argc, const char* const* argv);
 // exhaustive_matcher with --GuidedMatching.enabled 1 (Ga-CasHash).
 int RunGuidedMatcher(int argc, const char* const* argv);
 // Retrieval from the hash codes, then the retrieved pairs (retrieval_api.h);

@@ -3,9 +3,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <csignal>
 #include <cstdlib>
 #include <iomanip>
 #include <iostream>
@@ -14,11 +12,15 @@
 #include <unordered_set>
 
 #include "cashash/pipeline/pair_generation.h"
+#include "cashash/pipeline/schedule_sizing.h"
+#include "cashash/pipeline/schedule_sizing.h"
 #include "cashash/base/pair_id.h"
 #include "colmap_bridge/completed_pairs.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/sqlite_statement.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/verifier_selection.h"
+#include "colmap_bridge/commands/console.h"
 
 namespace cashash {
 namespace colmap {
@@ -106,26 +108,6 @@ class StoredMatches : public FeatureMatcher {
   KeypointSource* source_;
 };
 
-void Warn(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.warning) {
-    callbacks.warning(text);
-  } else {
-    std::cerr << "WARNING: " << text << std::endl;
-  }
-}
-
-void Info(const MatchingCallbacks& callbacks, const std::string& text) {
-  if (callbacks.info) callbacks.info(text);
-}
-
-std::atomic<bool> g_stop_requested{false};
-
-extern "C" void HandleVerifierInterrupt(int) {
-  if (g_stop_requested.exchange(true)) {
-    std::signal(SIGINT, SIG_DFL);
-    std::raise(SIGINT);
-  }
-}
 
 }  // namespace
 
@@ -136,7 +118,8 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
   const std::string problem = CheckMatcherCommandOptions(checked);
   if (!problem.empty()) throw std::invalid_argument(problem);
 
-  DatabaseFeatureSource database_source(database_path);
+  DatabaseFeatureSource database_source(database_path,
+                                        [&callbacks](const std::string& text) { Warn(callbacks, text); });
   if (callbacks.database_opened) callbacks.database_opened();
   std::unordered_set<image_t> known_images;
   for (const Image& image : database_source.images()) known_images.insert(image.image_id);
@@ -176,8 +159,14 @@ MatchingSummary VerifyExistingMatches(const std::string& database_path, const Ma
 
   KeypointSource source(&database_source);
   StoredMatches stored(&source);
+  const RunDevices devices = ChooseRunDevices(checked, MachineDeviceFacts());
+  for (const std::string& text : devices.warnings) Warn(callbacks, text);
+  // The verifier's device memory under --max_gpu_memory, as in a matching run.
+  size_t gpu_budget = 0;
+  if (!checked.max_gpu_memory.empty()) ParseMemorySize(checked.max_gpu_memory, &gpu_budget);
+  RunGpuResources gpu(gpu_budget);
   std::unique_ptr<BatchVerifier> verifier =
-      CreateBatchVerifierForOptions(checked, [&](const std::string& text) { Warn(callbacks, text); });
+      CreateBatchVerifierOnDevice(checked, devices.gpu_indices.empty() ? -1 : devices.gpu_indices.front(), &gpu);
   DatabaseResultSink sink(database_path, true);
   PipelineOptions pipeline_options;
   pipeline_options.num_threads = checked.sift.num_threads;
@@ -203,20 +192,16 @@ int RunGeometricVerifier(int argc, const char* const* argv) {
       break;
   }
   MatchingCallbacks callbacks;
-  callbacks.database_opened = []() {
-    std::cout << "\n" << std::string(78, '=') << "\nGeometric verification\n" << std::string(78, '=') << "\n"
-              << std::endl;
-  };
+  callbacks.database_opened = []() { PrintHeading("Geometric verification"); };
   callbacks.info = [](const std::string& text) { std::cout << text << std::endl; };
-  callbacks.warning = [](const std::string& text) { std::cerr << "WARNING: " << text << std::endl; };
+  callbacks.warning = PrintWarning;
   callbacks.progress = [](const PipelineProgress& p) {
     std::cout << "Verified " << p.pairs_done << "/" << p.pairs_total << " pairs (" << std::fixed
               << std::setprecision(1) << 100.0 * p.pairs_done / p.pairs_total << "%) in " << std::setprecision(3)
               << p.elapsed_seconds << "s" << std::endl;
   };
-  g_stop_requested = false;
-  callbacks.stop = &g_stop_requested;
-  std::signal(SIGINT, HandleVerifierInterrupt);
+  const StopOnInterrupt interrupt;
+  callbacks.stop = interrupt.stop_flag();
   int code = EXIT_FAILURE;
   try {
     const MatchingSummary summary = VerifyExistingMatches(options.database_path, options, callbacks);
@@ -236,7 +221,6 @@ int RunGeometricVerifier(int argc, const char* const* argv) {
   } catch (const std::exception& e) {
     std::cerr << "ERROR: " << e.what() << std::endl;
   }
-  std::signal(SIGINT, SIG_DFL);
   return code;
 }
 

@@ -4,6 +4,8 @@
     cashash.match_exhaustive("database.db")                 # like pycolmap.match_exhaustive
     cashash.match_pairs("database.db", [("a.jpg", "b.jpg")])
     cashash.match_retrieval("database.db", num_images=50)   # like pycolmap.match_vocabtree, no tree
+    cashash.match_sequential("database.db", pairing_options={"overlap": 10})
+    cashash.match_spatial("database.db", pairing_options=cashash.SpatialPairingOptions())
     result = cashash.match(desc1, desc2, kp1, kp2)         # numpy in, numpy out
 
 Options are keywords named as the fields of MatchingOptions and of its parts
@@ -17,7 +19,8 @@ the messages of the ``cashash`` command line.
 import numpy as np
 
 from . import _core
-from ._core import CasHashOptions, MatchingOptions, RetrievalOptions, SiftMatchingOptions, TwoViewGeometryOptions
+from ._core import (CasHashOptions, MatchingOptions, RetrievalOptions, SequentialPairingOptions, SiftMatchingOptions,
+                    SpatialPairingOptions, TwoViewGeometryOptions)
 
 __all__ = [
     "CasHashOptions",
@@ -32,6 +35,10 @@ __all__ = [
     "match_retrieval",
     "match_vocabtree",
     "RetrievalOptions",
+    "match_sequential",
+    "match_spatial",
+    "SequentialPairingOptions",
+    "SpatialPairingOptions",
     "with_cuda",
 ]
 
@@ -55,6 +62,11 @@ def _fields(obj):
     return [name for name in dir(obj) if not name.startswith("_")]
 
 
+# The parts of MatchingOptions; keywords name the fields of the first four
+# (pairing options travel in pairing_options, whose names would clash).
+_PARTS = ("sift", "cashash", "two_view", "retrieval", "sequential", "spatial")
+
+
 def make_options(options=None, **kwargs):
     """A MatchingOptions from `options` (copied) with keyword fields set.
 
@@ -67,16 +79,17 @@ def make_options(options=None, **kwargs):
         # not warn on every call.
         result.use_gpu = with_cuda
     else:
-        for part in ("sift", "cashash", "two_view", "retrieval"):
+        for part in _PARTS:
             source, target = getattr(options, part), getattr(result, part)
             for name in _fields(source):
-                setattr(target, name, getattr(source, name))
+                if name != "check":
+                    setattr(target, name, getattr(source, name))
         for name in _fields(options):
-            if name not in ("sift", "cashash", "two_view", "retrieval"):
+            if name not in _PARTS:
                 setattr(result, name, getattr(options, name))
     for name, value in kwargs.items():
         for target in (result, result.sift, result.cashash, result.two_view):
-            if name in _fields(target) and name not in ("sift", "cashash", "two_view"):
+            if name in _fields(target) and name not in _PARTS:
                 setattr(target, name, value)
                 break
         else:
@@ -93,7 +106,10 @@ def match_exhaustive(database_path, options=None, progress=None, **kwargs):
     called after each committed block; an exception it raises stops the run
     (finished blocks stay committed) and is raised again. Returns a dict of
     counts: pairs_requested, pairs_skipped, pairs_done, raw_matches,
-    verified_pairs, inlier_matches, seconds, matcher, stopped; and run, a
+    verified_pairs, inlier_matches, seconds, matcher, stopped,
+    gpu_memory_peak_held_bytes (what the run's owner of GPU memory held at
+    most, 0 without a GPU), gpu_memory_fallbacks (times a GPU part went on
+    on the CPU for want of device memory); and run, a
     dict of how the run was resolved from the options and the database
     (matcher, num_tables, bits_per_table, tau, exact_rematch_min_matches,
     exact_rematch_max_matches, rematch_on_matching_thread, block_size, blocks_per_group, gpu_index,
@@ -185,7 +201,10 @@ def match(descriptors1, descriptors2, keypoints1=None, keypoints2=None, camera1=
     pycolmap.Camera objects; without them the camera is guessed as COLMAP
     does and only F/H are estimated. Returns a dict: matches (M x 2 uint32),
     verified, config, config_name, inlier_matches (K x 2), F, E, H, qvec,
-    tvec.
+    tvec; and run, how the pair was resolved (as match_exhaustive's). The
+    options are checked as match_exhaustive checks them, and the pair is
+    matched as a run of two images is: use_gpu without a usable GPU
+    matches as use_gpu=False does.
     """
     if options is None and "use_gpu" not in kwargs:
         kwargs["use_gpu"] = False
@@ -195,3 +214,53 @@ def match(descriptors1, descriptors2, keypoints1=None, keypoints2=None, camera1=
                          _camera(camera2), make_options(options, **kwargs))
     result["config_name"] = TWO_VIEW_CONFIGS.get(result["config"], str(result["config"]))
     return result
+
+
+def _pairing_options(target, pairing_options):
+    """Copies `pairing_options` into `target` (a SequentialPairingOptions or
+    SpatialPairingOptions): a dict, or any object with fields of the same
+    names (cashash's own, or pycolmap's options of the same name). An unknown
+    dict key raises TypeError; fields of a foreign object that cashash lacks
+    are ignored."""
+    if pairing_options is None:
+        return
+    known = [name for name in _fields(target) if name != "check"]
+    if isinstance(pairing_options, dict):
+        items = pairing_options.items()
+        for name, _ in items:
+            if name not in known:
+                raise TypeError(f"unknown pairing option '{name}' (known: {', '.join(known)})")
+    else:
+        items = [(name, getattr(pairing_options, name)) for name in known if hasattr(pairing_options, name)]
+    for name, value in items:
+        if name == "vocab_tree_path":
+            value = "" if str(value) in ("", ".") else str(value)  # pycolmap shows an empty path as "."
+        setattr(target, name, value)
+
+
+def match_sequential(database_path, options=None, pairing_options=None, progress=None, **kwargs):
+    """Matches the pairs of ``colmap sequential_matcher``, as
+    ``pycolmap.match_sequential`` does: images in name order, each with its
+    next ``overlap`` images (1, 2, 4, ... places on with
+    ``quadratic_overlap``), rig frames expanded; with ``loop_detection``
+    also every ``loop_detection_period``-th image with the images most like
+    it (image retrieval from the cascade's codes, no vocabulary tree).
+    ``pairing_options`` is a SequentialPairingOptions, a dict of its fields
+    or pycolmap's SequentialPairingOptions. Otherwise as match_exhaustive."""
+    resolved = make_options(options, **kwargs)
+    _pairing_options(resolved.sequential, pairing_options)
+    return _core.match_sequential(str(database_path), resolved, progress)
+
+
+def match_spatial(database_path, options=None, pairing_options=None, progress=None, **kwargs):
+    """Matches the pairs of ``colmap spatial_matcher``, as
+    ``pycolmap.match_spatial`` does: each image with a position prior with
+    its nearest neighbours by that prior (``max_num_neighbors`` within
+    ``max_distance``, at least ``min_num_neighbors``; GPS priors compared in
+    metres). Images without a prior are left out with a warning, as COLMAP
+    leaves them out. ``pairing_options`` is a SpatialPairingOptions, a dict
+    of its fields or pycolmap's SpatialPairingOptions. Otherwise as
+    match_exhaustive."""
+    resolved = make_options(options, **kwargs)
+    _pairing_options(resolved.spatial, pairing_options)
+    return _core.match_spatial(str(database_path), resolved, progress)

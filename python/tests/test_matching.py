@@ -54,6 +54,40 @@ def test_bad_input_raises():
         cashash.make_options(no_such_option=1)
 
 
+def test_match_checks_options_as_the_runs_do(views):
+    a, b = views[0], views[1]
+    with pytest.raises(ValueError, match="--max_gpu_memory must be a size such as 16G"):
+        cashash.match(a.descriptors, b.descriptors, max_gpu_memory="abc")
+    with pytest.raises(ValueError, match="--FeatureMatching.gpu_index: expected an integer"):
+        cashash.match(a.descriptors, b.descriptors, gpu_index="first")
+    with pytest.raises(ValueError, match="gpu_verifications_in_flight must be 1 to 8"):
+        cashash.match(a.descriptors, b.descriptors, gpu_verifications_in_flight=0)
+
+
+def test_use_gpu_without_a_usable_gpu_matches_as_the_cpu():
+    # 40 shared features under heavy descriptor noise among 300 others each:
+    # the cascade misses a few of them, the CPU run's exact rematch of the
+    # pairs with 12 to 63 cascade matches finds them. Which algorithm ran
+    # shows in the matches.
+    rng = np.random.default_rng(0)
+
+    def sift_like(n):
+        raw = rng.integers(0, 61, (n, 128)).astype(np.float64)
+        return np.round(raw * 512.0 / np.linalg.norm(raw, axis=1, keepdims=True))
+
+    shared = sift_like(40)
+    d1 = np.vstack([shared, sift_like(300)]).astype(np.uint8)
+    d2 = np.vstack([np.clip(shared + rng.integers(-16, 17, shared.shape), 0, 255), sift_like(300)]).astype(np.uint8)
+    cpu = cashash.match(d1, d2, use_gpu=False)
+    asked = cashash.match(d1, d2, use_gpu=True)
+    if asked["run"]["gpu_index"] >= 0:
+        pytest.skip("a usable GPU matched the pair")
+    assert asked["run"] == cpu["run"]
+    assert cpu["run"]["exact_rematch_max_matches"] > 0  # the CPU's rematch window
+    np.testing.assert_array_equal(asked["matches"], cpu["matches"])
+    assert len(cpu["matches"]) == 40
+
+
 def test_exact_rematch_is_the_runs_default_and_can_be_turned_off(scene_database):
     # Runs match the pairs that may verify again exactly (12 cascade matches).
     # -1: chosen for the run (12, or 8 with the bucket screening tables).
@@ -163,3 +197,54 @@ def test_build_info_names_the_version_and_the_gpu_code():
         assert info["cuda_architectures"] != "none"
     else:
         assert info["cuda_architectures"] == "none"
+
+
+def stored_pairs(path):
+    db = sqlite3.connect(str(path))
+    pairs = {divmod(int(pair_id), 2147483647) for (pair_id,) in db.execute("SELECT pair_id FROM matches")}
+    db.close()
+    return pairs
+
+
+def test_match_sequential_pairs_neighbours_in_name_order(scene_database):
+    summary = cashash.match_sequential(scene_database, pairing_options={"overlap": 1, "quadratic_overlap": False})
+    assert summary["pairs_requested"] == 2 and summary["pairs_done"] == 2
+    assert stored_pairs(scene_database) == {(1, 2), (2, 3)}
+    options = cashash.SequentialPairingOptions()
+    assert options.overlap == 10 and options.quadratic_overlap and not options.loop_detection
+    again = cashash.match_sequential(scene_database, pairing_options=options)  # adds 1-3, resumes the others
+    assert again["pairs_skipped"] == 2 and again["pairs_done"] == 1
+    with pytest.raises(ValueError, match="--SequentialMatching.loop_detection 1 needs image retrieval"):
+        cashash.match_sequential(scene_database, pairing_options={"loop_detection": True})
+    with pytest.raises(TypeError, match="unknown pairing option 'overlapp'"):
+        cashash.match_sequential(scene_database, pairing_options={"overlapp": 3})
+
+
+def test_match_sequential_takes_pycolmaps_options(scene_database):
+    pycolmap = pytest.importorskip("pycolmap")
+    options = pycolmap.SequentialPairingOptions(overlap=1, quadratic_overlap=False)
+    assert cashash.match_sequential(scene_database, pairing_options=options)["pairs_requested"] == 2
+
+
+def test_match_spatial_pairs_neighbours_by_prior(scene_database):
+    db = sqlite3.connect(str(scene_database))  # COLMAP 3.8: priors in images
+    db.executemany("UPDATE images SET prior_tx = ?, prior_ty = 0, prior_tz = 0 WHERE image_id = ?",
+                   [(1.0, 1), (2.0, 2), (9.0, 3)])
+    db.commit()
+    db.close()
+    summary = cashash.match_spatial(scene_database, pairing_options={"max_distance": 2.0, "is_gps": False})
+    assert summary["pairs_requested"] == 1
+    assert stored_pairs(scene_database) == {(1, 2)}
+    assert cashash.SpatialPairingOptions().max_num_neighbors == 50
+    with pytest.raises(ValueError, match="--SpatialMatching.max_num_neighbors must be > 0"):
+        cashash.match_spatial(scene_database, pairing_options={"max_num_neighbors": 0})
+
+
+def test_match_spatial_names_images_without_prior(scene_database):
+    db = sqlite3.connect(str(scene_database))
+    db.execute("UPDATE images SET prior_tx = 1, prior_ty = 1 WHERE image_id < 3")
+    db.commit()
+    db.close()
+    with pytest.warns(RuntimeWarning, match="1 of the 3 images has no position prior.*view3.jpg"):
+        summary = cashash.match_spatial(scene_database, pairing_options={"is_gps": False})
+    assert summary["pairs_requested"] == 1

@@ -32,7 +32,7 @@
 #include "cashash/matching/brute_force_matcher.h"
 #include "cashash/matching/cascade_hashing.h"
 #include "cashash/matching/cascade_matcher.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "colmap_bridge/database.h"
 

@@ -3,8 +3,10 @@
 pycolmap has CUDA) on DB, timed; prints one row of end_to_end_bench.sh's
 table. With LIMIT > 0 the matcher is killed after LIMIT seconds and the
 rate counts the pairs it committed up to its last database write.
+MAX_NUM_MATCHES > 0 sets FeatureMatching.max_num_matches (COLMAP's default
+otherwise).
 
-  colmap_exhaustive_timed.py DB [LIMIT]
+  colmap_exhaustive_timed.py DB [LIMIT [MAX_NUM_MATCHES]]
 """
 import multiprocessing as mp
 import os
@@ -13,9 +15,11 @@ import sys
 import time
 
 
-def match(db):
+def match(db, max_num_matches):
     import pycolmap
     options = pycolmap.FeatureMatchingOptions()
+    if max_num_matches > 0:
+        options.max_num_matches = max_num_matches
     options.use_gpu = bool(pycolmap.has_cuda)
     if options.use_gpu:
         options.gpu_index = "0"
@@ -26,10 +30,13 @@ def match(db):
 def main():
     db = sys.argv[1]
     limit = float(sys.argv[2]) if len(sys.argv) > 2 else 0.0
+    max_num_matches = int(sys.argv[3]) if len(sys.argv) > 3 else 0
     import pycolmap
     label = f"COLMAP {pycolmap.__version__} match_exhaustive ({'GPU' if pycolmap.has_cuda else 'CPU'})"
+    if max_num_matches > 0:
+        label += f", max_num_matches {max_num_matches}"
     start = time.time()
-    process = mp.get_context("spawn").Process(target=match, args=(db,))
+    process = mp.get_context("spawn").Process(target=match, args=(db, max_num_matches))
     process.start()
     process.join(limit if limit > 0 else None)
     stopped = process.is_alive()

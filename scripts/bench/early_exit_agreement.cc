@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "cashash/pipeline/batch_verifier.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash/pipeline/verification_pairs_file.h"
 

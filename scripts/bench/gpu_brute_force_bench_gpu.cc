@@ -124,7 +124,8 @@ Row Measure(int n, int num_images, int repetitions) {
     mutual.push_back(m);
   }
 
-  BruteForceKernels kernels;
+  GpuResources resources(0, 0);
+  BruteForceKernels kernels(nullptr, &resources);
   cudaEvent_t start, stop;
   CUDA_CHECK(cudaEventCreate(&start));
   CUDA_CHECK(cudaEventCreate(&stop));

@@ -46,7 +46,7 @@
 #include <string>
 
 #include "cashash/base/pair_id.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "colmap_bridge/api/retrieval_api.h"
 #include "colmap_bridge/database.h"
 

@@ -19,7 +19,7 @@
 #include "../../tests/support/synthetic_two_view.h"
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/base/pair_id.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "cashash/pipeline/verification_pairs_file.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/geometry/two_view_geometry.h"

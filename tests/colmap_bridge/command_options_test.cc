@@ -22,6 +22,19 @@ ResolvedRun Resolve(const MatcherCommandOptions& options, const std::vector<size
   return run;
 }
 
+// The same run matched on device 0: the GPU's rules, on whichever machine
+// the test runs.
+ResolvedRun ResolveOnGpu(const MatcherCommandOptions& options, const std::vector<size_t>& rows,
+                         std::vector<std::string>* notes = nullptr) {
+  RunFacts facts;
+  facts.rows_per_image = rows;
+  facts.exhaustive = false;
+  facts.gpu_indices = {0};
+  ResolvedRun run = ResolveRun(options, facts);
+  if (notes != nullptr) notes->insert(notes->end(), run.notes.begin(), run.notes.end());
+  return run;
+}
+
 ParseOutcome Parse(std::vector<const char*> args, MatcherCommandOptions* options) {
   args.insert(args.begin(), "exhaustive_matcher");
   return ParseMatcherCommandOptions("exhaustive_matcher", static_cast<int>(args.size()), args.data(), options);
@@ -102,9 +115,6 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(defaults.cashash.num_tables, 0);
   EXPECT_EQ(defaults.cashash.bits_per_table, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
-  // What follows is the cascade with the runs' rematch: auto's rows on a
-  // GPU, on whichever machine the test runs (matcher_choice.h).
-  defaults.cashash.matcher = MatcherType::kCascade;
   // Given on the command line, the tables are kept for any image size.
   MatcherCommandOptions set;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.num_tables", "8", "--CasHash.bits_per_table", "7",
@@ -117,9 +127,9 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(run.cashash.bits_per_table, 7);
   // Left at 0, they follow the images: at 32,768 features on the CPU
   // 22 x 13 for recall (buckets of about 4 features, kCpuFineBucketFeatures),
-  // and 3 x 10 while the exact rematch decides (the default), since the
-  // cascade then only screens the pairs (TableShapeGoal).
-  const MatcherCommandOptions chosen = Resolve(defaults, {32768, 32768, 32768}).options;
+  // and on a GPU 3 x 10 while the exact rematch decides (the default), since
+  // the cascade then only screens the pairs (TableShapeGoal).
+  const MatcherCommandOptions chosen = ResolveOnGpu(defaults, {32768, 32768, 32768}).options;
   EXPECT_EQ(chosen.cashash.num_tables, 3);
   EXPECT_EQ(chosen.cashash.bits_per_table, 10);
   MatcherCommandOptions kept;
@@ -130,7 +140,7 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   MatcherCommandOptions guided = defaults;
   guided.guided.enabled = true;
   EXPECT_EQ(Resolve(guided, {8192, 8192}).options.cashash.bits_per_table, 7);
-  EXPECT_EQ(Resolve(defaults, {8192, 8192}).options.cashash.bits_per_table, 9);  // 3 x 9
+  EXPECT_EQ(ResolveOnGpu(defaults, {8192, 8192}).options.cashash.bits_per_table, 9);  // 3 x 9
   MatcherCommandOptions auto_named;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "auto"}, &auto_named), ParseOutcome::kRun);
   EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
@@ -142,8 +152,8 @@ TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
   EXPECT_EQ(defaults.cashash.tau, 0);
   EXPECT_EQ(CheckMatcherCommandOptions(defaults), "");
   std::vector<std::string> said;
-  // The default run: the rematch decides every pair that may verify.
-  EXPECT_EQ(Resolve(defaults, {8192, 8192}, &said).options.cashash.tau, kCascadeTauForScreening);
+  // The default run on a GPU: the rematch decides every pair that may verify.
+  EXPECT_EQ(ResolveOnGpu(defaults, {8192, 8192}, &said).options.cashash.tau, kCascadeTauForScreening);
   ASSERT_FALSE(said.empty());
   EXPECT_NE(said.back().find("tau 32 (chosen: the exact rematch"), std::string::npos) << said.back();
   // Without the rematch the cascade's matches are kept: tau for precision.
@@ -166,7 +176,7 @@ TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
 
 TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiven) {
   const auto threshold = [](const MatcherCommandOptions& options, size_t features) {
-    return Resolve(options, {features, features}).options.cashash.exact_rematch_min_matches;
+    return ResolveOnGpu(options, {features, features}).options.cashash.exact_rematch_min_matches;
   };
   MatcherCommandOptions defaults;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
@@ -178,7 +188,7 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
   EXPECT_EQ(threshold(defaults, 16384), kBucketScreeningRematchMinMatches);
   EXPECT_EQ(threshold(defaults, 4096), kDefaultRematchMinMatches);
   std::vector<std::string> said;
-  Resolve(defaults, {8192, 8192}, &said);
+  ResolveOnGpu(defaults, {8192, 8192}, &said);
   ASSERT_FALSE(said.empty());
   EXPECT_NE(said.back().find("exact rematch from 8 cascade matches (chosen for these tables)"), std::string::npos)
       << said.back();
@@ -212,7 +222,7 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
 // rematch stays there instead of going to the verification threads.
 TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
   const auto on_matching_thread = [](const MatcherCommandOptions& options, size_t features) {
-    return Resolve(options, {features, features}).rematch_on_matching_thread;
+    return ResolveOnGpu(options, {features, features}).rematch_on_matching_thread;
   };
   MatcherCommandOptions defaults;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
@@ -298,6 +308,64 @@ TEST(CommandOptions, HelpListsOptions) {
                            "--CasHash.tau", "--ExhaustiveMatching.block_size", "--SiftMatching.min_num_inliers"}) {
     EXPECT_NE(help.find(name), std::string::npos) << name;
   }
+}
+
+ParseOutcome ParseCommand(const char* command, std::vector<const char*> args, MatcherCommandOptions* options) {
+  args.insert(args.begin(), command);
+  return ParseMatcherCommandOptions(command, static_cast<int>(args.size()), args.data(), options);
+}
+
+TEST(CommandOptions, SequentialMatchingUnderColmapsNames) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(ParseCommand("sequential_matcher",
+                         {"--database_path", "x", "--SequentialMatching.overlap", "5",
+                          "--SequentialMatching.quadratic_overlap", "0", "--SequentialMatching.loop_detection", "1",
+                          "--SequentialMatching.loop_detection_period", "7",
+                          "--SequentialMatching.loop_detection_num_images", "30",
+                          "--SequentialMatching.loop_detection_min_index_distance", "20",
+                          "--SequentialMatching.expand_rig_images", "false",
+                          "--SequentialMatching.vocab_tree_path", "tree.bin",
+                          "--SequentialMatching.loop_detection_num_checks", "128"},
+                         &o),
+            ParseOutcome::kRun);
+  EXPECT_EQ(o.sequential.overlap, 5);
+  EXPECT_FALSE(o.sequential.quadratic_overlap);
+  EXPECT_TRUE(o.sequential.loop_detection);
+  EXPECT_EQ(o.sequential.loop_detection_period, 7);
+  EXPECT_EQ(o.sequential.loop_detection_num_images, 30);
+  EXPECT_EQ(o.sequential.loop_detection_min_index_distance, 20);
+  EXPECT_FALSE(o.sequential.expand_rig_images);
+  EXPECT_EQ(o.sequential.vocab_tree_path, "tree.bin");
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+  o = MatcherCommandOptions();
+  ASSERT_EQ(ParseCommand("sequential_matcher", {"--database_path", "x", "--SequentialMatching.overlap", "0"}, &o),
+            ParseOutcome::kRun);
+  EXPECT_NE(CheckMatcherCommandOptions(o).find("--SequentialMatching.overlap"), std::string::npos);
+  // Another command's options are unknown options.
+  EXPECT_EQ(ParseCommand("sequential_matcher", {"--database_path", "x", "--SpatialMatching.max_distance", "5"}, &o),
+            ParseOutcome::kError);
+  EXPECT_EQ(ParseCommand("exhaustive_matcher", {"--database_path", "x", "--SequentialMatching.overlap", "5"}, &o),
+            ParseOutcome::kError);
+}
+
+TEST(CommandOptions, SpatialMatchingUnderColmapsNames) {
+  MatcherCommandOptions o;
+  ASSERT_EQ(ParseCommand("spatial_matcher",
+                         {"--database_path", "x", "--SpatialMatching.max_num_neighbors", "20",
+                          "--SpatialMatching.min_num_neighbors", "3", "--SpatialMatching.max_distance", "25.5",
+                          "--SpatialMatching.ignore_z", "0", "--SpatialMatching.is_gps", "0"},
+                         &o),
+            ParseOutcome::kRun);
+  EXPECT_EQ(o.spatial.max_num_neighbors, 20);
+  EXPECT_EQ(o.spatial.min_num_neighbors, 3);
+  EXPECT_DOUBLE_EQ(o.spatial.max_distance, 25.5);
+  EXPECT_FALSE(o.spatial.ignore_z);
+  EXPECT_FALSE(o.spatial.is_gps);
+  EXPECT_EQ(CheckMatcherCommandOptions(o), "");
+  o.spatial.min_num_neighbors = 21;
+  EXPECT_NE(CheckMatcherCommandOptions(o).find("--SpatialMatching.min_num_neighbors"), std::string::npos);
+  EXPECT_EQ(ParseCommand("spatial_matcher", {"--database_path", "x", "--SpatialMatching.max_neighbors", "5"}, &o),
+            ParseOutcome::kError);
 }
 
 }  // namespace

@@ -96,6 +96,26 @@ TEST(CompletedPairsTest, MemoryIsTheBitsOfTheRun) {
   EXPECT_LE(completed.memory_bytes(), n * (n - 1) / 16 + 8 + 4 * (n + 1));
 }
 
+TEST(CompletedPairsTest, ExhaustiveRunHoldsNoBitsUntilAPairIsCompleted) {
+  // A fresh run at 20,000 images would otherwise fill 25 MiB of zeros.
+  const std::vector<image_t> ids = Ids(1, 3000);
+  const size_t n = ids.size();
+  CompletedPairs completed(ids);
+  EXPECT_TRUE(completed.uses_image_triangle());
+  EXPECT_LE(completed.memory_bytes(), 4 * (n + 1));  // the image index alone
+  EXPECT_FALSE(completed.Contains(ids[3], ids[7]));
+  completed.Mark(ImagePairToPairId(ids[7], ids[3]));
+  completed.Mark(ImagePairToPairId(ids.back() + 1, ids[3]));  // not an image of the run
+  EXPECT_EQ(completed.num_completed(), 1u);
+  EXPECT_TRUE(completed.Contains(ids[3], ids[7]));
+  // The bits by positions, as ScheduledChunkSource reads them.
+  const PairTriangle bits = completed.TakeTriangle();
+  EXPECT_EQ(bits.size(), n);
+  EXPECT_EQ(bits.count(), 1u);
+  EXPECT_TRUE(bits.Test(3, 7));
+  EXPECT_FALSE(bits.Test(3, 8));
+}
+
 size_t CountFiles(const std::string& path) {
   size_t count = 0;
   for (const char* suffix : {"-wal", "-shm", "-journal"}) count += std::filesystem::exists(path + suffix) ? 1 : 0;

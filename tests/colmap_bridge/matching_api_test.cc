@@ -258,7 +258,9 @@ TEST_F(SceneDatabase, ExhaustiveMatchesEveryPairOnceAndResumes) {
   callbacks.info = [&](const std::string& text) { notes.push_back(text); };
   callbacks.warning = [&](const std::string& text) { warnings.push_back(text); };
 
-  options_.cashash.matcher = MatcherType::kCascade;  // auto: DefaultsChooseTablesAndMatcherAndSaySo
+  // A typed threshold: every pair with 12 cascade matches is matched again
+  // exactly (the defaults: DefaultsChooseTablesAndMatcherAndSaySo).
+  options_.cashash.exact_rematch_min_matches = 12;
   const colmap::MatchingSummary first = colmap::MatchExhaustive(path_, options_, callbacks);
   EXPECT_EQ(first.pairs_requested, 3u);
   EXPECT_EQ(first.pairs_skipped, 0u);

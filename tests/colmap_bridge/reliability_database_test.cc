@@ -24,6 +24,7 @@
 
 #include <gtest/gtest.h>
 
+#include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/blob_codec.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -421,9 +422,8 @@ TEST(ReliabilityKeypointTest, OutsideTheImageWarnsOnce) {
     raw.ExecWithBlob("UPDATE keypoints SET data = ?1 WHERE image_id = 1", kp.data(),
                      kp.size() * sizeof(float));
   }
-  DatabaseFeatureSource source(path);
   std::vector<std::string> warnings;
-  source.SetWarningCallback([&](const std::string& text) { warnings.push_back(text); });
+  DatabaseFeatureSource source(path, [&](const std::string& text) { warnings.push_back(text); });
   EXPECT_EQ(source.LoadFeatures(1).keypoints.size(), 10u);
   EXPECT_EQ(source.LoadFeatures(1).keypoints.size(), 10u);
   EXPECT_EQ(source.LoadFeatures(2).keypoints.size(), 10u);
@@ -433,6 +433,36 @@ TEST(ReliabilityKeypointTest, OutsideTheImageWarnsOnce) {
   EXPECT_TRUE(Contains(warnings[0], "im1.jpg")) << warnings[0];
   EXPECT_TRUE(Contains(warnings[0], "2 of 10")) << warnings[0];
   EXPECT_TRUE(Contains(warnings[0], "row 4")) << warnings[0];
+}
+
+// A run's warnings about the data (keypoints outside the image, a camera
+// model unknown to cashash) reach its warning callback, as the others do:
+// Python turns them into RuntimeWarnings, the command line prints them.
+TEST(ReliabilityKeypointTest, DataWarningsReachTheRunsCallback) {
+  TempDir dir;
+  const std::string path = MakeDatabase(dir, "db.db", 2, 10);
+  {
+    RawDb raw(path);
+    std::vector<float> kp = Keypoints6(10, 1);
+    kp[6 * 4] = -50.0f;
+    raw.ExecWithBlob("UPDATE keypoints SET data = ?1 WHERE image_id = 1", kp.data(),
+                     kp.size() * sizeof(float));
+    raw.Exec("UPDATE cameras SET model = 99");
+  }
+  MatcherCommandOptions options;
+  options.use_gpu = false;
+  options.cashash.matcher = MatcherType::kBruteForce;
+  std::vector<std::string> warnings;
+  MatchingCallbacks callbacks;
+  callbacks.warning = [&](const std::string& text) { warnings.push_back(text); };
+  MatchExhaustive(path, options, callbacks);
+  size_t outside = 0, unknown_model = 0;
+  for (const std::string& text : warnings) {
+    outside += Contains(text, "keypoints lie outside the 640 x 480 image") ? 1 : 0;
+    unknown_model += Contains(text, "has model id 99, unknown to cashash") ? 1 : 0;
+  }
+  EXPECT_EQ(outside, 1u);
+  EXPECT_EQ(unknown_model, 1u);
 }
 
 // --- Images ------------------------------------------------------------------
@@ -524,6 +554,7 @@ TEST(ReliabilityFaultTest, LockedDatabaseTimesOut) {
   }
   EXPECT_EQ(CountRows(path, "matches"), 0u);
   sink.WriteChunk({ResultWithMatches(1, 2, 4), ResultWithMatches(1, 3, 2)});
+  sink.Flush();
   EXPECT_EQ(CountRows(path, "matches"), 2u);
   EXPECT_EQ(IntegrityOf(path), "ok");
 }
@@ -552,8 +583,12 @@ TEST(ReliabilityFaultTest, DiskFullWhileWriting) {
     DatabaseResultSink sink(path, true);
     struct rlimit small = {limit, old_limit.rlim_max};
     ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
-    // 40k matches: 320 kB, far past the limit.
-    error = ErrorOf([&] { sink.WriteChunk({ResultWithMatches(1, 3, 40000)}); });
+    // 40k matches: 320 kB, far past the limit; written to the file at the
+    // latest when the transaction commits.
+    error = ErrorOf([&] {
+      sink.WriteChunk({ResultWithMatches(1, 3, 40000)});
+      sink.Flush();
+    });
     setrlimit(RLIMIT_FSIZE, &old_limit);
   }
   sigaction(SIGXFSZ, &old_action, nullptr);

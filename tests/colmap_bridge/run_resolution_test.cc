@@ -3,12 +3,18 @@
 // on the command line and set as Python sets them resolve alike.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cashash/matching/table_shape.h"
 #include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/run_resolution.h"
 
 namespace cashash {
@@ -24,7 +30,7 @@ RunFacts Facts(size_t images, size_t rows, bool exhaustive, size_t physical = 16
   facts.rows_per_image.assign(images, rows);
   facts.exhaustive = exhaustive;
   facts.physical_memory_bytes = physical;
-  facts.gpu_index = gpu_index;
+  if (gpu_index >= 0) facts.gpu_indices = {gpu_index};
   facts.gpu_free_bytes = gpu_free;
   return facts;
 }
@@ -107,9 +113,9 @@ const std::vector<Row>& Table() {
          o->cashash.matcher = MatcherType::kCascade;
        },
        GpuFacts(2, 8192, false), "cascade", 3, 9, 40, kBucket, 0, true, kDefaultBlockSize, 0},
-      {"the cascade named on the CPU: the runs' rematch, as on the GPU", {"--CasHash.matcher", "cascade"},
+      {"the cascade named on the CPU: auto's window and tables for recall", {"--CasHash.matcher", "cascade"},
        [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kCascade; }, Facts(2, 8192, false), "cascade",
-       3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
       // On the CPU auto is the cascade's own matches (tables for recall,
       // tau for precision) and the exact rematch of the window [12, 64).
       {"CPU defaults, 8,192 features: the rematch window, the cascade for recall", {}, none, Facts(2, 8192, false),
@@ -203,7 +209,8 @@ TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
     }
     EXPECT_EQ(run.schedule.block_size, run.options.block_size);
     EXPECT_EQ(run.gpu_memory_budget_bytes, row.budget);
-    EXPECT_EQ(run.gpu_index, row.facts.gpu_index);
+    EXPECT_EQ(run.gpu_indices, row.facts.gpu_indices);
+    EXPECT_EQ(run.gpu_index, row.facts.gpu_indices.empty() ? -1 : row.facts.gpu_indices.front());
     if (row.facts.exhaustive) {
       EXPECT_GT(run.schedule.blocks_per_group, 0);
       EXPECT_GT(run.max_host_bytes, 0u);
@@ -284,6 +291,145 @@ TEST(RunResolution, RulesOfTheRematchThresholdAndTheMatcher) {
     EXPECT_EQ(MatcherRule(guided, on_gpu, 8192).matcher, MatcherType::kCascade);
     EXPECT_EQ(MatcherRule(guided, on_gpu, 8192).exact_rematch_max_matches, 0);
     EXPECT_EQ(MatcherRule(brute_force, on_gpu, 8192).matcher, MatcherType::kBruteForce);
+  }
+}
+
+// --CasHash.matcher cascade names the algorithm auto chooses, so it gets
+// the same run: the CPU's rematch window and tables for recall on the CPU,
+// the runs' rematch and the screening tables on the GPU. Only brute force
+// is another algorithm.
+TEST(RunResolution, TheCascadeNamedResolvesAsAutoOnEachDevice) {
+  MatcherCommandOptions cascade;
+  cascade.cashash.matcher = MatcherType::kCascade;
+  const MatcherCommandOptions automatic;
+  for (const size_t rows : {size_t{2048}, size_t{4096}, size_t{8192}, size_t{16384}}) {
+    for (const bool exhaustive : {false, true}) {
+      const RunFacts cpu = Facts(20, rows, exhaustive);
+      EXPECT_EQ(Decisions(ResolveRun(cascade, cpu)), Decisions(ResolveRun(automatic, cpu)))
+          << rows << " features on the CPU";
+      const RunFacts gpu = Facts(20, rows, exhaustive, 16 * kGiB, 0, 80 * kGiB);
+      EXPECT_EQ(Decisions(ResolveRun(cascade, gpu)), Decisions(ResolveRun(automatic, gpu)))
+          << rows << " features on the GPU";
+    }
+  }
+}
+
+// A machine whose device 0 cannot run this build's code (an architecture
+// the build left out) and whose device 1 can.
+DeviceFacts FirstDeviceUnusable() {
+  DeviceFacts machine;
+  machine.cuda_built = true;
+  machine.num_devices = 2;
+  machine.usable = [](int gpu_index, std::string* reason) {
+    if (gpu_index == 1) return true;
+    *reason = "GPU " + std::to_string(gpu_index) + " cannot run this build's GPU code";
+    return false;
+  };
+  return machine;
+}
+
+// --FeatureMatching.gpu_index 0,1 where device 0 is unusable: the run
+// matches on device 1, so it is resolved with the GPU's rules (a 64-bit
+// bucket signature; the CPU's 19 x 12 tables at 16,384 features would not
+// fit it) and verifies there too; a warning names device 0.
+TEST(RunDevices, ARunIsResolvedWithTheRulesOfTheGpusThatMatch) {
+  MatcherCommandOptions options;
+  options.gpu_index = "0,1";
+  const RunDevices devices = ChooseRunDevices(options, FirstDeviceUnusable());
+  EXPECT_EQ(devices.gpu_indices, std::vector<int>{1});
+  ASSERT_EQ(devices.warnings.size(), 1u);
+  EXPECT_NE(devices.warnings[0].find("device 0: GPU 0 cannot run this build's GPU code"), std::string::npos)
+      << devices.warnings[0];
+  RunFacts facts = Facts(20, 16384, false);
+  facts.gpu_indices = devices.gpu_indices;
+  facts.device_warnings = devices.warnings;
+  const ResolvedRun run = ResolveRun(options, facts);
+  EXPECT_EQ(run.gpu_index, 1);
+  EXPECT_LE(run.options.cashash.num_tables * run.options.cashash.bits_per_table, kMaxSignatureBits);
+  RunFacts on_device_1 = Facts(20, 16384, false, 16 * kGiB, 1);
+  EXPECT_EQ(Decisions(run), Decisions(ResolveRun(options, on_device_1)));
+  EXPECT_EQ(run.warnings, devices.warnings);
+
+  // Only the unusable device listed: the CPU, with its rules and a warning.
+  options.gpu_index = "0";
+  const RunDevices none = ChooseRunDevices(options, FirstDeviceUnusable());
+  EXPECT_TRUE(none.gpu_indices.empty());
+  ASSERT_EQ(none.warnings.size(), 1u);
+  EXPECT_NE(none.warnings[0].find("matching on the CPU"), std::string::npos) << none.warnings[0];
+  // Without use_gpu no device is asked for and nothing is said.
+  options.use_gpu = false;
+  EXPECT_TRUE(ChooseRunDevices(options, FirstDeviceUnusable()).gpu_indices.empty());
+  EXPECT_TRUE(ChooseRunDevices(options, FirstDeviceUnusable()).warnings.empty());
+}
+
+TEST(RunDevices, MpiRanksOfOneMachineShareItsGpusUnlessOneIsNamed) {
+  DeviceFacts machine;
+  machine.cuda_built = true;
+  machine.num_devices = 4;
+  machine.usable = [](int, std::string*) { return true; };
+  machine.num_ranks = 8;
+  machine.local_rank = 5;
+  MatcherCommandOptions options;
+  EXPECT_EQ(ChooseRunDevices(options, machine).gpu_indices, std::vector<int>{1});
+  options.gpu_index = "2";
+  EXPECT_EQ(ChooseRunDevices(options, machine).gpu_indices, std::vector<int>{2});
+}
+
+// Two MPI ranks as two threads: Min waits for both values and gives each
+// the smaller (distributed::MpiMin), as the job's ranks would.
+class TwoRanks {
+ public:
+  uint64_t Min(uint64_t value) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const int round = round_;
+    if (arrived_ == 0) smallest_ = value;
+    smallest_ = std::min(smallest_, value);
+    if (++arrived_ == 2) {
+      result_ = smallest_;
+      arrived_ = 0;
+      ++round_;
+      changed_.notify_all();
+    } else if (!changed_.wait_for(lock, std::chrono::seconds(10), [&] { return round_ != round; })) {
+      ADD_FAILURE() << "the other rank never reduced";
+      return value;
+    }
+    return result_;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  int arrived_ = 0, round_ = 0;
+  uint64_t smallest_ = 0, result_ = 0;
+};
+
+// Under MPI every rank resolves the same run, whichever rank has a GPU: a
+// chunk's rows do not depend on the rank that matched it.
+TEST(RunResolution, MpiRanksWithAndWithoutAGpuResolveTheSameRun) {
+  for (const size_t rows : {size_t{4096}, size_t{8192}, size_t{16384}}) {
+    for (const bool exhaustive : {false, true}) {
+      TwoRanks ranks;
+      RunFacts with_gpu = Facts(40, rows, exhaustive, 16 * kGiB, 0, 80 * kGiB);
+      RunFacts without = Facts(40, rows, exhaustive, 16 * kGiB);
+      with_gpu.smallest_over_ranks = [&](uint64_t value) { return ranks.Min(value); };
+      without.smallest_over_ranks = with_gpu.smallest_over_ranks;
+      ResolvedRun run_with, run_without;
+      std::thread other([&] { run_without = ResolveRun(MatcherCommandOptions(), without); });
+      run_with = ResolveRun(MatcherCommandOptions(), with_gpu);
+      other.join();
+      const CasHashOptions& a = run_with.options.cashash;
+      const CasHashOptions& b = run_without.options.cashash;
+      SCOPED_TRACE(std::to_string(rows) + (exhaustive ? " features, exhaustive" : " features, pair list"));
+      EXPECT_EQ(a.num_tables, b.num_tables);
+      EXPECT_EQ(a.bits_per_table, b.bits_per_table);
+      EXPECT_EQ(a.tau, b.tau);
+      EXPECT_EQ(a.exact_rematch_min_matches, b.exact_rematch_min_matches);
+      EXPECT_EQ(a.exact_rematch_max_matches, b.exact_rematch_max_matches);
+      EXPECT_EQ(run_with.options.block_size, run_without.options.block_size);
+      EXPECT_EQ(run_with.schedule.blocks_per_group, run_without.schedule.blocks_per_group);
+      // The GPU's shapes: the rank with the GPU can run them.
+      EXPECT_LE(a.num_tables * a.bits_per_table, kMaxSignatureBits);
+    }
   }
 }
 

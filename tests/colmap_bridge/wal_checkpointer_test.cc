@@ -77,6 +77,7 @@ TEST_F(WalCheckpointerTest, EveryChunkIsReadableAtOnceAndAllRowsSurviveClosing) 
   {
     DatabaseResultSink::Options options;
     options.log_pages_before_catch_up = 32;
+    options.commit_seconds = 0;  // a commit per chunk, each folded under the reader
     DatabaseResultSink sink(path_, options);
     Database reader(path_, /*read_only=*/true);
     for (int c = 0; c < kChunks; ++c) {
@@ -105,6 +106,7 @@ TEST_F(WalCheckpointerTest, TheLogStartsOverInsteadOfGrowing) {
   // bound of 32 pages the log must stay within the bound plus about a chunk.
   DatabaseResultSink::Options options;
   options.log_pages_before_catch_up = 32;
+  options.commit_seconds = 0;  // a commit per chunk
   DatabaseResultSink sink(path_, options);
   uintmax_t largest = 0;
   for (int c = 0; c < 60; ++c) {

@@ -107,12 +107,33 @@ TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty)
   PairResult empty;
   empty.pair = {25, 1};
   sink.WriteChunk({empty});
+  sink.Flush();
   EXPECT_EQ(sink.rows_written(), 0u);
   EXPECT_EQ(sink.empty_pairs_recorded(), 1u);
   EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 0);
   EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
   Database db(path_, true);
   EXPECT_EQ(db.ReadCompletedPairIds().count(ImagePairToPairId(1, 25)), 1u);
+}
+
+// --overwrite 1 with --skip_geometric_verification 1 rewrites the matches
+// of its pairs; their old two_view_geometries rows would describe other
+// matches and make a resumed run take the pairs as done. They go, so the
+// next verifying run matches and verifies those pairs again.
+TEST_F(WriteEmptyPairsTest, OverwriteWithoutVerificationDropsTheOldGeometries) {
+  colmap::MatchPairs(path_, NearAndFarPairs(), options_);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
+  colmap::MatcherCommandOptions rewrite = options_;
+  rewrite.overwrite = true;
+  rewrite.skip_geometric_verification = true;
+  const colmap::MatchingSummary rewritten = colmap::MatchPairs(path_, NearAndFarPairs(), rewrite);
+  EXPECT_EQ(rewritten.pipeline.pairs_done, 8u);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 8);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
+  const colmap::MatchingSummary resumed = colmap::MatchPairs(path_, NearAndFarPairs(), options_);
+  EXPECT_EQ(resumed.pairs_skipped, 0u);
+  EXPECT_EQ(resumed.pipeline.pairs_done, 8u);
+  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
 }
 
 TEST(PairIdRunsTest, RoundTripsRunsAndRejectsDamage) {

@@ -236,7 +236,8 @@ TEST_F(GpuBruteForceTest, BestTwoEqualsNaiveReferenceInOneBatch) {
       which.emplace_back(static_cast<int>(k), reversed);
     }
   }
-  BruteForceKernels kernels;
+  cuda::GpuResources resources(0, 0);
+  BruteForceKernels kernels(nullptr, &resources);
   kernels.EnqueueBestTwo(problems);
   ASSERT_CUDA(cudaStreamSynchronize(kernels.stream()));
 
@@ -332,7 +333,8 @@ TEST_F(GpuBruteForceTest, SkippedStripsKeepTheReferenceBestTwo) {
     p.best_idx = out + 2 * p.n_a;
     problems.push_back(p);
   }
-  BruteForceKernels kernels;
+  cuda::GpuResources resources(0, 0);
+  BruteForceKernels kernels(nullptr, &resources);
   kernels.EnqueueBestTwo(problems);
   ASSERT_CUDA(cudaStreamSynchronize(kernels.stream()));
   const int n = a.rows();
@@ -383,7 +385,8 @@ TEST_F(GpuBruteForceTest, MatchPairsEqualsReferenceAndCpuMatcher) {
     r12.push_back(NaiveBestTwo(first[k], second[k]));
     r21.push_back(NaiveBestTwo(second[k], first[k]));
   }
-  BruteForceKernels kernels;
+  cuda::GpuResources resources(0, 0);
+  BruteForceKernels kernels(nullptr, &resources);
   const std::vector<MatchThresholds> settings = {
       {0.8f, 0.7f, true}, {0.8f, 0.7f, false}, {0.95f, 1.2f, true}, {0.6f, 0.3f, true}};
   for (const MatchThresholds& t : settings) {
@@ -442,7 +445,8 @@ TEST_F(GpuBruteForceTest, ReverseSearchOverNamedRowsEqualsFullReference) {
     r12.push_back(NaiveBestTwo(*c.first, *c.second));
     r21.push_back(NaiveBestTwo(*c.second, *c.first));
   }
-  BruteForceKernels kernels;
+  cuda::GpuResources resources(0, 0);
+  BruteForceKernels kernels(nullptr, &resources);
   const std::vector<MatchThresholds> settings = {{0.8f, 0.7f, true}, {0.8f, 0.0f, true}, {1.0f, 2.0f, true}};
   size_t matched_identical = 0;
   for (const MatchThresholds& t : settings) {
@@ -503,7 +507,8 @@ TEST_F(GpuBruteForceTest, AcceptanceBoundaryIsBitExact) {
     db.push_back(std::make_unique<DeviceImage>(b));
     pairs.emplace_back(da.view(), db.back()->view());
   }
-  BruteForceKernels kernels;
+  cuda::GpuResources resources(0, 0);
+  BruteForceKernels kernels(nullptr, &resources);
   const std::vector<FeatureMatches> got = kernels.MatchPairs(pairs, t);
   int accepted = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {

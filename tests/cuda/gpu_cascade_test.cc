@@ -16,8 +16,10 @@
 #include <thread>
 #include <vector>
 
+#include "cashash/base/device_memory_error.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/device_memory.cuh"
 
 namespace cashash {
@@ -324,18 +326,22 @@ TEST(GpuCascadeTest, BigBucketsSharedOutGiveThePerQueryKernelsMatches) {
   EXPECT_EQ(AddAndMatch(gpu.get(), images, pairs), direct);
 }
 
-TEST(GpuCascadeTest, DeviceOutOfMemoryIsAnError) {
+// cudaErrorMemoryAllocation becomes a DeviceMemoryError (recognised by its
+// type, whatever the text), and the device stays usable afterwards.
+TEST(GpuCascadeTest, DeviceOutOfMemoryIsADeviceMemoryError) {
   SKIP_WITHOUT_CUDA_DEVICE();
+  cuda::GpuResources resources(0, 0);
   cuda::DeviceBuffer buffer;
   try {
-    buffer.Allocate(size_t{1} << 50, "a petabyte");
+    buffer.Allocate(&resources, size_t{1} << 50, "a petabyte");
     ADD_FAILURE() << "a petabyte was allocated";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("out of memory"), std::string::npos) << e.what();
+  } catch (const DeviceMemoryError& e) {
+    EXPECT_NE(std::string(e.what()).find("a petabyte"), std::string::npos) << e.what();
   }
-  // The device stays usable afterwards.
-  buffer.Allocate(1 << 20, "a mebibyte");
+  buffer.Allocate(&resources, 1 << 20, "a mebibyte");
   EXPECT_EQ(buffer.bytes(), size_t{1} << 20);
+  void* raw = nullptr;
+  EXPECT_THROW(CUDA_CHECK(cudaMalloc(&raw, size_t{1} << 50)), DeviceMemoryError);
 }
 
 TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {

@@ -1,55 +1,94 @@
-// The device block pool that holds the GPU matchers' images, the pinned ring
-// that uploads them, and both backends' images through them: blocks are
-// reused by size, staged uploads arrive intact, and images added again
-// after removal (their blocks recycled) match as before.
+// The owner of a device's memory (GpuResources) that holds the GPU
+// matchers' images, the pinned ring that uploads them, and both backends'
+// images through them: blocks are reused by size class, the budget trims
+// the cache before it refuses, staged uploads arrive intact, and images
+// added again after removal (their blocks recycled) match as before.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <random>
 #include <vector>
 
+#include "cashash/base/caching_block_allocator.h"
+#include "cashash/base/device_memory_error.h"
 #include "synthetic_sift.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "gpu_test_support.h"
 #include "cashash_cuda/utils/device_memory.cuh"
+#include "cashash_cuda/utils/gpu_resources.h"
 
 namespace cashash {
 namespace {
 
-TEST(DeviceBlockPool, BlocksAreDistinctAlignedAndReusedBySize) {
+TEST(GpuResources, BlocksAreDistinctAlignedAndReusedByClass) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  cuda::DeviceBlockPool pool;
-  char* a = static_cast<char*>(pool.Acquire(1000, "test"));
-  char* b = static_cast<char*>(pool.Acquire(1000, "test"));
+  cuda::GpuResources resources(0, 0);
+  char* a = static_cast<char*>(resources.AllocateDevice(100000, "test"));
+  char* b = static_cast<char*>(resources.AllocateDevice(100000, "test"));
   EXPECT_NE(a, b);
-  EXPECT_GE(static_cast<size_t>(std::max(a, b) - std::min(a, b)), 1000u);  // no overlap
-  EXPECT_EQ(reinterpret_cast<uintptr_t>(b) % cuda::DeviceBlockPool::kAlignment, 0u);
-  pool.Release(a, 1000);
-  EXPECT_EQ(pool.Acquire(1000, "test"), a);  // same size: the freed block
-  void* big = pool.Acquire(cuda::DeviceBlockPool::kChunkBytes + 1, "test");  // a chunk of its own
-  EXPECT_NE(big, nullptr);
+  EXPECT_GE(static_cast<size_t>(std::max(a, b) - std::min(a, b)), 100000u);  // no overlap
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(b) % CachingBlockAllocator::kGranularity, 0u);
+  resources.FreeDevice(a);
+  // Another size of the same class (98,304 < bytes <= 114,688): the freed block.
+  EXPECT_EQ(resources.AllocateDevice(99000, "test"), a);
+  const BlockAllocatorStats stats = resources.DeviceStats();
+  EXPECT_EQ(stats.source_allocations, 1u) << "without a budget both blocks come from one slab";
+  EXPECT_EQ(stats.reuses, 1u);
   // Blocks are device memory: a round trip through one of them.
   std::vector<int> host(250, 7), back(250, 0);
   ASSERT_EQ(cudaMemcpy(b, host.data(), 1000, cudaMemcpyHostToDevice), cudaSuccess);
   ASSERT_EQ(cudaMemcpy(back.data(), b, 1000, cudaMemcpyDeviceToHost), cudaSuccess);
   EXPECT_EQ(back, host);
+  resources.FreeDevice(a);
+  resources.FreeDevice(b);
+}
+
+// The budget holds on the device: cached blocks go back (cudaFree) to make
+// room, and blocks in use past it are a DeviceMemoryError.
+TEST(GpuResources, TheBudgetTrimsTheCacheThenRefuses) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  constexpr size_t kMiB = size_t{1} << 20;
+  cuda::GpuResources resources(0, 64 * kMiB);
+  EXPECT_EQ(resources.ScratchBytes(), 2 * kMiB);
+  void* big = resources.AllocateDevice(40 * kMiB, "big");
+  resources.FreeDevice(big);
+  void* other = resources.AllocateDevice(30 * kMiB, "other");  // 40 + 30 > 64: the cached 40 MiB go
+  EXPECT_EQ(resources.DeviceStats().trimmed_blocks, 1u);
+  EXPECT_LE(resources.DeviceStats().peak_held_bytes, 64 * kMiB);
+  EXPECT_THROW(resources.AllocateDevice(40 * kMiB, "too much"), DeviceMemoryError);
+  resources.FreeDevice(other);
+}
+
+TEST(GpuResources, PinnedBlocksAreMappedAndReused) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  cuda::GpuResources resources(0, 0);
+  cuda::PinnedBuffer buffer;
+  buffer.Allocate(&resources, 4096, "test");
+  ASSERT_NE(buffer.host<int>(), nullptr);
+  ASSERT_NE(buffer.device<int>(), nullptr);
+  void* first = buffer.host<void>();
+  buffer.Release();
+  buffer.Allocate(&resources, 4000, "test");
+  EXPECT_EQ(buffer.host<void>(), first);
+  EXPECT_EQ(resources.PinnedStats().reuses, 1u);
+  EXPECT_EQ(resources.DeviceStats().source_allocations, 0u) << "pinned memory is not device memory";
 }
 
 TEST(PinnedUploadRing, MoreUploadsThanSlotsArriveIntact) {
   SKIP_WITHOUT_CUDA_DEVICE();
   cudaStream_t stream = nullptr;
   ASSERT_EQ(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), cudaSuccess);
-  cuda::DeviceBlockPool pool;
+  cuda::GpuResources resources(0, 0);
   std::vector<void*> blocks;
   std::vector<std::vector<uint8_t>> sent;
   {
-    cuda::PinnedUploadRing ring;
+    cuda::PinnedUploadRing ring(&resources);
     for (int k = 0; k < 3 * cuda::PinnedUploadRing::kSlots + 1; ++k) {
       const size_t bytes = 1000 + 4096 * static_cast<size_t>(k % 3);  // slots grow and are reused
       std::vector<uint8_t> host(bytes);
       for (size_t i = 0; i < bytes; ++i) host[i] = static_cast<uint8_t>(31 * k + i);
       sent.push_back(host);
-      blocks.push_back(pool.Acquire(bytes, "test"));
+      blocks.push_back(resources.AllocateDevice(bytes, "test"));
       ring.Upload(host.data(), bytes, blocks.back(), stream);
       host.assign(bytes, 0xff);  // the ring has its own copy: the caller's may change at once
     }
@@ -59,6 +98,7 @@ TEST(PinnedUploadRing, MoreUploadsThanSlotsArriveIntact) {
     std::vector<uint8_t> back(sent[k].size());
     ASSERT_EQ(cudaMemcpy(back.data(), blocks[k], back.size(), cudaMemcpyDeviceToHost), cudaSuccess);
     EXPECT_EQ(back, sent[k]) << "upload " << k;
+    resources.FreeDevice(blocks[k]);
   }
   cudaStreamDestroy(stream);
 }

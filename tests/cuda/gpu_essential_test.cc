@@ -26,7 +26,7 @@
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/geometry/five_point_solver.h"
 #include "cashash/base/pair_id.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash/pipeline/verification_pairs_file.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"

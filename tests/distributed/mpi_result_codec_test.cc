@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include "cashash/pipeline/pair_chunk_source.h"
 #include "cashash/pipeline/pair_generation.h"
 #include "cashash/base/pair_id.h"
 #include "distributed/mpi_distributed.h"
@@ -120,18 +121,44 @@ TEST(MpiResultCodec, RankReportRoundTrips) {
 TEST(MpiDistributed, RoundRobinGivesEveryChunkToOneRank) {
   std::vector<image_t> ids;
   for (image_t i = 1; i <= 23; ++i) ids.push_back(i);
-  const std::vector<PairChunk> chunks = ScheduledPairChunks(ids, 4, 2);
+  const std::vector<PairChunk> reference = ScheduledPairChunks(ids, 4, 2);
+  const ScheduledChunkSource chunks(ids, 4, 2);
   for (int size : {1, 2, 3, 7, 100}) {
     std::set<pair_t> seen;
+    size_t num_chunks = 0, num_pairs = 0;
     for (int rank = 0; rank < size; ++rank) {
-      for (const PairChunk& chunk : ChunksOfRank(chunks, rank, size)) {
+      const ChunksOfRank mine(&chunks, rank, size);
+      num_chunks += mine.size();
+      num_pairs += mine.num_pairs();
+      for (size_t k = 0; k < mine.size(); ++k) {
+        // Chunk k of a rank is chunk rank + k * size of the run, as before.
+        const PairChunk chunk = mine.Chunk(k);
+        EXPECT_EQ(chunk.pairs, reference[rank + k * size].pairs);
+        EXPECT_EQ(mine.NumPairs(k), chunk.pairs.size());
         for (const ImagePair& p : chunk.pairs) EXPECT_TRUE(seen.insert(ImagePairToPairId(p.first, p.second)).second);
       }
     }
     EXPECT_EQ(seen.size(), 23u * 22u / 2u) << "size " << size;
+    EXPECT_EQ(num_chunks, reference.size());
+    EXPECT_EQ(num_pairs, 23u * 22u / 2u);
   }
-  EXPECT_EQ(ChunkListChecksum(chunks), ChunkListChecksum(ScheduledPairChunks(ids, 4, 2)));
-  EXPECT_NE(ChunkListChecksum(chunks), ChunkListChecksum(ScheduledPairChunks(ids, 4, 3)));
+  EXPECT_EQ(chunks.Checksum(), ScheduledChunkSource(ids, 4, 2).Checksum());
+  EXPECT_NE(chunks.Checksum(), ScheduledChunkSource(ids, 4, 3).Checksum());
+  EXPECT_NE(chunks.Checksum(), ScheduledChunkSource(ids, 5, 2).Checksum());
+  std::vector<image_t> other = ids;
+  other.back() += 1;
+  EXPECT_NE(chunks.Checksum(), ScheduledChunkSource(other, 4, 2).Checksum());
+  // Ranks that resumed from different completed pairs disagree.
+  PairTriangle done_a(ids.size()), done_b(ids.size());
+  done_a.Set(0, 1);
+  done_b.Set(0, 2);
+  EXPECT_NE(ScheduledChunkSource(ids, 4, 2, done_a).Checksum(), ScheduledChunkSource(ids, 4, 2, done_b).Checksum());
+  EXPECT_NE(ScheduledChunkSource(ids, 4, 2, done_a).Checksum(), chunks.Checksum());
+  // A pair list's chunks: over their pairs.
+  const ChunkList listed(&reference);
+  EXPECT_EQ(listed.Checksum(), ChunkList(&reference).Checksum());
+  const std::vector<PairChunk> fewer(reference.begin(), reference.end() - 1);
+  EXPECT_NE(listed.Checksum(), ChunkList(&fewer).Checksum());
 }
 
 TEST(MpiWorld, WithoutALauncherIsAWorldOfOne) {

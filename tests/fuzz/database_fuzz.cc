@@ -39,8 +39,7 @@ void RemoveJournals(const std::string& path) {
 }
 
 void ReadLikeAMatchingRun(const std::string& path) {
-  DatabaseFeatureSource source(path);
-  source.SetWarningCallback([](const std::string&) {});
+  DatabaseFeatureSource source(path, [](const std::string&) {});
   const size_t num_images = std::min<size_t>(source.images().size(), 8);
   for (size_t i = 0; i < num_images; ++i) {
     const cashash::image_t id = source.images()[i].image_id;

@@ -30,7 +30,7 @@ colmap feature_extractor --database_path "$DB" --image_path "$WORK/scene/images"
   --ImageReader.camera_params "$FX,$FY,$CX,$CY" \
   --SiftExtraction.use_gpu 0 >"$WORK/extract.log" 2>&1 || { tail -30 "$WORK/extract.log"; exit 1; }
 
-"$CASHASH" exhaustive_matcher --database_path "$DB" --CasHash.matcher cascade
+"$CASHASH" exhaustive_matcher --database_path "$DB"
 
 # Every pair must have been attempted and written, as COLMAP does.
 python3 - "$DB" "$NUM_VIEWS" <<'PY'

@@ -2,8 +2,11 @@
 """Helpers of the reliability tests (tests/integration/reliability_*.sh).
 
   make OUT.db [--images N] [--features K] ...   synthetic feature database
-  check DB [--pairs N]     integrity_check ok, matches and two_view_geometries
-                           hold the same pairs, no more than N of them
+  check DB [--pairs N] [--block_size B]
+                           integrity_check ok, matches and two_view_geometries
+                           hold the same pairs, no more than N of them; with
+                           B, every pair of blocks of B images (an exhaustive
+                           run's chunk) is there whole or not at all
   compare DB REF           same rows (pair_id and every column) in both tables
   count DB                 prints the number of matches rows
   watch DB PIDFILE         reads DB while the process in PIDFILE writes it;
@@ -130,7 +133,25 @@ def check(args):
         fail(f"{args.path}: {len(matches ^ geometries)} pairs have a row in one table only")
     if args.pairs is not None and len(matches) > args.pairs:
         fail(f"{args.path}: {len(matches)} pairs, more than {args.pairs}")
-    print(f"{args.path}: integrity ok, {len(matches)} pairs in both tables")
+    chunks = ""
+    if args.block_size:
+        # Blocks of images in image_id order; pair_id = id1 * 2147483647 + id2.
+        ids = [row[0] for row in con.execute("SELECT image_id FROM images ORDER BY image_id")]
+        block = {image_id: k // args.block_size for k, image_id in enumerate(ids)}
+        present, total = {}, {}
+        for a in range(len(ids)):
+            for b in range(a + 1, len(ids)):
+                key = (block[ids[a]], block[ids[b]])
+                total[key] = total.get(key, 0) + 1
+        for pair_id in matches:
+            key = (block[pair_id // 2147483647], block[pair_id % 2147483647])
+            present[key] = present.get(key, 0) + 1
+        partial = [key for key, n in present.items() if n != total[key]]
+        if partial:
+            fail(f"{args.path}: {len(partial)} block pairs are partly written, e.g. {partial[0]} with "
+                 f"{present[partial[0]]} of {total[partial[0]]} pairs")
+        chunks = f", {len(present)} whole block pairs of {len(total)}"
+    print(f"{args.path}: integrity ok, {len(matches)} pairs in both tables{chunks}")
 
 
 def rows(con, table):
@@ -203,6 +224,7 @@ def main():
     p = sub.add_parser("check")
     p.add_argument("path")
     p.add_argument("--pairs", type=int)
+    p.add_argument("--block_size", type=int)
     p = sub.add_parser("compare")
     p.add_argument("path")
     p.add_argument("reference")

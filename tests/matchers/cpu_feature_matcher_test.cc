@@ -10,7 +10,7 @@
 #include "cashash/matching/cascade_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/matching/matching_options.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "synthetic_sift.h"
 
 namespace cashash {

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include "cashash/base/device_memory_error.h"
 #include "synthetic_sift.h"
 
 namespace cashash {
@@ -233,14 +234,15 @@ class TicketMatcher : public CannedMatcher {
  public:
   class Ticket : public ExactMatchingTicket {
    public:
-    Ticket(std::vector<ImagePair> pairs, std::vector<FeatureMatches> answer, int* alive)
-        : pairs_(std::move(pairs)), answer_(std::move(answer)), alive_(alive) {
+    Ticket(std::vector<ImagePair> pairs, std::vector<FeatureMatches> answer, int* alive, bool out_of_memory)
+        : pairs_(std::move(pairs)), answer_(std::move(answer)), alive_(alive), out_of_memory_(out_of_memory) {
       ++*alive_;
     }
     ~Ticket() override { --*alive_; }
     std::vector<FeatureMatches> Run() override {
       EXPECT_FALSE(ran_) << "a ticket is run once";
       ran_ = true;
+      if (out_of_memory_) throw DeviceMemoryError("GPU memory budget exceeded by brute-force scratch");
       return answer_;
     }
 
@@ -248,16 +250,55 @@ class TicketMatcher : public CannedMatcher {
     std::vector<ImagePair> pairs_;
     std::vector<FeatureMatches> answer_;
     int* alive_;
+    bool out_of_memory_;
     bool ran_ = false;
   };
   std::unique_ptr<ExactMatchingTicket> DeferExactMatching(const std::vector<ImagePair>& pairs) override {
     for (const ImagePair& p : pairs) {
       EXPECT_TRUE(images.count(p.first) && images.count(p.second)) << "a ticket is taken while the images are held";
     }
-    return std::make_unique<Ticket>(pairs, MatchPairsExact(pairs), &alive);
+    return std::make_unique<Ticket>(pairs, MatchPairsExact(pairs), &alive, out_of_memory);
   }
   int alive = 0;
+  bool out_of_memory = false;  // its tickets throw DeviceMemoryError
 };
+
+// A ticket that finds no room on the device does not end the run: its
+// pairs go to the pool's matchers (which themselves go on on the CPU when
+// the device has no room for them either), fed with the caller's
+// descriptors, and the run's counts say so.
+TEST(ExactRematchFeatureMatcher, ATicketOutOfDeviceMemoryHandsItsPairsToThePool) {
+  auto cascade = std::make_unique<TicketMatcher>();
+  TicketMatcher* c = cascade.get();
+  c->out_of_memory = true;
+  std::vector<CannedMatcher*> made;
+  auto pool = std::make_shared<ExactMatcherPool>([&made]() {
+    auto exact = std::make_unique<CannedMatcher>();
+    made.push_back(exact.get());
+    return exact;
+  });
+  auto counts = std::make_shared<ExactRematchCounts>();
+  ExactRematchFeatureMatcher matcher(std::move(cascade), 5, counts, pool);
+  for (image_t id = 0; id < 5; ++id) matcher.AddImage(id, FeatureDescriptors{});
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 4}, {0, 2}, {2, 3}, {0, 4}, {1, 2}};
+  ChunkMatches chunk = matcher.MatchPairsDeferred(pairs);
+  ASSERT_NE(chunk.deferred, nullptr);
+  std::set<image_t> looked_up;
+  auto descriptors = std::make_shared<const FeatureDescriptors>();
+  EXPECT_NO_THROW(chunk.deferred->Complete(
+      [&](image_t id) {
+        looked_up.insert(id);
+        return descriptors;
+      },
+      &chunk.matches));
+  EXPECT_EQ(c->alive, 0) << "the failed ticket is let go";
+  ASSERT_EQ(made.size(), 1u);
+  EXPECT_EQ(made[0]->asked, (std::vector<ImagePair>{{1, 4}, {2, 3}}));
+  EXPECT_EQ(looked_up, (std::set<image_t>{1, 2, 3, 4}));
+  EXPECT_EQ(chunk.matches[1].size(), 5u) << "the pool's answer";
+  EXPECT_EQ(counts->tickets_without_memory, 1u);
+  EXPECT_EQ(matcher.pairs_rematched(), 2u);
+}
 
 TEST(ExactRematchFeatureMatcher, DeferredRematchRunsTheCascadesTicketWhereItGivesOne) {
   auto cascade = std::make_unique<TicketMatcher>();

@@ -36,7 +36,9 @@ TEST(ChooseAutoMatcher, OneRulePerDeviceAndTypedOptionsWin) {
       {"CPU, window typed", MatcherType::kAuto, false, false, false, 10, 40, MatcherType::kCascade, 10, 40},
       {"GPU, window typed", MatcherType::kAuto, true, false, false, 10, 40, MatcherType::kCascade, 10, 40},
       {"CPU, guided", MatcherType::kAuto, false, true, true, 12, 0, MatcherType::kCascade, 12, 0},
-      {"CPU, cascade named", MatcherType::kCascade, false, true, false, 12, 0, MatcherType::kCascade, 12, 0},
+      {"CPU, cascade named: auto's window", MatcherType::kCascade, false, true, false, 12, 0, MatcherType::kCascade,
+       kCpuRematchWindowMin, kCpuRematchWindowMax},
+      {"GPU, cascade named", MatcherType::kCascade, true, true, false, 12, 0, MatcherType::kCascade, 12, 0},
       {"CPU, brute force named", MatcherType::kBruteForce, false, true, false, 12, 0, MatcherType::kBruteForce, 12,
        0},
   };

@@ -107,6 +107,41 @@ TEST(MatchingPipeline, EveryPairMatchedAndWrittenOnce) {
   EXPECT_LE(matcher.num_added(), 8u);
 }
 
+// Records each chunk's pairs in the order they are written.
+class OrderSink : public ResultSink {
+ public:
+  void WriteChunk(const std::vector<PairResult>& results) override {
+    std::vector<ImagePair> pairs;
+    for (const PairResult& r : results) pairs.push_back(r.pair);
+    chunks.push_back(std::move(pairs));
+  }
+  std::vector<std::vector<ImagePair>> chunks;
+};
+
+TEST(MatchingPipeline, ChunksMadeOnDemandAreWrittenAsTheListWouldBe) {
+  const std::vector<image_t> ids = Ids(23);
+  const std::vector<PairChunk> listed = ScheduledPairChunks(ids, 3, 2);
+  const ScheduledChunkSource made(ids, 3, 2);
+  std::vector<std::vector<ImagePair>> written[2];
+  std::vector<std::pair<int, int>> blocks[2];
+  for (int run = 0; run < 2; ++run) {
+    FakeSource source;
+    FakeMatcher matcher;
+    OrderSink sink;
+    MatchingPipeline pipeline(NoVerification(), &source, &matcher, &sink);
+    // The chunk a progress call names is alive while it is reported.
+    pipeline.SetProgressCallback(
+        [&](const PipelineProgress& p) { blocks[run].emplace_back(p.chunk->block_i, p.chunk->block_j); });
+    const PipelineStats stats = run == 0 ? pipeline.Run(listed) : pipeline.Run(made);
+    EXPECT_EQ(stats.pairs_total, 23u * 22u / 2u);
+    EXPECT_EQ(stats.pairs_done, 23u * 22u / 2u);
+    written[run] = sink.chunks;
+  }
+  EXPECT_EQ(written[0].size(), listed.size());
+  EXPECT_EQ(written[0], written[1]);
+  EXPECT_EQ(blocks[0], blocks[1]);
+}
+
 // Leaves every pair's matches to DeferredMatching::Complete: MatchPairsDeferred
 // returns none, Complete gives each pair as many matches as the first
 // image's descriptors have rows (read through the pipeline's lookup).

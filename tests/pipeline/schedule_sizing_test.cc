@@ -90,7 +90,7 @@ TEST(ScheduleSizing, GpuCapMakesBlocksSmaller) {
   const ScheduleSizes sizes = ChooseScheduleSizes(features, limits);
   EXPECT_LT(sizes.block_size, 50);
   EXPECT_GE(sizes.block_size, 2);
-  EXPECT_LE(sizes.predicted_gpu_bytes, static_cast<size_t>(0.75 * limits.max_gpu_bytes));
+  EXPECT_LE(sizes.predicted_gpu_bytes, static_cast<size_t>(limits.gpu_image_share * limits.max_gpu_bytes));
   EXPECT_TRUE(sizes.warning.empty());
 }
 

@@ -17,6 +17,7 @@
 #include "colmap_bridge/database.h"
 #include "synthetic/database_generator.h"
 #include "colmap_bridge/database_pipeline_io.h"
+#include "colmap_bridge/position_priors.h"
 #include "synthetic/generate_database_command.h"
 #include "colmap_bridge/api/matching_api.h"
 #include "synthetic/synthetic_street_scene.h"
@@ -46,6 +47,35 @@ class DatabaseGeneratorTest : public ::testing::Test {
   ScratchDir scratch_{"generator_test"};
   std::string source_ = scratch_.File("source.db");
 };
+
+TEST_F(DatabaseGeneratorTest, PositionPriorsAreTheCameraCentres) {
+  DatabaseGeneratorOptions o = Options("cartesian.db", 6, 50);
+  o.position_priors = "cartesian";
+  colmap::GenerateDatabase(o);
+  SpatialPairingOptions read_options;
+  read_options.is_gps = false;
+  const std::vector<PositionPrior> cartesian =
+      colmap::ReadPositionPriors(Database(o.database_path, true), read_options).priors;
+  o = Options("gps.db", 6, 50);
+  o.position_priors = "gps";
+  colmap::GenerateDatabase(o);
+  const std::vector<PositionPrior> gps =
+      colmap::ReadPositionPriors(Database(o.database_path, true), SpatialPairingOptions()).priors;
+  ASSERT_EQ(cartesian.size(), 6u);
+  ASSERT_EQ(gps.size(), 6u);
+  for (size_t k = 0; k + 1 < cartesian.size(); ++k) {
+    // East along the street, one unit (metre) a camera, 0.15 of jitter.
+    const Eigen::Vector3d step = cartesian[k + 1].position - cartesian[k].position;
+    EXPECT_NEAR(step.x(), 1.0, 0.31);
+    // The same step in GPS: its length in ECEF metres, heights included.
+    const double metres = (GeodeticToEcef(gps[k + 1].position) - GeodeticToEcef(gps[k].position)).norm();
+    EXPECT_NEAR(metres, step.norm(), 0.01);
+    EXPECT_NEAR(gps[k].position.x(), 47.3769, 0.01);  // latitude, degrees
+  }
+  o = Options("bad.db", 2, 50);
+  o.position_priors = "utm";
+  EXPECT_NE(o.Check().find("--position_priors"), std::string::npos);
+}
 
 TEST_F(DatabaseGeneratorTest, WritesAValidColmapDatabaseWithExactlyTheFeatureCount) {
   const DatabaseGeneratorOptions o = Options("out.db", 7, 700);

@@ -5,6 +5,7 @@
 #include "cashash_cuda/geometry/two_view_geometry.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -12,10 +13,11 @@
 #include <stdexcept>
 #include <string>
 
+#include "cashash/base/device_memory_error.h"
 #include "cashash/geometry/launch_order.h"
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/geometry/ransac.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/utils/device_memory.cuh"
 #include "cashash_cuda/geometry/ransac.cuh"
@@ -27,14 +29,14 @@ namespace cuda {
 namespace {
 
 // Grow buffers geometrically so that chunk after chunk reuses them.
-void Reserve(DeviceBuffer* buffer, size_t bytes, const char* what) {
+void Reserve(GpuResources* owner, DeviceBuffer* buffer, size_t bytes, const char* what) {
   if (buffer->bytes() >= bytes) return;
-  buffer->Allocate(bytes + bytes / 2, what);
+  buffer->Allocate(owner, bytes + bytes / 2, what);
 }
 
-void Reserve(PinnedBuffer* buffer, size_t bytes) {
+void Reserve(GpuResources* owner, PinnedBuffer* buffer, size_t bytes, const char* what) {
   if (buffer->bytes() >= bytes) return;
-  buffer->Allocate(bytes + bytes / 2, /*mapped=*/false, "RANSAC host staging");
+  buffer->Allocate(owner, bytes + bytes / 2, what);
 }
 
 Eigen::Matrix3d FromRowMajor(const double* v) {
@@ -46,6 +48,7 @@ Eigen::Matrix3d FromRowMajor(const double* v) {
 }  // namespace
 
 struct GpuTwoViewRansac::Impl {
+  std::shared_ptr<GpuResources> resources;  // first in, last out
   TwoViewGeometryOptions options;
   int device = 0;
   cudaStream_t stream = nullptr, stream_E = nullptr;
@@ -55,10 +58,12 @@ struct GpuTwoViewRansac::Impl {
   GpuRansacStats stats;
 };
 
-GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index)
+GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index,
+                                   std::shared_ptr<GpuResources> resources)
     : impl_(std::make_unique<Impl>()) {
   std::string reason;
   if (!CudaDeviceUsable(gpu_index, &reason)) throw std::runtime_error(reason);
+  impl_->resources = resources ? std::move(resources) : std::make_shared<GpuResources>(gpu_index, 0);
   impl_->options = options;
   impl_->device = gpu_index;
   CUDA_CHECK(cudaSetDevice(gpu_index));
@@ -167,7 +172,8 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   const size_t all_points = total + total_E;
   // Packing and unpacking run on all cores: at tens of thousands of pairs
   // per second they would otherwise cost as much as the kernels.
-  Reserve(&d.host_points, all_points * sizeof(float4));
+  GpuResources* owner = d.resources.get();
+  Reserve(owner, &d.host_points, all_points * sizeof(float4), "RANSAC host staging");
   float4* host_points = d.host_points.host<float4>();
   ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
     const PointPairs& p = j < num_pairs ? pairs[order[j]]->normalized : essential[order_E[j - num_pairs]]->world;
@@ -175,10 +181,10 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
   });
 
-  Reserve(&d.points, all_points * sizeof(float4), "RANSAC points");
-  Reserve(&d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
-  Reserve(&d.outputs, inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
-  Reserve(&d.masks, 2 * total + total_E, "RANSAC inlier masks");
+  Reserve(owner, &d.points, all_points * sizeof(float4), "RANSAC points");
+  Reserve(owner, &d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
+  Reserve(owner, &d.outputs, inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
+  Reserve(owner, &d.masks, 2 * total + total_E, "RANSAC inlier masks");
 
   CUDA_CHECK(cudaEventRecord(d.start, d.stream));
   CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points, all_points * sizeof(float4),
@@ -258,8 +264,8 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   }
 
   const size_t num_outputs = inputs.size();
-  Reserve(&d.host_outputs, num_outputs * sizeof(RansacPairOutput));
-  Reserve(&d.host_masks, 2 * total + total_E);
+  Reserve(owner, &d.host_outputs, num_outputs * sizeof(RansacPairOutput), "RANSAC host outputs");
+  Reserve(owner, &d.host_masks, 2 * total + total_E, "RANSAC host masks");
   const RansacPairOutput* outputs = d.host_outputs.host<RansacPairOutput>();
   const uint8_t* masks = d.host_masks.host<uint8_t>();
   CUDA_CHECK(cudaMemcpyAsync(d.host_outputs.host<RansacPairOutput>(), d.outputs.as<RansacPairOutput>(),
@@ -330,9 +336,10 @@ class GpuBatchVerifier : public BatchVerifier {
       : options_(options),
         num_threads_(config.num_threads),
         gpu_index_(config.gpu_index),
-        max_calls_(std::min(std::max(config.verifications_in_flight, 1), kMaxGpuVerificationsInFlight)) {
+        max_calls_(std::min(std::max(config.verifications_in_flight, 1), kMaxGpuVerificationsInFlight)),
+        resources_(config.resources ? config.resources : std::make_shared<GpuResources>(config.gpu_index, 0)) {
     // The first estimator now, so that an unusable device fails here.
-    estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index_));
+    estimators_.push_back(std::make_unique<GpuTwoViewRansac>(options, gpu_index_, resources_));
     free_.push_back(estimators_.back().get());
   }
 
@@ -350,7 +357,7 @@ class GpuBatchVerifier : public BatchVerifier {
 
   std::string StatsSummary() const override {
     const GpuRansacStats st = SummedStats();
-    if (st.pairs == 0) return {};
+    if (st.pairs == 0 && chunks_on_cpu_.load() == 0) return {};
     auto per_pair = [](long long value, size_t pairs) { return pairs ? static_cast<double>(value) / pairs : 0.0; };
     char line[512];
     std::snprintf(line, sizeof(line),
@@ -362,8 +369,16 @@ class GpuBatchVerifier : public BatchVerifier {
                   kEssentialLargeBlockThreads, per_pair(st.trials_F, st.pairs),
                   per_pair(st.trials_H, st.pairs), per_pair(st.trials_E, st.pairs_E), st.early_exits_F,
                   st.early_exits_H, st.early_exits_E);
-    return line;
+    std::string summary = line;
+    const size_t on_cpu = chunks_on_cpu_.load();
+    if (on_cpu > 0) {
+      summary += "; CPU fallback: " + std::to_string(on_cpu) +
+                 " verification calls found no room in GPU memory and were verified on the CPU";
+    }
+    return summary;
   }
+
+  size_t CallsWithoutDeviceMemory() const override { return chunks_on_cpu_.load(); }
 
   std::vector<TwoViewGeometry> Verify(const std::vector<VerificationPair>& pairs) override {
     const size_t n = pairs.size();
@@ -393,8 +408,15 @@ class GpuBatchVerifier : public BatchVerifier {
       batch_essential.push_back(calibrated[k] ? &essential_points[k] : nullptr);
     }
     std::vector<TwoViewModelEstimate> F, H, E_batch, E(n);
-    EstimatorLease ransac(this);
-    ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
+    try {
+      EstimatorLease ransac(this);
+      ransac->Estimate(batch_points, batch_seeds, batch_essential, &F, &H, &E_batch);
+    } catch (const DeviceMemoryError&) {
+      // No room on the device for this call's buffers: the CPU verifies it,
+      // as the matchers go on on the CPU.
+      ++chunks_on_cpu_;
+      return CpuVerifier()->Verify(pairs);
+    }
     for (size_t i = 0; i < batch.size(); ++i) E[batch[i]] = std::move(E_batch[i]);
     ParallelFor(batch.size(), num_threads_, [&](size_t i) {
       const size_t k = batch[i];
@@ -422,7 +444,8 @@ class GpuBatchVerifier : public BatchVerifier {
     explicit EstimatorLease(GpuBatchVerifier* owner) : owner_(owner) {
       std::unique_lock<std::mutex> lock(owner_->mutex_);
       if (owner_->free_.empty()) {
-        owner_->estimators_.push_back(std::make_unique<GpuTwoViewRansac>(owner_->options_, owner_->gpu_index_));
+        owner_->estimators_.push_back(
+            std::make_unique<GpuTwoViewRansac>(owner_->options_, owner_->gpu_index_, owner_->resources_));
         owner_->free_.push_back(owner_->estimators_.back().get());
       }
       estimator_ = owner_->free_.back();
@@ -464,10 +487,19 @@ class GpuBatchVerifier : public BatchVerifier {
     return sum;
   }
 
+  BatchVerifier* CpuVerifier() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!cpu_verifier_) cpu_verifier_ = CreateCpuBatchVerifier(options_, num_threads_);
+    return cpu_verifier_.get();
+  }
+
   TwoViewGeometryOptions options_;
   int num_threads_;
   int gpu_index_;
   int max_calls_;
+  std::shared_ptr<GpuResources> resources_;  // outlives the estimators
+  std::atomic<size_t> chunks_on_cpu_{0};
+  std::unique_ptr<BatchVerifier> cpu_verifier_;  // made on the first fallback
   mutable std::mutex mutex_;
   std::vector<std::unique_ptr<GpuTwoViewRansac>> estimators_;
   std::vector<GpuTwoViewRansac*> free_;

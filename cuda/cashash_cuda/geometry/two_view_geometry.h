@@ -13,6 +13,7 @@
 
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/geometry/two_view_geometry.h"
+#include "cashash_cuda/utils/gpu_resources.h"
 
 namespace cashash {
 namespace cuda {
@@ -35,8 +36,12 @@ struct GpuRansacStats {
 // one Estimate call at a time.
 class GpuTwoViewRansac {
  public:
-  // Throws std::runtime_error when the device cannot be used.
-  GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index);
+  // Throws std::runtime_error when the device cannot be used. Its buffers
+  // come from `resources` (null: an owner of its own without a budget);
+  // Estimate throws DeviceMemoryError, before anything is queued, when
+  // they have no room.
+  GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index,
+                   std::shared_ptr<GpuResources> resources = nullptr);
   ~GpuTwoViewRansac();
   GpuTwoViewRansac(const GpuTwoViewRansac&) = delete;
   GpuTwoViewRansac& operator=(const GpuTwoViewRansac&) = delete;
@@ -71,18 +76,13 @@ class GpuTwoViewRansac {
 };
 
 // Chunks the GPU verifier keeps on the device at once (its
-// MaxConcurrentCalls), by default. On the H200 more chunks
-// at once help where verification sets
-// the pace (guided matching: 23.5k, 25.6k and 26.9k pairs/s at 300 images
-// with 1, 2 and 3) and cost a little where matching does (exhaustive: 20.6k,
-// 20.4k, 19.7k), since their E blocks hold SMs the matching kernels want;
-// 2 takes most of the first and little of the second. One at a time keeps
-// the matching stage closer to its matching-only time (1.19-1.22x against
-// 1.39-1.58x at 300 images) but the whole command is 2-5 %
-// slower, so the default stays at 2; the pipeline's second verification
-// thread takes a chunk only on a backlog or after matching
-// (the verification stage in matching_pipeline.cc), which gives the first
-// without the second.
+// MaxConcurrentCalls), by default. More chunks at once help where
+// verification sets the pace and cost a little where matching does, since
+// their E blocks hold SMs the matching kernels want; 2 takes most of the
+// first and little of the second. The pipeline's second verification
+// thread takes a chunk only on a backlog or after matching (the
+// verification stage in matching_pipeline.cc), which keeps the gain without
+// the cost. docs/gpu_verification.md has the figures.
 constexpr int kDefaultGpuVerificationsInFlight = 2;
 constexpr int kMaxGpuVerificationsInFlight = 8;
 
@@ -94,10 +94,15 @@ struct GpuVerifierConfig {
   // Chunks verified on the device at once, 1 to kMaxGpuVerificationsInFlight
   // (values outside are clamped).
   int verifications_in_flight = kDefaultGpuVerificationsInFlight;
+  // The owner of the device's memory, shared with the run's matchers (null:
+  // one of its own without a budget).
+  std::shared_ptr<GpuResources> resources;
 };
 
 // The BatchVerifier that estimates F, H and E of a whole chunk on the GPU
-// and prepares points and decides on CPU threads.
+// and prepares points and decides on CPU threads. A chunk whose buffers
+// find no room on the device (DeviceMemoryError) is verified on the CPU
+// instead; StatsSummary counts those chunks.
 std::unique_ptr<BatchVerifier> CreateGpuBatchVerifier(const TwoViewGeometryOptions& options,
                                                       const GpuVerifierConfig& config);
 // The same with the default number of verifications in flight.

@@ -20,6 +20,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "cashash/base/device_memory_error.h"
 #include "cashash/base/object_pool.h"
 #include "cashash/matching/cascade_hashing.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
@@ -56,6 +57,12 @@ constexpr uint32_t kBigBucketFirstChunks = 4;
 // Queue entries per batch: far more than the buckets past a few chunks
 // (about one per table and pair at 16,384 features), 512 KiB.
 constexpr uint32_t kBigBucketCapacity = 65536;
+
+// Under a budget each of the two batch slots grows within a sixteenth of it
+// (a batch of a single pair that needs more may take up to half of what the
+// images leave): the rest is for the exact rematch's kernels and the
+// verifier, which take their memory from the same owner (GpuResources).
+constexpr size_t kSlotShareOfBudget = 16;
 
 std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
   if (options.num_tables * options.bits_per_table > kMaxSignatureBits) {
@@ -101,11 +108,12 @@ struct BatchSlot {
 // runs tickets at once.
 class ExactKernels {
  public:
-  explicit ExactKernels(int device) : device_(device) {
+  ExactKernels(int device, std::shared_ptr<GpuResources> resources)
+      : device_(device), resources_(std::move(resources)) {
     CUDA_CHECK(cudaSetDevice(device));
     stream_ = CreateStageStream(StreamRole::kMatching);
     try {
-      kernels_ = std::make_unique<BruteForceKernels>(stream_);
+      kernels_ = std::make_unique<BruteForceKernels>(stream_, resources_.get());
     } catch (...) {
       cudaStreamDestroy(stream_);
       throw;
@@ -122,19 +130,21 @@ class ExactKernels {
   ExactKernels& operator=(const ExactKernels&) = delete;
 
   BruteForceKernels* kernels() { return kernels_.get(); }
+  size_t scratch_bytes() const { return resources_->ScratchBytes(); }
 
  private:
   const int device_;
+  std::shared_ptr<GpuResources> resources_;  // outlives kernels_
   cudaStream_t stream_ = nullptr;
   std::unique_ptr<BruteForceKernels> kernels_;
 };
 using ExactKernelsPool = ObjectPool<ExactKernels>;
 
 // Exact matches of pairs from device descriptors the cascade matcher holds:
-// the ticket keeps their blocks (and the pool they return to) until it goes.
+// the ticket keeps their blocks (and the owner they return to) until it goes.
 class GpuExactMatchingTicket : public ExactMatchingTicket {
  public:
-  GpuExactMatchingTicket(int device, std::shared_ptr<DeviceBlockPool> blocks, std::shared_ptr<ExactKernelsPool> kernels,
+  GpuExactMatchingTicket(int device, std::shared_ptr<GpuResources> blocks, std::shared_ptr<ExactKernelsPool> kernels,
                          const MatchThresholds& thresholds)
       : device_(device), blocks_(std::move(blocks)), kernels_(std::move(kernels)), thresholds_(thresholds) {}
   ~GpuExactMatchingTicket() override {
@@ -152,14 +162,15 @@ class GpuExactMatchingTicket : public ExactMatchingTicket {
   std::vector<FeatureMatches> Run() override {
     CUDA_CHECK(cudaSetDevice(device_));
     std::unique_ptr<ExactKernels> lease = kernels_->Acquire();
-    std::vector<FeatureMatches> matches = MatchPairsInBatches(lease->kernels(), pairs_, thresholds_);
+    std::vector<FeatureMatches> matches =
+        MatchPairsInBatches(lease->kernels(), pairs_, thresholds_, lease->scratch_bytes());
     kernels_->Release(std::move(lease));
     return matches;
   }
 
  private:
   const int device_;
-  std::shared_ptr<DeviceBlockPool> blocks_;  // first in, last out: outlives held_
+  std::shared_ptr<GpuResources> blocks_;  // first in, last out: outlives held_
   std::shared_ptr<ExactKernelsPool> kernels_;
   const MatchThresholds thresholds_;
   std::vector<std::shared_ptr<PooledDeviceBlock>> held_;
@@ -174,7 +185,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
         options_(options),
         device_(config.gpu_index),
         tiled_(config.cascade_kernel == GpuCascadeKernel::kBucketTiles),
-        list_capacity_(kCandidateListCapacity) {
+        list_capacity_(kCandidateListCapacity),
+        resources_(config.resources ? config.resources
+                                    : std::make_shared<GpuResources>(config.gpu_index, config.memory_budget_bytes)) {
     std::string error = sift_options.Check();
     if (error.empty()) error = options.Check();
     if (error.empty()) error = CheckGpuCascadeOptions(options);
@@ -182,7 +195,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
     std::string reason;
     if (!CudaDeviceUsable(device_, &reason)) throw std::runtime_error(reason);
     CUDA_CHECK(cudaSetDevice(device_));
-    budget_ = MemoryBudget(config.memory_budget_bytes);
+    if (resources_->device() != device_) throw std::invalid_argument("GPU cascade matcher: resources of another device");
+    budget_ = MemoryBudget(resources_->budget_bytes());
 
     const CascadeProjections projections = GenerateCascadeProjections(options_);
     UploadProjections(projections, mean);
@@ -220,7 +234,12 @@ class GpuCascadeMatcher : public FeatureMatcher {
     if (n > 0) {
       const DeviceImageLayout layout(n, options_.num_tables, options_.bits_per_table);
       Reserve(layout.total, "image " + std::to_string(image_id));
-      image.memory = std::make_shared<PooledDeviceBlock>(image_pool_.get(), layout.total, "image features");
+      try {
+        image.memory = std::make_shared<PooledDeviceBlock>(resources_.get(), layout.total, "image features");
+      } catch (...) {
+        used_ -= layout.total;  // the owner had no room: nothing was taken
+        throw;
+      }
       image.parts = layout.Parts(image.memory->as<void>(), image.num_features);
       // On the stream that hashes: the upload and the zeroed counts are
       // ordered before the hash launch (the streams do not sync with the
@@ -252,7 +271,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
   bool SupportsExactMatching() const override { return true; }
   std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
     CUDA_CHECK(cudaSetDevice(device_));
-    if (!exact_kernels_) exact_kernels_ = std::make_unique<BruteForceKernels>(slots_[0].stream);
+    if (!exact_kernels_) exact_kernels_ = std::make_unique<BruteForceKernels>(slots_[0].stream, resources_.get());
     std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> device_pairs;
     device_pairs.reserve(pairs.size());
     for (const ImagePair& pair : pairs) {
@@ -261,7 +280,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
       device_pairs.emplace_back(DeviceDescriptors{a.parts.descriptors, static_cast<int>(a.num_features)},
                                 DeviceDescriptors{b.parts.descriptors, static_cast<int>(b.num_features)});
     }
-    return MatchPairsInBatches(exact_kernels_.get(), device_pairs, ToMatchThresholds(sift_options_));
+    return MatchPairsInBatches(exact_kernels_.get(), device_pairs, ToMatchThresholds(sift_options_),
+                               resources_->ScratchBytes());
   }
 
   // The pairs' device descriptors, lent to the ticket with their blocks:
@@ -270,10 +290,10 @@ class GpuCascadeMatcher : public FeatureMatcher {
   // chunk's images.
   std::unique_ptr<ExactMatchingTicket> DeferExactMatching(const std::vector<ImagePair>& pairs) override {
     if (!ticket_kernels_) {
-      const int device = device_;
-      ticket_kernels_ = std::make_shared<ExactKernelsPool>([device] { return std::make_unique<ExactKernels>(device); });
+      ticket_kernels_ = std::make_shared<ExactKernelsPool>(
+          [device = device_, resources = resources_] { return std::make_unique<ExactKernels>(device, resources); });
     }
-    auto ticket = std::make_unique<GpuExactMatchingTicket>(device_, image_pool_, ticket_kernels_,
+    auto ticket = std::make_unique<GpuExactMatchingTicket>(device_, resources_, ticket_kernels_,
                                                            ToMatchThresholds(sift_options_));
     for (const ImagePair& pair : pairs) {
       const Image& a = Find(pair.first);
@@ -384,7 +404,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
       used_ -= points_.bytes();
       points_.Release();
       Reserve(bytes, "keypoint positions");
-      points_.Allocate(bytes, "keypoint positions");
+      points_.Allocate(resources_.get(), bytes, "keypoint positions");
     }
     std::vector<float2> staged(total);
     for (const Placed& placed : arrays) {
@@ -414,7 +434,7 @@ class GpuCascadeMatcher : public FeatureMatcher {
   // Accounts for `bytes` more device memory, or throws naming `what`.
   void Reserve(size_t bytes, const std::string& what) {
     if (bytes > budget_ || used_ > budget_ - bytes) {
-      throw std::runtime_error("GPU memory budget exceeded by " + what + ": it needs " + MiB(bytes) + ", " +
+      throw DeviceMemoryError("GPU memory budget exceeded by " + what + ": it needs " + MiB(bytes) + ", " +
                                MiB(used_) + " of " + MiB(budget_) +
                                " are in use; match fewer or smaller images per block");
     }
@@ -444,8 +464,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
       // of the descriptor range; then float rounding could flip a bit.
       offsets[r] = static_cast<float>(offset);
     }
-    projections_t_.Allocate(transposed.size() * sizeof(float), "projections");
-    row_offsets_.Allocate(offsets.size() * sizeof(float), "projection offsets");
+    projections_t_.Allocate(resources_.get(), transposed.size() * sizeof(float), "projections");
+    row_offsets_.Allocate(resources_.get(), offsets.size() * sizeof(float), "projection offsets");
     CUDA_CHECK(cudaMemcpy(projections_t_.as<float>(), transposed.data(), transposed.size() * sizeof(float),
                           cudaMemcpyHostToDevice));
     CUDA_CHECK(cudaMemcpy(row_offsets_.as<float>(), offsets.data(), offsets.size() * sizeof(float),
@@ -468,7 +488,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
       blocks += (image.num_features + kHashFeaturesPerBlock - 1) / kHashFeaturesPerBlock;
       jobs.push_back(job);
     }
-    DeviceBuffer device_jobs(jobs.size() * sizeof(HashJob), "hash jobs");
+    // Used on slots_[0]'s stream only, which is synchronised below: the
+    // block may go back without waiting for the whole device.
+    const PooledDeviceBlock device_jobs(resources_.get(), jobs.size() * sizeof(HashJob), "hash jobs");
     CUDA_CHECK(cudaMemcpyAsync(device_jobs.as<HashJob>(), jobs.data(), jobs.size() * sizeof(HashJob),
                                cudaMemcpyHostToDevice, slots_[0].stream));
     HashParams params;
@@ -495,14 +517,18 @@ class GpuCascadeMatcher : public FeatureMatcher {
   }
 
   // End of the batch starting at `start`: bounded by kMaxBatch* and by the
-  // memory budget left for the two slots.
+  // memory budget left for the two slots: a batch grows within its share
+  // (kSlotShareOfBudget) and takes at least one pair where that pair fits
+  // half of what the images leave.
   size_t BatchEnd(const std::vector<PairTask>& tasks, size_t start) const {
     size_t free_for_slots = std::numeric_limits<size_t>::max();
+    size_t most_for_one_pair = std::numeric_limits<size_t>::max();
     if (budget_ != std::numeric_limits<size_t>::max()) {
       size_t slots_now = 0;
       for (const BatchSlot& s : slots_) slots_now += SlotBytes(s.task_capacity, s.query_capacity, s.row_capacity);
       const size_t images = used_ - slots_now;
-      free_for_slots = budget_ > images ? (budget_ - images) / 2 : 0;
+      free_for_slots = budget_ / kSlotShareOfBudget;
+      most_for_one_pair = budget_ > images ? (budget_ - images) / 2 : 0;
     }
     size_t end = start, queries = 0, rows = 0;
     while (end < tasks.size() && end - start < kMaxBatchPairs) {
@@ -512,10 +538,10 @@ class GpuCascadeMatcher : public FeatureMatcher {
                           SlotBytes(end + 1 - start, queries + q, rows + r) > free_for_slots)) {
         break;
       }
-      if (end == start && SlotBytes(1, q, r) > free_for_slots) {
-        throw std::runtime_error("GPU memory budget too small to match a pair of " + std::to_string(q) + " and " +
+      if (end == start && SlotBytes(1, q, r) > most_for_one_pair) {
+        throw DeviceMemoryError("GPU memory budget too small to match a pair of " + std::to_string(q) + " and " +
                                  std::to_string(r - q) + " features: " + MiB(SlotBytes(1, q, r)) +
-                                 " of scratch needed, " + MiB(free_for_slots) + " left");
+                                 " of scratch needed, " + MiB(most_for_one_pair) + " left");
       }
       queries += q;
       rows += r;
@@ -538,16 +564,17 @@ class GpuCascadeMatcher : public FeatureMatcher {
     slot->list_counts.Release();
     slot->task_capacity = slot->query_capacity = slot->row_capacity = 0;
     Reserve(SlotBytes(new_tasks, new_queries, new_rows), "matching scratch");
-    slot->tasks.Allocate(new_tasks * sizeof(PairTask), "pair tasks");
-    slot->best.Allocate(new_queries * sizeof(int32_t), "match results");
+    GpuResources* owner = resources_.get();
+    slot->tasks.Allocate(owner, new_tasks * sizeof(PairTask), "pair tasks");
+    slot->best.Allocate(owner, new_queries * sizeof(int32_t), "match results");
     if (tiled_ && new_rows > 0) {
-      slot->list_keys.Allocate(new_rows * list_capacity_ * sizeof(uint32_t), "candidate lists");
-      slot->list_counts.Allocate(new_rows * sizeof(uint32_t), "candidate list counts");
+      slot->list_keys.Allocate(owner, new_rows * list_capacity_ * sizeof(uint32_t), "candidate lists");
+      slot->list_counts.Allocate(owner, new_rows * sizeof(uint32_t), "candidate list counts");
     }
-    if (slot->cursor.bytes() == 0) slot->cursor.Allocate(256, "match cursor");
-    slot->host_tasks.Allocate(new_tasks * sizeof(PairTask), false, "pair tasks");
-    slot->segments.Allocate(new_tasks * sizeof(MatchSegment), true, "match segments");
-    slot->out.Allocate(new_queries * sizeof(uint2), true, "matches");
+    if (slot->cursor.bytes() == 0) slot->cursor.Allocate(owner, 256, "match cursor");
+    slot->host_tasks.Allocate(owner, new_tasks * sizeof(PairTask), "pair tasks");
+    slot->segments.Allocate(owner, new_tasks * sizeof(MatchSegment), "match segments");
+    slot->out.Allocate(owner, new_queries * sizeof(uint2), "matches");
     slot->task_capacity = new_tasks;
     slot->query_capacity = new_queries;
     slot->row_capacity = new_rows;
@@ -586,8 +613,8 @@ class GpuCascadeMatcher : public FeatureMatcher {
         slot->guides.Release();
         slot->guide_capacity = 0;
         Reserve(num_tasks * sizeof(EpipolarGuideDevice), "epipolar guides");
-        slot->guides.Allocate(num_tasks * sizeof(EpipolarGuideDevice), "epipolar guides");
-        slot->host_guides.Allocate(num_tasks * sizeof(EpipolarGuideDevice), false, "epipolar guides");
+        slot->guides.Allocate(resources_.get(), num_tasks * sizeof(EpipolarGuideDevice), "epipolar guides");
+        slot->host_guides.Allocate(resources_.get(), num_tasks * sizeof(EpipolarGuideDevice), "epipolar guides");
         slot->guide_capacity = num_tasks;
       }
       EpipolarGuideDevice* staged_guides = slot->host_guides.host<EpipolarGuideDevice>();
@@ -618,7 +645,9 @@ class GpuCascadeMatcher : public FeatureMatcher {
       BigBucketQueue big;
       {
         const size_t entry_bytes = size_t{kBigBucketCapacity} * sizeof(uint2);
-        if (slot->big_buckets.bytes() == 0) slot->big_buckets.Allocate(entry_bytes + 64, "big-bucket queue");
+        if (slot->big_buckets.bytes() == 0) {
+          slot->big_buckets.Allocate(resources_.get(), entry_bytes + 64, "big-bucket queue");
+        }
         char* base = slot->big_buckets.as<char>();
         big.entries = reinterpret_cast<uint2*>(base);
         big.capacity = kBigBucketCapacity;
@@ -671,17 +700,17 @@ class GpuCascadeMatcher : public FeatureMatcher {
   const bool tiled_;
   int sm_count_ = 1;
   const int list_capacity_;
+  // First in, last out: every buffer, block and ticket below returns to it.
+  std::shared_ptr<GpuResources> resources_;
   size_t budget_ = 0;
   size_t used_ = 0;
   int rows_padded_ = 0;
   int grid_size_ = 1;
   DeviceBuffer projections_t_;
   DeviceBuffer row_offsets_;
-  // Before images_, and shared with tickets: outlives every block.
-  std::shared_ptr<DeviceBlockPool> image_pool_ = std::make_shared<DeviceBlockPool>();
   std::unordered_map<image_t, Image> images_;
   std::vector<image_t> pending_;
-  PinnedUploadRing uploads_;  // descriptors to the device, on slots_[0]'s stream
+  PinnedUploadRing uploads_{resources_.get()};  // descriptors to the device, on slots_[0]'s stream
   BatchSlot slots_[2];
   // MatchPairsExact's kernels and scratch, made on first use.
   std::unique_ptr<BruteForceKernels> exact_kernels_;

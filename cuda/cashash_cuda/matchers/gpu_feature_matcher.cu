@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "cashash/base/device_memory_error.h"
 #include "cashash/matching/table_shape.h"
 #include "cashash_cuda/matching/brute_force_matcher.cuh"
 #include "cashash_cuda/matchers/gpu_cascade_feature_matcher.h"
@@ -29,14 +30,18 @@ namespace {
 class GpuBruteForceMatcher : public FeatureMatcher {
  public:
   GpuBruteForceMatcher(const SiftMatchingOptions& sift_options, const GpuMatcherConfig& config)
-      : sift_options_(sift_options), device_(config.gpu_index), budget_(MemoryBudget(config.memory_budget_bytes)) {
+      : sift_options_(sift_options),
+        device_(config.gpu_index),
+        resources_(config.resources ? config.resources
+                                    : std::make_shared<GpuResources>(config.gpu_index, config.memory_budget_bytes)),
+        budget_(MemoryBudget(resources_->budget_bytes())) {
     const std::string error = sift_options.Check();
     if (!error.empty()) throw std::invalid_argument(error);
     std::string reason;
     if (!CudaDeviceUsable(device_, &reason)) throw std::runtime_error(reason);
     CUDA_CHECK(cudaSetDevice(device_));
     stream_ = CreateStageStream(StreamRole::kMatching);
-    kernels_ = std::make_unique<BruteForceKernels>(stream_);
+    kernels_ = std::make_unique<BruteForceKernels>(stream_, resources_.get());
   }
   ~GpuBruteForceMatcher() override {
     cudaSetDevice(device_);
@@ -55,12 +60,12 @@ class GpuBruteForceMatcher : public FeatureMatcher {
     if (n > 0) {
       const size_t bytes = n * kDescriptorDim;
       if (bytes > budget_ || used_ > budget_ - bytes) {
-        throw std::runtime_error("GPU memory budget exceeded by image " + std::to_string(image_id) + ": it needs " +
+        throw DeviceMemoryError("GPU memory budget exceeded by image " + std::to_string(image_id) + ": it needs " +
                                  MiB(bytes) + ", " + MiB(used_) + " of " + MiB(budget_) + " are in use");
       }
       // From the pool, through pinned staging, on the stream the kernels
       // use: no cudaMalloc, no wait (as the cascade's images).
-      image.memory = PooledDeviceBlock(&image_pool_, bytes, "image descriptors");
+      image.memory = PooledDeviceBlock(resources_.get(), bytes, "image descriptors");
       uploads_.Upload(descriptors.data.data(), bytes, image.memory.as<uint8_t>(), stream_);
       used_ += bytes;
     }
@@ -84,7 +89,8 @@ class GpuBruteForceMatcher : public FeatureMatcher {
       device_pairs.emplace_back(DeviceDescriptors{a.memory.as<uint8_t>(), a.rows},
                                 DeviceDescriptors{b.memory.as<uint8_t>(), b.rows});
     }
-    return MatchPairsInBatches(kernels_.get(), device_pairs, ToMatchThresholds(sift_options_));
+    return MatchPairsInBatches(kernels_.get(), device_pairs, ToMatchThresholds(sift_options_),
+                               resources_->ScratchBytes());
   }
 
   bool SupportsExactMatching() const override { return true; }
@@ -109,13 +115,14 @@ class GpuBruteForceMatcher : public FeatureMatcher {
 
   const SiftMatchingOptions sift_options_;
   const int device_;
+  // First in, last out: the images, kernels and staging return to it.
+  std::shared_ptr<GpuResources> resources_;
   const size_t budget_;
   size_t used_ = 0;
   cudaStream_t stream_ = nullptr;
   std::unique_ptr<BruteForceKernels> kernels_;
-  DeviceBlockPool image_pool_;  // before images_: outlives their blocks
   std::unordered_map<image_t, Image> images_;
-  PinnedUploadRing uploads_;
+  PinnedUploadRing uploads_{resources_.get()};
 };
 
 // A kernel compiled like every other of the backend: whether the driver can

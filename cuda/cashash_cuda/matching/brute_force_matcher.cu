@@ -333,8 +333,9 @@ __global__ void __launch_bounds__(kMatchThreads)
   if (threadIdx.x == 0) *p.num_matches = written;
 }
 
-// Device or pinned host memory that only grows; growing waits for the stream
-// first, since queued work may still read the old block.
+// Device or pinned host memory of a GpuResources that only grows; growing
+// waits for the stream first, since queued work may still read the old
+// block (only this stream uses it, so the block can then go back at once).
 class GrowingBuffer {
  public:
   GrowingBuffer(bool pinned_host) : pinned_host_(pinned_host) {}
@@ -342,16 +343,14 @@ class GrowingBuffer {
   GrowingBuffer(const GrowingBuffer&) = delete;
   GrowingBuffer& operator=(const GrowingBuffer&) = delete;
 
-  void* Reserve(size_t bytes, cudaStream_t stream) {
+  void* Reserve(GpuResources* owner, size_t bytes, cudaStream_t stream) {
     if (bytes <= bytes_) return ptr_;
     CUDA_CHECK(cudaStreamSynchronize(stream));
     Free();
     const size_t grown = std::max(bytes, bytes_ * 3 / 2);
-    if (pinned_host_) {
-      CUDA_CHECK(cudaMallocHost(&ptr_, grown));
-    } else {
-      CUDA_CHECK(cudaMalloc(&ptr_, grown));
-    }
+    ptr_ = pinned_host_ ? owner->AllocatePinned(grown, "brute-force results")
+                        : owner->AllocateDevice(grown, "brute-force scratch");
+    owner_ = owner;
     bytes_ = grown;
     return ptr_;
   }
@@ -359,13 +358,14 @@ class GrowingBuffer {
  private:
   void Free() {
     if (ptr_ != nullptr) {
-      if (pinned_host_) cudaFreeHost(ptr_);
-      else cudaFree(ptr_);
+      if (pinned_host_) owner_->FreePinned(ptr_);
+      else owner_->FreeDevice(ptr_);
     }
     ptr_ = nullptr;
     bytes_ = 0;
   }
   bool pinned_host_;
+  GpuResources* owner_ = nullptr;
   void* ptr_ = nullptr;
   size_t bytes_ = 0;
 };
@@ -384,13 +384,14 @@ struct BruteForceKernels::Scratch {
   const float* angle = nullptr;
 };
 
-BruteForceKernels::BruteForceKernels(cudaStream_t stream) : stream_(stream), scratch_(new Scratch) {
+BruteForceKernels::BruteForceKernels(cudaStream_t stream, GpuResources* resources)
+    : stream_(stream), resources_(resources), scratch_(new Scratch) {
   try {
     // The host's own angle of every dot that can differ from angle 0, so the
     // device's decisions are bit-identical to AcceptSiftMatch on the CPU.
     std::vector<float> table(kAngleTableMaxDot + 1);
     for (int dot = 0; dot <= kAngleTableMaxDot; ++dot) table[dot] = DescriptorDotToAngle(dot);
-    void* device_table = scratch_->angle_table.Reserve(table.size() * sizeof(float), stream_);
+    void* device_table = scratch_->angle_table.Reserve(resources_, table.size() * sizeof(float), stream_);
     CUDA_CHECK(cudaMemcpyAsync(device_table, table.data(), table.size() * sizeof(float), cudaMemcpyHostToDevice,
                                stream_));
     CUDA_CHECK(cudaStreamSynchronize(stream_));
@@ -410,7 +411,8 @@ namespace {
 
 // Stages the problems and their items in `staging` and launches one
 // BestTwoKernel over them.
-void LaunchBestTwo(const std::vector<BestTwoProblem>& problems, GrowingBuffer* staging, cudaStream_t stream) {
+void LaunchBestTwo(const std::vector<BestTwoProblem>& problems, GpuResources* owner, GrowingBuffer* staging,
+                   cudaStream_t stream) {
   std::vector<int2> items;
   for (size_t k = 0; k < problems.size(); ++k) {
     const BestTwoProblem& p = problems[k];
@@ -428,7 +430,7 @@ void LaunchBestTwo(const std::vector<BestTwoProblem>& problems, GrowingBuffer* s
   std::vector<uint8_t> staged(problem_bytes + item_bytes);
   std::memcpy(staged.data(), problems.data(), problems.size() * sizeof(BestTwoProblem));
   std::memcpy(staged.data() + problem_bytes, items.data(), item_bytes);
-  uint8_t* device = static_cast<uint8_t*>(staging->Reserve(staged.size(), stream));
+  uint8_t* device = static_cast<uint8_t*>(staging->Reserve(owner, staged.size(), stream));
   CUDA_CHECK(cudaMemcpyAsync(device, staged.data(), staged.size(), cudaMemcpyHostToDevice, stream));
   BestTwoKernel<<<static_cast<unsigned>(items.size()), kThreads, 0, stream>>>(
       reinterpret_cast<const BestTwoProblem*>(device), reinterpret_cast<const int2*>(device + problem_bytes),
@@ -439,7 +441,7 @@ void LaunchBestTwo(const std::vector<BestTwoProblem>& problems, GrowingBuffer* s
 }  // namespace
 
 void BruteForceKernels::EnqueueBestTwo(const std::vector<BestTwoProblem>& problems) {
-  LaunchBestTwo(problems, &scratch_->problems, stream_);
+  LaunchBestTwo(problems, resources_, &scratch_->problems, stream_);
 }
 
 void BruteForceKernels::EnqueueHitGather(const std::vector<HitGatherProblem>& problems,
@@ -452,7 +454,7 @@ void BruteForceKernels::EnqueueHitGather(const std::vector<HitGatherProblem>& pr
     }
   }
   const size_t bytes = problems.size() * sizeof(HitGatherProblem);
-  void* device = scratch_->gather.Reserve(bytes, stream_);
+  void* device = scratch_->gather.Reserve(resources_, bytes, stream_);
   CUDA_CHECK(cudaMemcpyAsync(device, problems.data(), bytes, cudaMemcpyHostToDevice, stream_));
   HitGatherKernel<<<static_cast<unsigned>(problems.size()), kMatchThreads, 0, stream_>>>(
       static_cast<const HitGatherProblem*>(device), scratch_->angle, thresholds);
@@ -463,7 +465,7 @@ void BruteForceKernels::EnqueueMutualMatches(const std::vector<MutualMatchProble
                                              const MatchThresholds& thresholds) {
   if (problems.empty()) return;
   const size_t bytes = problems.size() * sizeof(MutualMatchProblem);
-  void* device = scratch_->mutual.Reserve(bytes, stream_);
+  void* device = scratch_->mutual.Reserve(resources_, bytes, stream_);
   CUDA_CHECK(cudaMemcpyAsync(device, problems.data(), bytes, cudaMemcpyHostToDevice, stream_));
   MutualMatchKernel<<<static_cast<unsigned>(problems.size()), kMatchThreads, 0, stream_>>>(
       static_cast<const MutualMatchProblem*>(device), scratch_->angle, thresholds);
@@ -546,11 +548,11 @@ std::vector<FeatureMatches> BruteForceKernels::MatchPairs(
   if (pairs.empty()) return {};
   size_t total = pairs.size();
   for (const auto& pair : pairs) total += MatchPairsScratchBytes(pair.first.rows, pair.second.rows) / 4;
-  int* counts = static_cast<int*>(scratch_->results.Reserve(total * 4, stream_));  // one per pair, first
+  int* counts = static_cast<int*>(scratch_->results.Reserve(resources_, total * 4, stream_));  // one per pair, first
   const PairProblems problems = LayOutPairProblems(pairs, thresholds.cross_check, counts, counts + pairs.size());
   EnqueueBestTwo(problems.forward);
   EnqueueHitGather(problems.gather, thresholds);
-  LaunchBestTwo(problems.reverse, &scratch_->reverse_problems, stream_);
+  LaunchBestTwo(problems.reverse, resources_, &scratch_->reverse_problems, stream_);
   EnqueueMutualMatches(problems.mutual, thresholds);
   return CopyMatchesBack(problems.mutual, counts);
 }
@@ -558,14 +560,14 @@ std::vector<FeatureMatches> BruteForceKernels::MatchPairs(
 std::vector<FeatureMatches> BruteForceKernels::CopyMatchesBack(const std::vector<MutualMatchProblem>& mutual,
                                                                const int* device_counts) {
   const size_t n = mutual.size();
-  int* host_counts = static_cast<int*>(scratch_->host_counts.Reserve(n * sizeof(int), stream_));
+  int* host_counts = static_cast<int*>(scratch_->host_counts.Reserve(resources_, n * sizeof(int), stream_));
   CUDA_CHECK(cudaMemcpyAsync(host_counts, device_counts, n * sizeof(int), cudaMemcpyDeviceToHost, stream_));
   CUDA_CHECK(cudaStreamSynchronize(stream_));
   const std::vector<int> counts(host_counts, host_counts + n);  // the buffer below may be regrown
   size_t num_matches = 0;
   for (const int count : counts) num_matches += static_cast<size_t>(count);
   FeatureMatch* host_matches = static_cast<FeatureMatch*>(
-      scratch_->host_matches.Reserve(std::max<size_t>(num_matches, 1) * sizeof(FeatureMatch), stream_));
+      scratch_->host_matches.Reserve(resources_, std::max<size_t>(num_matches, 1) * sizeof(FeatureMatch), stream_));
   size_t offset = 0;
   for (size_t k = 0; k < n; ++k) {
     if (counts[k] == 0) continue;
@@ -585,9 +587,7 @@ std::vector<FeatureMatches> BruteForceKernels::CopyMatchesBack(const std::vector
 
 std::vector<FeatureMatches> MatchPairsInBatches(BruteForceKernels* kernels,
                                                 const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
-                                                const MatchThresholds& thresholds) {
-  // Scratch of the brute-force kernels allowed for one batch of pairs.
-  constexpr size_t kBatchScratchBytes = size_t{1} << 30;
+                                                const MatchThresholds& thresholds, size_t batch_scratch_bytes) {
   std::vector<FeatureMatches> results(pairs.size());
   std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> batch;
   std::vector<size_t> batch_pairs;
@@ -605,7 +605,7 @@ std::vector<FeatureMatches> MatchPairsInBatches(BruteForceKernels* kernels,
     const DeviceDescriptors& b = pairs[i].second;
     if (a.rows == 0 || b.rows == 0) continue;
     const size_t bytes = BruteForceKernels::MatchPairsScratchBytes(a.rows, b.rows);
-    if (!batch.empty() && scratch + bytes > kBatchScratchBytes) flush();
+    if (!batch.empty() && scratch + bytes > batch_scratch_bytes) flush();
     batch.push_back(pairs[i]);
     batch_pairs.push_back(i);
     scratch += bytes;

@@ -15,6 +15,7 @@
 
 #include "cashash/matching/matching_options.h"
 #include "cashash/base/types.h"
+#include "cashash_cuda/utils/gpu_resources.h"
 
 namespace cashash {
 namespace cuda {
@@ -96,7 +97,8 @@ struct DeviceDescriptors {
 // current.
 class BruteForceKernels {
  public:
-  explicit BruteForceKernels(cudaStream_t stream = nullptr);
+  // Scratch from `resources` (gpu_resources.h), which must outlive this.
+  BruteForceKernels(cudaStream_t stream, GpuResources* resources);
   ~BruteForceKernels();
   BruteForceKernels(const BruteForceKernels&) = delete;
   BruteForceKernels& operator=(const BruteForceKernels&) = delete;
@@ -134,16 +136,18 @@ class BruteForceKernels {
 
   struct Scratch;
   cudaStream_t stream_ = nullptr;
+  GpuResources* resources_ = nullptr;
   Scratch* scratch_ = nullptr;
 };
 
 // Matches any number of pairs of device images in batches whose scratch
-// stays within kBatchScratchBytes (1 GiB); a pair with an empty image gets
-// no matches. Result i belongs to pair i. Blocks until done. Shared by the
+// stays within `batch_scratch_bytes` (GpuResources::ScratchBytes; a pair
+// larger than that goes alone); a pair with an empty image gets no
+// matches. Result i belongs to pair i. Blocks until done. Shared by the
 // brute-force backend and the cascade's exact rematch.
 std::vector<FeatureMatches> MatchPairsInBatches(BruteForceKernels* kernels,
                                                 const std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>>& pairs,
-                                                const MatchThresholds& thresholds);
+                                                const MatchThresholds& thresholds, size_t batch_scratch_bytes);
 
 // COLMAP's thresholds from the matching options (float, as the CPU test).
 inline MatchThresholds ToMatchThresholds(const SiftMatchingOptions& options) {

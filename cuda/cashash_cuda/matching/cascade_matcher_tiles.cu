@@ -8,15 +8,13 @@
 // A row, and the survivors are queued so that all 32 lanes share their work
 // (duplicate test, exact distance, ranks, two appends).
 //
-// History (same benchmark; H200 figures from one run, docs/gpu_cascade_design.md):
-// per-table lists kept in order by replacing the largest key spent most of
-// the time on list upkeep; append-only lists with one lane per A row and
-// 32 x 32 lane popcounts (each lane walking its own survivors, so the warp
-// ran as many steps as its busiest lane: ~8 for ~3.5 on average) reached
-// 28.0k pairs/s, these tensor-core tiles 31.1k. Per-(feature, table) lists
-// filled without global atomics (one warp owns each) were tried and dropped:
-// 32 keys per table overflowed for so many features that the per-query
-// fallback halved the rate (15.4k).
+// Rules the design keeps (docs/gpu_cascade_design.md has the figures):
+// candidate lists are append-only (keeping them sorted makes list upkeep
+// the main cost); the tau test runs on tensor-core tiles and the warp
+// shares each survivor's work, since one lane per A row leaves the warp
+// waiting on its busiest lane; the lists are per query, not per (feature,
+// table): fixed-size per-table lists overflow on dense buckets, and their
+// fallback costs more than the atomics it saves.
 #include "cashash_cuda/matching/cascade_matcher_tiles.cuh"
 
 #include <algorithm>
@@ -30,9 +28,9 @@ namespace cuda {
 namespace {
 
 // One warp per block: tiles differ in size by orders of magnitude, and a
-// block's resources are only freed when its last warp ends, so independent
-// one-warp blocks keep the SMs full where 8-warp blocks left them at 16 %
-// occupancy (measured).
+// block's resources are only freed when its last warp ends, so multi-warp
+// blocks hold the SMs for their slowest tile; independent one-warp blocks
+// keep them full.
 constexpr int kTileThreads = 32;
 
 // Survivors queued per round; a 32 x 32 tile has at most 1024.

@@ -1,6 +1,7 @@
 // Where one image's cascade data lives on the device. Everything is carved
-// out of one allocation per image (see DeviceImageLayout) so that adding and
-// removing images costs one cudaMalloc/cudaFree each.
+// out of one block per image (see DeviceImageLayout), taken from the
+// device's GpuResources, so that adding and removing an image costs one
+// request to its cache of blocks.
 #pragma once
 
 #include <cstddef>

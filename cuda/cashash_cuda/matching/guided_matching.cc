@@ -1,5 +1,7 @@
 #include "cashash_cuda/matching/guided_matching.h"
 
+#include <utility>
+
 #include "cashash_cuda/geometry/two_view_geometry.h"
 
 namespace cashash {
@@ -8,7 +10,9 @@ namespace {
 
 class GpuFundamentalEstimator : public BatchFundamentalEstimator {
  public:
-  GpuFundamentalEstimator(const TwoViewGeometryOptions& options, int gpu_index) : ransac_(options, gpu_index) {}
+  GpuFundamentalEstimator(const TwoViewGeometryOptions& options, int gpu_index,
+                          std::shared_ptr<GpuResources> resources)
+      : ransac_(options, gpu_index, std::move(resources)) {}
   std::string Name() const override { return "gpu"; }
   std::vector<TwoViewModelEstimate> Estimate(const std::vector<const TwoViewPoints*>& pairs,
                                              const std::vector<uint64_t>& seeds) override {
@@ -24,8 +28,9 @@ class GpuFundamentalEstimator : public BatchFundamentalEstimator {
 }  // namespace
 
 std::unique_ptr<BatchFundamentalEstimator> CreateGpuFundamentalEstimator(const TwoViewGeometryOptions& options,
-                                                                         int gpu_index) {
-  return std::make_unique<GpuFundamentalEstimator>(options, gpu_index);
+                                                                         int gpu_index,
+                                                                         std::shared_ptr<GpuResources> resources) {
+  return std::make_unique<GpuFundamentalEstimator>(options, gpu_index, std::move(resources));
 }
 
 }  // namespace cuda

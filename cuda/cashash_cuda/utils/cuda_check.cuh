@@ -1,6 +1,8 @@
 // Error checking for CUDA runtime calls. Every failure becomes a
 // std::runtime_error naming the call site, so a bad launch or an exhausted
-// device is reported where it happened instead of at some later sync.
+// device is reported where it happened instead of at some later sync; an
+// exhausted device (cudaErrorMemoryAllocation) becomes a DeviceMemoryError,
+// which every GPU part of a run answers by going on on the CPU.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -8,12 +10,19 @@
 #include <stdexcept>
 #include <string>
 
+#include "cashash/base/device_memory_error.h"
+
 namespace cashash {
 namespace cuda {
 
 inline void ThrowCudaError(cudaError_t error, const char* file, int line, const char* what) {
-  throw std::runtime_error(std::string(file) + ":" + std::to_string(line) + ": " +
-                           cudaGetErrorString(error) + " (" + what + ")");
+  const std::string message =
+      std::string(file) + ":" + std::to_string(line) + ": " + cudaGetErrorString(error) + " (" + what + ")";
+  if (error == cudaErrorMemoryAllocation) {
+    (void)cudaGetLastError();  // not a sticky error: clear it, the device goes on
+    throw DeviceMemoryError(message);
+  }
+  throw std::runtime_error(message);
 }
 
 }  // namespace cuda

@@ -1,6 +1,7 @@
-// RAII owners of device and pinned host memory. Allocation failures throw
-// std::runtime_error with the requested size so that out-of-memory cases are
-// reported clearly instead of crashing later.
+// RAII handles of device and pinned host memory, all taken from the
+// device's GpuResources (gpu_resources.h), which keeps the books and the
+// budget. Allocation failures throw DeviceMemoryError naming what was
+// allocated.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -19,6 +20,7 @@
 #include <vector>
 
 #include "cashash_cuda/utils/cuda_check.cuh"
+#include "cashash_cuda/utils/gpu_resources.h"
 
 namespace cashash {
 namespace cuda {
@@ -32,16 +34,21 @@ inline size_t MemoryBudget(size_t budget_bytes) {
   return budget_bytes == 0 ? std::numeric_limits<size_t>::max() : budget_bytes;
 }
 
-// Device memory; move-only.
+// Device memory from a GpuResources (gpu_resources.h); move-only. Release
+// waits for the device first, as the cudaFree it replaces did: a buffer
+// does not know which streams still read it, and its block may go to
+// another user of the device at once.
 class DeviceBuffer {
  public:
   DeviceBuffer() = default;
-  explicit DeviceBuffer(size_t bytes, const char* what) { Allocate(bytes, what); }
+  DeviceBuffer(GpuResources* owner, size_t bytes, const char* what) { Allocate(owner, bytes, what); }
   ~DeviceBuffer() { Release(); }
-  DeviceBuffer(DeviceBuffer&& o) noexcept : ptr_(std::exchange(o.ptr_, nullptr)), bytes_(std::exchange(o.bytes_, 0)) {}
+  DeviceBuffer(DeviceBuffer&& o) noexcept
+      : owner_(std::exchange(o.owner_, nullptr)), ptr_(std::exchange(o.ptr_, nullptr)), bytes_(std::exchange(o.bytes_, 0)) {}
   DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
     if (this != &o) {
       Release();
+      owner_ = std::exchange(o.owner_, nullptr);
       ptr_ = std::exchange(o.ptr_, nullptr);
       bytes_ = std::exchange(o.bytes_, 0);
     }
@@ -50,22 +57,23 @@ class DeviceBuffer {
   DeviceBuffer(const DeviceBuffer&) = delete;
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
 
-  void Allocate(size_t bytes, const char* what) {
+  // Throws DeviceMemoryError when the owner has no room.
+  void Allocate(GpuResources* owner, size_t bytes, const char* what) {
     Release();
     if (bytes == 0) return;
-    const cudaError_t error = cudaMalloc(&ptr_, bytes);
-    if (error != cudaSuccess) {
-      (void)cudaGetLastError();  // clear the sticky-free allocation error
-      ptr_ = nullptr;
-      size_t free_bytes = 0, total_bytes = 0;
-      cudaMemGetInfo(&free_bytes, &total_bytes);
-      throw std::runtime_error(std::string("GPU out of memory allocating ") + MiB(bytes) + " for " + what +
-                               " (" + MiB(free_bytes) + " free of " + MiB(total_bytes) + ")");
-    }
+    ptr_ = owner->AllocateDevice(bytes, what);
+    owner_ = owner;
     bytes_ = bytes;
   }
   void Release() {
-    if (ptr_ != nullptr) cudaFree(ptr_);
+    if (ptr_ != nullptr) {
+      try {
+        owner_->SynchronizeDevice();
+      } catch (const std::exception&) {
+        // a failed device: its errors surface at the next checked call
+      }
+      owner_->FreeDevice(ptr_);
+    }
     ptr_ = nullptr;
     bytes_ = 0;
   }
@@ -74,72 +82,27 @@ class DeviceBuffer {
   size_t bytes() const { return bytes_; }
 
  private:
+  GpuResources* owner_ = nullptr;
   void* ptr_ = nullptr;
   size_t bytes_ = 0;
 };
 
-// Device memory for many blocks of a few sizes (the images of a run):
-// blocks are carved from large chunks and reused by size, so adding an image
-// costs no cudaMalloc (about a third of a millisecond each on the H200,
-// a third of what adding an image cost), and removing one no cudaFree,
-// which would wait for every stream of the device. Memory goes back to the
-// device only with the pool. Thread-safe: a block lent to another thread
-// (the GPU cascade's exact-matching tickets) comes back from there.
-class DeviceBlockPool {
- public:
-  static constexpr size_t kChunkBytes = size_t{64} << 20;
-  static constexpr size_t kAlignment = 256;
-
-  // Throws like DeviceBuffer::Allocate when the device has no room.
-  void* Acquire(size_t bytes, const char* what) {
-    bytes = RoundUp(bytes);
-    std::lock_guard<std::mutex> lock(mutex_);
-    auto& reusable = free_[bytes];
-    if (!reusable.empty()) {
-      void* ptr = reusable.back();
-      reusable.pop_back();
-      return ptr;
-    }
-    if (chunks_.empty() || chunk_left_ < bytes) {
-      try {
-        chunks_.emplace_back(std::max(bytes, kChunkBytes), what);
-      } catch (const std::runtime_error&) {
-        chunks_.emplace_back(bytes, what);  // a nearly full device: this block alone
-      }
-      chunk_left_ = chunks_.back().bytes();
-    }
-    DeviceBuffer& chunk = chunks_.back();
-    void* ptr = chunk.as<char>() + (chunk.bytes() - chunk_left_);
-    chunk_left_ -= bytes;
-    return ptr;
-  }
-  // `ptr` from Acquire(bytes); no kernel may use it any more.
-  void Release(void* ptr, size_t bytes) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    free_[RoundUp(bytes)].push_back(ptr);
-  }
-
- private:
-  static size_t RoundUp(size_t bytes) { return (bytes + kAlignment - 1) / kAlignment * kAlignment; }
-  std::mutex mutex_;
-  std::vector<DeviceBuffer> chunks_;
-  size_t chunk_left_ = 0;
-  std::unordered_map<size_t, std::vector<void*>> free_;
-};
-
-// One block of a DeviceBlockPool, given back when this goes.
+// A block of a GpuResources that its user knows to be idle when it goes
+// (the images of the matchers, which the exact-matching tickets may hold a
+// while longer on another thread): given back without waiting for the
+// device. The owner outlives the block (the users hold it by shared_ptr).
 class PooledDeviceBlock {
  public:
   PooledDeviceBlock() = default;
-  PooledDeviceBlock(DeviceBlockPool* pool, size_t bytes, const char* what)
-      : pool_(pool), ptr_(pool->Acquire(bytes, what)), bytes_(bytes) {}
+  PooledDeviceBlock(GpuResources* owner, size_t bytes, const char* what)
+      : owner_(owner), ptr_(owner->AllocateDevice(bytes, what)), bytes_(bytes) {}
   ~PooledDeviceBlock() { Reset(); }
   PooledDeviceBlock(PooledDeviceBlock&& o) noexcept
-      : pool_(std::exchange(o.pool_, nullptr)), ptr_(std::exchange(o.ptr_, nullptr)), bytes_(std::exchange(o.bytes_, 0)) {}
+      : owner_(std::exchange(o.owner_, nullptr)), ptr_(std::exchange(o.ptr_, nullptr)), bytes_(std::exchange(o.bytes_, 0)) {}
   PooledDeviceBlock& operator=(PooledDeviceBlock&& o) noexcept {
     if (this != &o) {
       Reset();
-      pool_ = std::exchange(o.pool_, nullptr);
+      owner_ = std::exchange(o.owner_, nullptr);
       ptr_ = std::exchange(o.ptr_, nullptr);
       bytes_ = std::exchange(o.bytes_, 0);
     }
@@ -149,20 +112,22 @@ class PooledDeviceBlock {
   PooledDeviceBlock& operator=(const PooledDeviceBlock&) = delete;
   template <typename T>
   T* as() const { return static_cast<T*>(ptr_); }
+  // The bytes asked for (the owner's size class may be larger).
   size_t bytes() const { return bytes_; }
 
  private:
   void Reset() {
-    if (ptr_ != nullptr) pool_->Release(ptr_, bytes_);
+    if (ptr_ != nullptr) owner_->FreeDevice(ptr_);
     ptr_ = nullptr;
   }
-  DeviceBlockPool* pool_ = nullptr;
+  GpuResources* owner_ = nullptr;
   void* ptr_ = nullptr;
   size_t bytes_ = 0;
 };
 
-// Page-locked host memory, optionally mapped into the device address space
-// so kernels can write results straight into it.
+// Page-locked host memory of a GpuResources, mapped into the device address
+// space so kernels can write results straight into it. Release waits for
+// the device first, as cudaFreeHost did.
 class PinnedBuffer {
  public:
   PinnedBuffer() = default;
@@ -170,21 +135,24 @@ class PinnedBuffer {
   PinnedBuffer(const PinnedBuffer&) = delete;
   PinnedBuffer& operator=(const PinnedBuffer&) = delete;
 
-  void Allocate(size_t bytes, bool mapped, const char* what) {
+  // Throws DeviceMemoryError when no more host memory can be pinned.
+  void Allocate(GpuResources* owner, size_t bytes, const char* what) {
     Release();
     if (bytes == 0) return;
-    const cudaError_t error = cudaHostAlloc(&ptr_, bytes, mapped ? cudaHostAllocMapped : cudaHostAllocDefault);
-    if (error != cudaSuccess) {
-      (void)cudaGetLastError();
-      ptr_ = nullptr;
-      throw std::runtime_error(std::string("cannot allocate ") + MiB(bytes) + " of pinned host memory for " + what +
-                               ": " + cudaGetErrorString(error));
-    }
+    ptr_ = owner->AllocatePinned(bytes, what);
+    owner_ = owner;
     bytes_ = bytes;
-    if (mapped) CUDA_CHECK(cudaHostGetDevicePointer(&device_ptr_, ptr_, 0));
+    device_ptr_ = owner->DevicePointerOfPinned(ptr_);
   }
   void Release() {
-    if (ptr_ != nullptr) cudaFreeHost(ptr_);
+    if (ptr_ != nullptr) {
+      try {
+        owner_->SynchronizeDevice();
+      } catch (const std::exception&) {
+        // a failed device: its errors surface at the next checked call
+      }
+      owner_->FreePinned(ptr_);
+    }
     ptr_ = nullptr;
     device_ptr_ = nullptr;
     bytes_ = 0;
@@ -196,6 +164,7 @@ class PinnedBuffer {
   size_t bytes() const { return bytes_; }
 
  private:
+  GpuResources* owner_ = nullptr;
   void* ptr_ = nullptr;
   void* device_ptr_ = nullptr;
   size_t bytes_ = 0;
@@ -210,7 +179,7 @@ class PinnedUploadRing {
  public:
   static constexpr int kSlots = 4;
 
-  PinnedUploadRing() {
+  explicit PinnedUploadRing(GpuResources* owner) : owner_(owner) {
     for (Slot& slot : slots_) CUDA_CHECK(cudaEventCreateWithFlags(&slot.uploaded, cudaEventDisableTiming));
   }
   ~PinnedUploadRing() {
@@ -230,7 +199,7 @@ class PinnedUploadRing {
     Slot& slot = slots_[next_];
     next_ = (next_ + 1) % kSlots;
     if (slot.in_flight) CUDA_CHECK(cudaEventSynchronize(slot.uploaded));
-    if (slot.buffer.bytes() < bytes) slot.buffer.Allocate(bytes, /*mapped=*/false, "upload staging");
+    if (slot.buffer.bytes() < bytes) slot.buffer.Allocate(owner_, bytes, "upload staging");
     std::memcpy(slot.buffer.host<uint8_t>(), host, bytes);
     CUDA_CHECK(cudaMemcpyAsync(device, slot.buffer.host<uint8_t>(), bytes, cudaMemcpyHostToDevice, stream));
     CUDA_CHECK(cudaEventRecord(slot.uploaded, stream));
@@ -243,6 +212,7 @@ class PinnedUploadRing {
     cudaEvent_t uploaded = nullptr;
     bool in_flight = false;
   };
+  GpuResources* owner_;
   Slot slots_[kSlots];
   int next_ = 0;
 };

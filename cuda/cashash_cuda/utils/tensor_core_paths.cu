@@ -78,6 +78,12 @@ __global__ void WarpReductionsKernel(const uint32_t* __restrict__ values, uint32
   }
 }
 
+int CurrentDevice() {
+  int device = 0;
+  CUDA_CHECK(cudaGetDevice(&device));
+  return device;
+}
+
 }  // namespace
 
 std::vector<int32_t> U8DotProductsOnDevice(const std::vector<uint8_t>& a, int rows_a, const std::vector<uint8_t>& b,
@@ -87,8 +93,9 @@ std::vector<int32_t> U8DotProductsOnDevice(const std::vector<uint8_t>& a, int ro
     throw std::invalid_argument("U8DotProductsOnDevice: rows_a must be a multiple of 16, rows_b of 8, rows of 128 bytes");
   }
   const size_t products = static_cast<size_t>(rows_a) * rows_b;
-  DeviceBuffer d_a(a.size(), "test rows a"), d_b(b.size(), "test rows b");
-  DeviceBuffer d_out(products * sizeof(int32_t), "test products");
+  GpuResources resources(CurrentDevice(), 0);
+  DeviceBuffer d_a(&resources, a.size(), "test rows a"), d_b(&resources, b.size(), "test rows b");
+  DeviceBuffer d_out(&resources, products * sizeof(int32_t), "test products");
   CUDA_CHECK(cudaMemcpy(d_a.as<uint8_t>(), a.data(), a.size(), cudaMemcpyHostToDevice));
   CUDA_CHECK(cudaMemcpy(d_b.as<uint8_t>(), b.data(), b.size(), cudaMemcpyHostToDevice));
   CUDA_CHECK(cudaMemset(d_out.as<int32_t>(), 0xff, products * sizeof(int32_t)));  // poison: every product is written
@@ -109,8 +116,9 @@ std::vector<uint32_t> WarpReductionsOnDevice(const std::vector<uint32_t>& values
     throw std::invalid_argument("WarpReductionsOnDevice: a multiple of 32 values");
   }
   const unsigned warps = static_cast<unsigned>(values.size() / 32);
-  DeviceBuffer d_values(values.size() * sizeof(uint32_t), "test values");
-  DeviceBuffer d_out(warps * 4 * sizeof(uint32_t), "test reductions");
+  GpuResources resources(CurrentDevice(), 0);
+  DeviceBuffer d_values(&resources, values.size() * sizeof(uint32_t), "test values");
+  DeviceBuffer d_out(&resources, warps * 4 * sizeof(uint32_t), "test reductions");
   CUDA_CHECK(cudaMemcpy(d_values.as<uint32_t>(), values.data(), values.size() * sizeof(uint32_t),
                         cudaMemcpyHostToDevice));
   if (path == TensorCorePath::kSm75) {

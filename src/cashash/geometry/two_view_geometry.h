@@ -140,10 +140,9 @@ double TwoViewRelevantHomographyRatio(const TwoViewGeometryOptions& options);
 // failed) and the pair's matches (EssentialSettledInliers); E stops there
 // (RansacOptions::settled_inliers): more trials would change which inliers
 // are kept, not the decision. 0 when early_exit is off or no count settles
-// it. (Asking E's chance test for more than min_num_inliers where F's count
-// is higher was tried and dropped: on a 300-image street it stopped E on 4
-// of 4,136 pairs before E found the model F had found, and flipped them to
-// UNCALIBRATED; docs/gpu_verification.md.)
+// it. E's chance test asks for min_num_inliers only, never F's higher
+// count: asking for more can stop E before it finds the model F found and
+// flip the pair to UNCALIBRATED (docs/gpu_verification.md).
 int TwoViewEssentialSettledInliers(int num_F_inliers, int num_H_inliers, int num_matches,
                                    const TwoViewGeometryOptions& options);
 // The fewest inliers EssentialSettledInliers may settle at for these

@@ -12,7 +12,7 @@
 #include "cashash/matching/cascade_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/matching/table_shape.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 
 namespace cashash {
 namespace {

@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "cashash/base/device_memory_error.h"
 #include "cashash/base/pair_id.h"
 
 namespace cashash {
@@ -35,10 +36,17 @@ class DeferredExactRematch : public DeferredMatching {
   void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
     const auto start = std::chrono::steady_clock::now();
     std::vector<FeatureMatches> exact_matches;
+    bool matched = false;
     if (ticket_) {
-      exact_matches = ticket_->Run();
+      try {
+        exact_matches = ticket_->Run();
+        matched = true;
+      } catch (const DeviceMemoryError&) {
+        ++counts_->tickets_without_memory;
+      }
       ticket_.reset();  // lets go of the images now
-    } else {
+    }
+    if (!matched) {
       const std::vector<image_t> images = ImagesOfPairs(pairs_);
       // On an error the matcher, which may still hold images, is dropped
       // instead of going back to the pool.

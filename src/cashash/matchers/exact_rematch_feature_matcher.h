@@ -26,7 +26,11 @@
 // Complete uses the cascade's ticket (FeatureMatcher::DeferExactMatching:
 // the GPU cascade lends the descriptors it holds on the device) where it
 // gives one, else a brute-force matcher from the pool, fed with the
-// descriptors the chunk holds.
+// descriptors the chunk holds. A ticket that runs out of device memory
+// (DeviceMemoryError) hands its pairs to the pool as well, whose GPU
+// matchers go on on the CPU when the device has no room for them either
+// (CreateFallbackFeatureMatcher): out of memory in the rematch costs time,
+// never the run.
 #pragma once
 
 #include <atomic>
@@ -47,6 +51,9 @@ struct ExactRematchCounts {
   std::atomic<size_t> pairs{0};      // matched by the cascade
   std::atomic<size_t> rematched{0};  // of those, matched again exactly
   std::atomic<int64_t> exact_us{0};  // wall time of the exact matching
+  // Deferred rematches whose ticket found no room on the device
+  // (DeviceMemoryError) and were matched by the pool's matchers instead.
+  std::atomic<size_t> tickets_without_memory{0};
 };
 
 // Brute-force matchers for deferred rematches, one per thread that

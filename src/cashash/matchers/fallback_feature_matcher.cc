@@ -2,6 +2,8 @@
 
 #include <map>
 
+#include "cashash/base/device_memory_error.h"
+
 namespace cashash {
 namespace {
 
@@ -101,9 +103,7 @@ std::unique_ptr<FeatureMatcher> CreateFallbackFeatureMatcher(
 }
 
 bool IsDeviceMemoryError(const std::exception& error) {
-  const std::string what = error.what();
-  return what.find("out of memory") != std::string::npos ||
-         what.find("memory budget exceeded") != std::string::npos;
+  return dynamic_cast<const DeviceMemoryError*>(&error) != nullptr;
 }
 
 }  // namespace cashash

@@ -18,7 +18,8 @@ std::unique_ptr<FeatureMatcher> CreateFallbackFeatureMatcher(
     std::unique_ptr<FeatureMatcher> primary, std::function<std::unique_ptr<FeatureMatcher>()> make_fallback,
     std::function<bool(const std::exception&)> recoverable, std::function<void(const std::string&)> warn);
 
-// True for the GPU backend's out-of-memory and memory-budget errors.
+// True for the GPU backend's out-of-memory and memory-budget errors: a
+// DeviceMemoryError (cashash/base/device_memory_error.h), whatever its text.
 bool IsDeviceMemoryError(const std::exception& error);
 
 }  // namespace cashash

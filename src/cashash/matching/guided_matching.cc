@@ -9,7 +9,7 @@
 
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/matching/epipolar_band.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 
 namespace cashash {
 

@@ -17,10 +17,12 @@ MatcherChoice ChooseAutoMatcher(const CasHashOptions& options, const MatcherChoi
   choice.matcher = options.matcher;
   choice.exact_rematch_min_matches = options.exact_rematch_min_matches;
   choice.exact_rematch_max_matches = options.exact_rematch_max_matches;
-  if (options.matcher != MatcherType::kAuto) {
+  if (options.matcher == MatcherType::kBruteForce) {
     choice.reason = MatcherTypeToString(options.matcher) + " (as set by the options)";
     return choice;
   }
+  // The cascade named is the cascade auto chooses, with the same rematch
+  // rule: the name picks the algorithm, not another screen.
   choice.matcher = MatcherType::kCascade;
   if (input.guided) {
     choice.reason = "cascade (guided matching needs it)";

@@ -70,8 +70,9 @@ struct MatcherChoice {
   std::string reason;
 };
 
-// The choice for options whose matcher is kAuto; options with another
-// matcher come back unchanged (their matcher and rematch settings).
+// The choice for options whose matcher is kAuto or kCascade: the cascade
+// named is the cascade auto chooses, with the same rematch rule on each
+// device. Brute force comes back unchanged (its rematch settings unused).
 MatcherChoice ChooseAutoMatcher(const CasHashOptions& options, const MatcherChoiceInput& input);
 
 // `options` with the choice applied (matcher, rematch threshold and window).

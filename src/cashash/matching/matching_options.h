@@ -48,10 +48,11 @@ struct CasHashOptions {
   // are one option away (--CasHash.num_tables 7 --CasHash.bits_per_table 8).
   // The GPU backend needs num_tables * bits_per_table <= 64.
   //
-  // 0 (the default) = chosen from the features per image of the run
-  // (table_shape.h): 8 x 7 up to 16,383 features per image, 8 x 8 from
-  // 16,384 (one bit more per doubling, capped by the GPU's 64-bit
-  // signature). A value > 0 is kept.
+  // 0 (the default) = chosen for the run (ResolveTableShape, table_shape.h)
+  // from its features per image, what the cascade's matches are for
+  // (TableShapeGoal: recall, or a coarser screen where the exact rematch
+  // decides) and the device (TableShapeBackend: the CPU's recall shapes
+  // drop the GPU's 64-bit limit from 16,384 features). A value > 0 is kept.
   // A matcher created from options still at 0 uses the 8,192-feature shape.
   int num_tables = 0;
   int bits_per_table = 0;
@@ -83,10 +84,11 @@ struct CasHashOptions {
   // exact brute force, whose matches replace the cascade's
   // (exact_rematch_feature_matcher.h): the cascade screens, exact matching
   // decides the pairs that may verify. 0 = off (the cascade's matches are
-  // kept). Runs default to 12 (MatcherCommandOptions): with the cascade
-  // keeping 94 % of the exact matches (its worst real set), a pair with
-  // min_num_inliers = 15 exact matches falls below 12 cascade matches with
-  // probability about 1 %. Unused by brute force and guided matching.
+  // kept). Runs leave it to the run (MatcherCommandOptions: -1, resolved
+  // by ResolveRun to 12, or 8 with the bucket screening tables): with the
+  // cascade keeping 94 % of the exact matches (its worst real set), a pair
+  // with min_num_inliers = 15 exact matches falls below 12 cascade matches
+  // with probability about 1 %. Unused by brute force and guided matching.
   int exact_rematch_min_matches = 0;
   // When > 0, only pairs with fewer cascade matches than this are matched
   // again exactly (a window [exact_rematch_min_matches, this)): the pairs

@@ -25,7 +25,10 @@
 // reaches the target (8 x 8: 0.954, 7 x 9: 0.897), so the bits stop at the
 // width whose capped L loses at most kMaxCollisionLoss; beyond that size the
 // candidates per query grow again (linearly in n), the recall does not drop.
-// CPU and GPU use the same rule, so their matches stay identical.
+// Shapes within these limits (TableShapeBackend::kAny) are matched
+// identically by the CPU and the GPU. A run resolved for the CPU takes,
+// from kCpuFineBucketFeatures on, a recall shape past them (kCpu): its
+// matches then differ from the GPU's.
 #pragma once
 
 #include <cstddef>

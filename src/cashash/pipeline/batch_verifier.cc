@@ -1,7 +1,7 @@
 #include "cashash/pipeline/batch_verifier.h"
 
 #include "cashash/base/pair_id.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 
 namespace cashash {
 namespace {

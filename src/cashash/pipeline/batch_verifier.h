@@ -48,6 +48,9 @@ class BatchVerifier {
   // One line on where the time went (device time, trials, early exits), for
   // the run's log; empty when there is nothing beyond the pipeline's times.
   virtual std::string StatsSummary() const { return {}; }
+  // Calls verified on the CPU because the device had no room for them (a
+  // GPU verifier's fallback); 0 for the CPU verifier.
+  virtual size_t CallsWithoutDeviceMemory() const { return 0; }
 };
 
 // EstimateTwoViewGeometry per pair on num_threads threads (-1 = all cores).

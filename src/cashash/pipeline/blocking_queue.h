@@ -32,6 +32,20 @@ class BlockingQueue {
   // Blocks while empty; returns nullopt once closed and drained.
   std::optional<T> Pop() { return PopWhenBacklogged(1); }
 
+  // As Pop, but gives up after `timeout`: then returns nullopt with
+  // *timed_out set (false when it returns an item or the queue is closed
+  // and drained).
+  template <typename Duration>
+  std::optional<T> PopWithin(Duration timeout, bool* timed_out) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    *timed_out = !not_empty_.wait_for(lock, timeout, [&] { return closed_ || !items_.empty(); });
+    if (items_.empty()) return std::nullopt;
+    T item = std::move(items_.front());
+    items_.pop_front();
+    not_full_.notify_one();
+    return item;
+  }
+
   // As Pop, but waits until at least `backlog` items wait or the queue is
   // closed: for a helper consumer that should work only when the others
   // cannot keep up (the producer is about to block) or at the end.

@@ -3,7 +3,7 @@
 #include <utility>
 
 #include "cashash/base/pair_id.h"
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 
 namespace cashash {
 namespace pipeline_internal {

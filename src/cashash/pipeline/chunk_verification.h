@@ -24,7 +24,9 @@ std::shared_ptr<const FeatureDescriptors> DescriptorsOf(const FeaturesPtr& featu
 // What travels from the matching stage to the verification stage.
 struct MatchedChunk {
   size_t index = 0;  // position in the run's chunks: the writer's order
-  const PairChunk* chunk = nullptr;
+  // Made for the run when it was matched (PairChunkSource::Chunk); lives
+  // until it is written.
+  std::shared_ptr<const PairChunk> chunk;
   std::unordered_map<image_t, FeaturesPtr> features;
   std::vector<FeatureMatches> matches;
   // What the matcher left to complete the matches (the exact rematch on the
@@ -35,7 +37,7 @@ struct MatchedChunk {
 
 struct VerifiedChunk {
   size_t index = 0;
-  const PairChunk* chunk = nullptr;
+  std::shared_ptr<const PairChunk> chunk;
   std::shared_ptr<std::vector<PairResult>> results = std::make_shared<std::vector<PairResult>>();
   Clock::time_point started;
   // For the trace: the chunk's deferred matching, if it had any, and when

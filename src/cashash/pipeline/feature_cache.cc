@@ -12,26 +12,67 @@ size_t FeatureBytes(const ImageFeatures& features) {
 }
 
 std::vector<std::vector<image_t>> GroupFeatureCache::Steps(const std::vector<PairChunk>& chunks) {
+  return Steps(ChunkList(&chunks));
+}
+
+namespace {
+
+// The step an image was last added to (-1: none): a flat table for ids up
+// to 2^24 (COLMAP numbers images 1..n), a map beyond. Planning visits every
+// image of every chunk (8 million at 20,000 images in blocks of 50), so
+// the common case is an array read, not a hash lookup.
+class LastStepOfImage {
+ public:
+  int Get(image_t id) const {
+    if (id < kFlatIds) return id < flat_.size() ? flat_[id] : -1;
+    const auto it = far_.find(id);
+    return it == far_.end() ? -1 : it->second;
+  }
+  void Set(image_t id, int step) {
+    if (id >= kFlatIds) {
+      far_[id] = step;
+      return;
+    }
+    if (id >= flat_.size()) flat_.resize(std::min<size_t>(std::max<size_t>(id + 1, 2 * flat_.size()), kFlatIds), -1);
+    flat_[id] = step;
+  }
+
+ private:
+  static constexpr image_t kFlatIds = image_t{1} << 24;
+  std::vector<int> flat_;
+  std::unordered_map<image_t, int> far_;
+};
+
+}  // namespace
+
+std::vector<std::vector<image_t>> GroupFeatureCache::Steps(const PairChunkSource& chunks) {
   std::vector<std::vector<image_t>> steps;
-  std::unordered_set<image_t> step_images;
+  LastStepOfImage last_step;
   std::pair<int, int> group_pair(-1, -1);
-  for (const PairChunk& chunk : chunks) {
+  for (size_t k = 0; k < chunks.size(); ++k) {
+    const PairChunk chunk = chunks.Outline(k);
     const std::pair<int, int> chunk_groups(chunk.group_i, chunk.group_j);
-    const bool all_held = std::all_of(chunk.images.begin(), chunk.images.end(),
-                                      [&](image_t id) { return step_images.count(id) > 0; });
-    if (steps.empty() || (chunk_groups != group_pair && !all_held)) {
+    const int step = static_cast<int>(steps.size()) - 1;
+    if (steps.empty() || (chunk_groups != group_pair &&
+                          !std::all_of(chunk.images.begin(), chunk.images.end(),
+                                       [&](image_t id) { return last_step.Get(id) == step; }))) {
       steps.emplace_back();
-      step_images.clear();
     }
     group_pair = chunk_groups;
+    const int current = static_cast<int>(steps.size()) - 1;
     for (image_t id : chunk.images) {
-      if (step_images.insert(id).second) steps.back().push_back(id);
+      if (last_step.Get(id) == current) continue;
+      last_step.Set(id, current);
+      steps.back().push_back(id);
     }
   }
   return steps;
 }
 
 GroupFeatureCache::GroupFeatureCache(FeatureSource* source, const std::vector<PairChunk>& chunks)
+    : GroupFeatureCache(source, ChunkList(&chunks)) {}
+
+GroupFeatureCache::GroupFeatureCache(FeatureSource* source, const PairChunkSource& chunks)
     : source_(source), loader_threads_(std::max(1, source->MaxConcurrentLoads())), steps_(Steps(chunks)) {
   for (size_t s = 0; s < steps_.size(); ++s) {
     step_sets_.emplace_back(steps_[s].begin(), steps_[s].end());

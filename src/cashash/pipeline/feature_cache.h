@@ -2,8 +2,8 @@
 // keeps the features of the current group pair in memory and loads the next
 // one on its own thread while the current one is matched.
 //
-// The chunk list (ScheduledPairChunks, possibly thinned by resume) is cut
-// into steps: runs of chunks of one group pair. A chunk whose images are all
+// The run's chunks (ScheduledChunkSource, possibly thinned by resume) are
+// cut into steps: runs of chunks of one group pair. A chunk whose images are all
 // held already (a diagonal group pair after the cross pair that brought its
 // group) joins the running step. A step holds the images its chunks touch;
 // while the pipeline works on step s, the cache holds step s and loads step
@@ -45,6 +45,9 @@ class GroupFeatureCache : public FeatureSource {
   // `source` must outlive the cache; it is called from the cache's loading
   // threads (MaxConcurrentLoads() of them) and, for unplanned requests, from
   // the caller's thread; one at a time where MaxConcurrentLoads() is 1.
+  // The steps are planned from the chunks' outlines (PairChunkSource::
+  // Outline) in one pass; the chunks need not outlive the cache.
+  GroupFeatureCache(FeatureSource* source, const PairChunkSource& chunks);
   GroupFeatureCache(FeatureSource* source, const std::vector<PairChunk>& chunks);
   ~GroupFeatureCache() override;
   GroupFeatureCache(const GroupFeatureCache&) = delete;
@@ -60,6 +63,7 @@ class GroupFeatureCache : public FeatureSource {
 
   // The steps the chunks are cut into (images in first-use order); exposed
   // for tests and for memory estimates.
+  static std::vector<std::vector<image_t>> Steps(const PairChunkSource& chunks);
   static std::vector<std::vector<image_t>> Steps(const std::vector<PairChunk>& chunks);
 
  private:

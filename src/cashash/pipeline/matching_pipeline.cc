@@ -23,6 +23,9 @@ using pipeline_internal::MatchedChunk;
 using pipeline_internal::VerifiedChunk;
 using pipeline_internal::VerifyChunks;
 
+// How long the writer waits for a chunk before it flushes the sink.
+constexpr std::chrono::milliseconds kWriterIdleFlush(500);
+
 double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
@@ -85,8 +88,8 @@ class PipelineRun {
     chunks_per_call_ = std::max<size_t>(1, verifier_ != nullptr ? verifier_->ChunksPerCall() : 1);
   }
 
-  PipelineStats Execute(const std::vector<PairChunk>& chunks) {
-    for (const PairChunk& chunk : chunks) stats_.pairs_total += chunk.pairs.size();
+  PipelineStats Execute(const PairChunkSource& chunks) {
+    stats_.pairs_total = chunks.num_pairs();
     stats_.verification_threads = num_verifier_threads_;
     std::thread writer(&PipelineRun::Write, this);
     std::vector<std::thread> verifier_threads;
@@ -124,21 +127,26 @@ class PipelineRun {
   }
 
   // Stage 1, on the caller's thread: load what the chunk needs, match.
-  void Match(const std::vector<PairChunk>& chunks) {
+  void Match(const PairChunkSource& chunks) {
     BlockingQueue<MatchedChunk>& after_matching = to_verify_;
     try {
       std::unordered_map<image_t, FeaturesPtr> loaded;
+      // Chunks are made one ahead: the next one's images stay loaded.
+      std::shared_ptr<const PairChunk> next;
       for (size_t c = 0; c < chunks.size(); ++c) {
         if (error_.failed() || (stop_ && stop_->load())) {
           stats_.stopped = !error_.failed();
           break;
         }
-        const PairChunk& chunk = chunks[c];
         const Clock::time_point chunk_start = Clock::now();
+        std::shared_ptr<const PairChunk> current =
+            next ? std::move(next) : std::make_shared<const PairChunk>(chunks.Chunk(c));
+        next = c + 1 < chunks.size() ? std::make_shared<const PairChunk>(chunks.Chunk(c + 1)) : nullptr;
+        const PairChunk& chunk = *current;
 
         // Drop images that neither this chunk nor the next one needs.
         std::unordered_set<image_t> keep(chunk.images.begin(), chunk.images.end());
-        if (c + 1 < chunks.size()) keep.insert(chunks[c + 1].images.begin(), chunks[c + 1].images.end());
+        if (next) keep.insert(next->images.begin(), next->images.end());
         for (auto it = loaded.begin(); it != loaded.end();) {
           if (keep.count(it->first)) {
             ++it;
@@ -163,7 +171,7 @@ class PipelineRun {
         const Clock::time_point t_match = Clock::now();
         MatchedChunk item;
         item.index = c;
-        item.chunk = &chunk;
+        item.chunk = current;
         item.started = chunk_start;
         ChunkMatches matched = matcher_->MatchPairsDeferred(chunk.pairs);
         item.matches = std::move(matched.matches);
@@ -243,13 +251,23 @@ class PipelineRun {
     if (--verifier_threads_left_ == 0) to_write_.Close();
   }
 
-  // Stage 3: the single writer.
+  // Stage 3: the single writer. The sink may hold several chunks in one
+  // transaction; it is flushed when no chunk has come for
+  // kWriterIdleFlush (a chunk not yet committed is lost to a kill, and its
+  // open transaction keeps other writers out) and when the run ends.
   void Write() {
     try {
       for (;;) {
         const Clock::time_point t_wait = Clock::now();
-        std::optional<VerifiedChunk> item = to_write_.Pop();
+        bool idle = false;
+        std::optional<VerifiedChunk> item = to_write_.PopWithin(kWriterIdleFlush, &idle);
         AddSeconds(&PipelineStats::seconds_writing_wait_input, t_wait);
+        if (idle) {
+          const Clock::time_point t_flush = Clock::now();
+          sink_->Flush();
+          AddSeconds(&PipelineStats::seconds_writing, t_flush);
+          continue;
+        }
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
         const std::vector<PairResult>& results = *item->results;
@@ -271,10 +289,15 @@ class PipelineRun {
         }
         progress.pairs_total = stats_.pairs_total;
         progress.elapsed_seconds = SecondsSince(run_start_);
-        progress.chunk = item->chunk;
+        progress.chunk = item->chunk.get();
         progress.chunk_seconds = SecondsSince(item->started);
         if (progress_) progress_(progress);
       }
+      // Finished, stopped, or another stage failed: what was written is
+      // whole chunks, kept as it would have been with a commit per chunk.
+      const Clock::time_point t_flush = Clock::now();
+      sink_->Flush();
+      AddSeconds(&PipelineStats::seconds_writing, t_flush);
     } catch (...) {
       error_.Set(std::current_exception());
       to_verify_.Close();
@@ -308,13 +331,6 @@ class PipelineRun {
 
 }  // namespace
 
-TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
-                           const ImageFeatures& image2, const FeatureMatches& matches,
-                           const TwoViewGeometryOptions& options) {
-  return EstimateTwoViewGeometry(camera1, KeypointPositions(image1.keypoints), camera2,
-                                 KeypointPositions(image2.keypoints), matches, options);
-}
-
 std::shared_ptr<const ImageFeatures> FeatureSource::LoadSharedFeatures(image_t image_id) {
   return std::make_shared<const ImageFeatures>(LoadFeatures(image_id));
 }
@@ -331,9 +347,11 @@ void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop
 
 void MatchingPipeline::SetBatchVerifier(BatchVerifier* verifier) { verifier_ = verifier; }
 
-PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) {
+PipelineStats MatchingPipeline::Run(const PairChunkSource& chunks) {
   PipelineRun run(options_, source_, matcher_, sink_, verifier_, progress_, stop_);
   return run.Execute(chunks);
 }
+
+PipelineStats MatchingPipeline::Run(const std::vector<PairChunk>& chunks) { return Run(ChunkList(&chunks)); }
 
 }  // namespace cashash

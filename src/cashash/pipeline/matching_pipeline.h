@@ -16,7 +16,7 @@
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/matchers/feature_matcher.h"
-#include "cashash/pipeline/pair_generation.h"
+#include "cashash/pipeline/pair_chunk_source.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash/base/types.h"
 
@@ -50,13 +50,20 @@ struct PairResult {
   TwoViewGeometry geometry;
 };
 
-// Where results go. WriteChunk persists a chunk atomically (one
-// transaction), so a stopped run leaves only whole chunks behind.
+// Where results go. A chunk is persisted atomically: a transaction holds
+// whole chunks only (one or several), so a stopped run leaves whole chunks
+// behind.
 class ResultSink {
  public:
   virtual ~ResultSink() = default;
-  // A chunk's matches and geometries, in one transaction.
+  // A chunk's matches and geometries. A sink may keep the chunk's
+  // transaction open for the chunks that follow (DatabaseResultSink) until
+  // Flush.
   virtual void WriteChunk(const std::vector<PairResult>& results) = 0;
+  // Persists every chunk written so far. The pipeline's writer calls it
+  // when the run ends (finished, stopped or failed elsewhere) and when no
+  // chunk has come for a while.
+  virtual void Flush() {}
 };
 
 struct PipelineOptions {
@@ -134,6 +141,9 @@ class MatchingPipeline {
   // instead of the default CPU thread pool over options.two_view.
   void SetBatchVerifier(BatchVerifier* verifier);
 
+  // Matches the chunks in order, making each when it is next (and the one
+  // after it, whose images decide what stays loaded).
+  PipelineStats Run(const PairChunkSource& chunks);
   PipelineStats Run(const std::vector<PairChunk>& chunks);
 
  private:
@@ -145,10 +155,5 @@ class MatchingPipeline {
   const std::atomic<bool>* stop_ = nullptr;
   BatchVerifier* verifier_ = nullptr;
 };
-
-// Verifies one pair (exposed for tests and for the verify-only mode).
-TwoViewGeometry VerifyPair(const Camera& camera1, const ImageFeatures& image1, const Camera& camera2,
-                           const ImageFeatures& image2, const FeatureMatches& matches,
-                           const TwoViewGeometryOptions& options);
 
 }  // namespace cashash

@@ -174,6 +174,12 @@ std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids
   return ChunksOfBlockPairs(image_ids, bs, num_blocks, per_group, BlockPairOrder(num_blocks, per_group).Build());
 }
 
+std::vector<std::pair<int, int>> ScheduledBlockPairOrder(int num_blocks, int blocks_per_group) {
+  if (num_blocks < 1) return {};
+  const int per_group = std::min(num_blocks, std::max(1, blocks_per_group));
+  return BlockPairOrder(num_blocks, per_group).Build();
+}
+
 std::vector<PairChunk> ListPairChunks(const std::vector<ImagePair>& pairs, size_t max_pairs_per_chunk,
                                       size_t max_images_per_chunk) {
   std::vector<PairChunk> chunks;

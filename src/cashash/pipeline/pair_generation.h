@@ -6,6 +6,7 @@
 // ScheduledPairChunks.
 #pragma once
 
+#include <utility>
 #include <vector>
 
 #include "cashash/base/pair_id.h"
@@ -45,8 +46,16 @@ std::vector<PairChunk> ExhaustivePairChunks(const std::vector<image_t>& image_id
 // last group's last four blocks go as a band, then their far pairs, so
 // that the run does not end on a diagonal chunk, the slowest to verify
 // (see BlockPairOrder::Diagonal).
+//
+// This list holds every pair (1.6 GB at 20,000 images); a run makes the
+// same chunks one at a time instead (ScheduledChunkSource,
+// pair_chunk_source.h).
 std::vector<PairChunk> ScheduledPairChunks(const std::vector<image_t>& image_ids, int block_size,
                                            int blocks_per_group);
+
+// The block pairs (bi <= bj) of ScheduledPairChunks in its order, empty
+// ones (the diagonal of a one-image block) included.
+std::vector<std::pair<int, int>> ScheduledBlockPairOrder(int num_blocks, int blocks_per_group);
 
 // Splits an arbitrary pair list into chunks of at most max_pairs_per_chunk
 // pairs (in the given order), each touching at most max_images_per_chunk

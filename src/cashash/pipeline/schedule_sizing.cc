@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "cashash/base/caching_block_allocator.h"
 #include "cashash/base/types.h"
 
 namespace cashash {
@@ -80,10 +81,17 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   size_t largest = 1;
   for (size_t f : features_per_image) largest = std::max(largest, f);
   sizes.host_bytes_per_image = HostBytesPerImage(largest);
+  const bool gpu = limits.max_gpu_bytes > 0;
   sizes.matcher_bytes_per_image =
       MatcherBytesPerImage(std::min(largest, static_cast<size_t>(std::max(1, limits.max_num_matches))),
                            limits.num_tables);
-  const bool gpu = limits.max_gpu_bytes > 0;
+  // On the GPU an image's block is rounded up to its size class, and that
+  // is what the device's owner of memory counts against the budget.
+  if (gpu) {
+    sizes.matcher_bytes_per_image = limits.gpu_without_budget
+                                        ? CachingBlockAllocator::SlabBlockClass(sizes.matcher_bytes_per_image)
+                                        : CachingBlockAllocator::SizeClass(sizes.matcher_bytes_per_image);
+  }
   const size_t gpu_for_images = static_cast<size_t>(limits.gpu_image_share * limits.max_gpu_bytes);
   const size_t n = std::max<size_t>(2, features_per_image.size());
 

@@ -43,9 +43,18 @@ struct ScheduleLimits {
   // 0: the matcher keeps its images in host memory (CPU backend), which
   // then counts against max_host_bytes.
   size_t max_gpu_bytes = 0;
-  // Share of max_gpu_bytes for the images; the GPU matcher's batch buffers
-  // use the rest.
-  double gpu_image_share = 0.75;
+  // Share of max_gpu_bytes for the images the GPU matcher holds. The rest is
+  // for everything else the run puts on the device under the same budget
+  // (cuda/cashash_cuda/utils/gpu_resources.h): the matcher's batch buffers,
+  // the exact rematch's kernels, the verifier's RANSAC buffers. Without
+  // --max_gpu_memory (max_gpu_bytes the device's free memory, no budget)
+  // the run uses kImageShareWithoutBudget.
+  double gpu_image_share = 0.5;
+  static constexpr double kImageShareWithoutBudget = 0.75;
+  // No device budget: the GPU's blocks share slabs and keep their
+  // quarter-step class (CachingBlockAllocator::SlabBlockClass) instead of
+  // whole pages (SizeClass).
+  bool gpu_without_budget = false;
   int block_size = 0;  // 0: derive, at most kMaxDerivedBlockSize
   int max_num_matches = 32768;  // rows per image the matcher keeps
   int num_tables = 8;           // cascade hash tables (matcher memory)
@@ -55,7 +64,7 @@ struct ScheduleSizes {
   int block_size = 0;
   int blocks_per_group = 0;
   size_t host_bytes_per_image = 0;     // features of the largest image
-  size_t matcher_bytes_per_image = 0;  // what the matcher keeps of it
+  size_t matcher_bytes_per_image = 0;  // what the matcher keeps of it (on the GPU: its block's size class)
   size_t predicted_host_bytes = 0;     // cache + pipeline (+ matcher on CPU)
   size_t predicted_gpu_bytes = 0;      // images held by the GPU matcher
   // What the matcher may keep of images the pipeline has let go, so that

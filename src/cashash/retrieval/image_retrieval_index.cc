@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "cashash/pipeline/thread_pool.h"
+#include "cashash/base/parallel_for.h"
 
 namespace cashash {
 namespace {

@@ -1,7 +1,9 @@
 // ParallelFor: runs fn(i) for i in [0, n) on up to num_threads threads
-// (-1 or 0 = every core). Work is handed out one index at a time, so uneven
-// items (image pairs of different sizes) balance themselves. The first
-// exception thrown by fn stops the remaining work and is rethrown here.
+// (-1 or 0 = every core), started for the call and joined before it
+// returns (no pool: callers on several threads at once never wait for each
+// other's work). Work is handed out one index at a time, so uneven items
+// (image pairs of different sizes) balance themselves. The first exception
+// thrown by fn stops the remaining work and is rethrown here.
 #pragma once
 
 #include <algorithm>

@@ -1,0 +1,182 @@
+// The writer's transactions and batched rows: DatabaseResultSink holds whole
+// chunks in one transaction until it has been open commit_seconds or is
+// flushed (another connection sees nothing before, everything after), and
+// the rows it writes several to a statement are those of one statement per
+// row, pairs stored swapped included, in both schemas' conventions.
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <string>
+#include <vector>
+
+#include "cashash/base/pair_id.h"
+#include "colmap_bridge/colmap38_schema.h"
+#include "colmap_bridge/database.h"
+#include "colmap_bridge/database_pipeline_io.h"
+#include "generated_database_support.h"
+
+namespace cashash {
+namespace {
+
+using colmap::Database;
+using colmap::DatabaseResultSink;
+
+int64_t QueryInt(const std::string& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+  sqlite3_stmt* s = nullptr;
+  int64_t value = -1;
+  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
+    value = sqlite3_column_int64(s, 0);
+  }
+  sqlite3_finalize(s);
+  sqlite3_close(db);
+  return value;
+}
+
+// Rows of `table` in one database and not in the other, both ways.
+int64_t RowsDiffering(const std::string& a, const std::string& b, const std::string& table) {
+  sqlite3* db = nullptr;
+  sqlite3_open_v2(a.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
+  sqlite3_exec(db, ("ATTACH DATABASE '" + b + "' AS other").c_str(), nullptr, nullptr, nullptr);
+  sqlite3_stmt* s = nullptr;
+  const std::string sql = "SELECT (SELECT count(*) FROM (SELECT * FROM main." + table + " EXCEPT SELECT * FROM other." +
+                          table + ")) + (SELECT count(*) FROM (SELECT * FROM other." + table +
+                          " EXCEPT SELECT * FROM main." + table + "))";
+  int64_t value = -1;
+  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
+    value = sqlite3_column_int64(s, 0);
+  }
+  sqlite3_finalize(s);
+  sqlite3_close(db);
+  return value;
+}
+
+// `count` pairs of image `first` with the images after it; every third pair
+// in the order opposite to storage, every fourth without matches, the others
+// with a calibrated geometry (F, E, pose) or a planar one (H only).
+std::vector<PairResult> MakeChunk(image_t first, int count) {
+  std::vector<PairResult> results;
+  for (int k = 1; k <= count; ++k) {
+    PairResult r;
+    const image_t other = first + static_cast<image_t>(k);
+    r.pair = k % 3 == 0 ? ImagePair{other, first} : ImagePair{first, other};
+    if (k % 4 != 0) {
+      for (int m = 0; m < 10 + k; ++m) {
+        r.matches.push_back({static_cast<point2D_t>(m), static_cast<point2D_t>((m * 7 + k) % 97)});
+      }
+      r.geometry.inlier_matches.assign(r.matches.begin(), r.matches.begin() + 8);
+      if (k % 2 == 0) {
+        r.geometry.config = kPlanar;
+        r.geometry.H = Eigen::Matrix3d::Identity() * 1.5;
+      } else {
+        r.geometry.config = kCalibrated;
+        r.geometry.F = Eigen::Matrix3d::Constant(0.25);
+        r.geometry.E = Eigen::Matrix3d::Constant(-0.5);
+        r.geometry.qvec = Eigen::Vector4d(0.9, 0.1, 0.3, 0.2).normalized();
+        r.geometry.tvec = Eigen::Vector3d(1, 0.1, -0.2);
+      }
+    } else {
+      r.geometry.config = kDegenerate;
+    }
+    results.push_back(std::move(r));
+  }
+  return results;
+}
+
+class WriterTransactionsTest : public ::testing::TestWithParam<bool> {
+ protected:
+  void SetUp() override {
+    for (const std::string& path : {path_, reference_}) {
+      colmap::CreateColmap38Database(path);
+      colmap::SetWalJournal(path);
+      // COLMAP 4.x's numbering: unset matrices and poses are written NULL.
+      if (GetParam()) {
+        sqlite3* db = nullptr;
+        sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
+        sqlite3_exec(db, "PRAGMA user_version = 4020100", nullptr, nullptr, nullptr);
+        sqlite3_close(db);
+      }
+    }
+  }
+  testing_support::ScratchDir scratch_{"writer_transactions_test"};
+  std::string path_ = scratch_.File("db.db");
+  std::string reference_ = scratch_.File("reference.db");
+};
+
+TEST_P(WriterTransactionsTest, ChunksWaitForTheCommitThenAllAppear) {
+  DatabaseResultSink::Options options;
+  options.commit_seconds = 3600;
+  DatabaseResultSink sink(path_, options);
+  sink.WriteChunk(MakeChunk(1, 100));
+  sink.WriteChunk(MakeChunk(200, 100));
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 0) << "another connection saw an open transaction";
+  EXPECT_EQ(sink.commits(), 0u);
+  EXPECT_EQ(sink.rows_written(), 0u) << "rows count once committed";
+  sink.Flush();
+  EXPECT_EQ(sink.commits(), 1u);
+  EXPECT_EQ(sink.rows_written(), 400u);
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 200);
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM two_view_geometries"), 200);
+  sink.Flush();  // nothing open: no commit
+  EXPECT_EQ(sink.commits(), 1u);
+}
+
+TEST_P(WriterTransactionsTest, ClosingCommitsWhatIsWritten) {
+  {
+    DatabaseResultSink::Options options;
+    options.commit_seconds = 3600;
+    DatabaseResultSink sink(path_, options);
+    sink.WriteChunk(MakeChunk(1, 30));
+  }
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM two_view_geometries"), 30);
+}
+
+TEST_P(WriterTransactionsTest, ZeroSecondsCommitsEveryChunk) {
+  DatabaseResultSink::Options options;
+  options.commit_seconds = 0;
+  DatabaseResultSink sink(path_, options);
+  sink.WriteChunk(MakeChunk(1, 10));
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 10);
+  sink.WriteChunk(MakeChunk(100, 10));
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 20);
+  EXPECT_EQ(sink.commits(), 2u);
+}
+
+// 150 pairs a chunk: two statements of 64 rows and 22 single rows.
+TEST_P(WriterTransactionsTest, BatchedRowsAreThoseOfOneStatementPerRow) {
+  const std::vector<PairResult> first = MakeChunk(1, 150), second = MakeChunk(300, 7);
+  {
+    DatabaseResultSink sink(path_, true);
+    sink.WriteChunk(first);
+    sink.WriteChunk(second);
+  }
+  {
+    Database db(reference_);
+    db.BeginTransaction();
+    for (const std::vector<PairResult>* chunk : {&first, &second}) {
+      for (const PairResult& r : *chunk) {
+        db.WriteMatches(r.pair.first, r.pair.second, r.matches);
+        db.WriteTwoViewGeometry(r.pair.first, r.pair.second, r.geometry);
+      }
+    }
+    db.Commit();
+  }
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 157);
+  EXPECT_EQ(RowsDiffering(path_, reference_, "matches"), 0);
+  EXPECT_EQ(RowsDiffering(path_, reference_, "two_view_geometries"), 0);
+  // And they read back as written, swapped pairs included.
+  Database db(path_, true);
+  for (const PairResult& r : first) {
+    EXPECT_EQ(db.ReadMatches(r.pair.first, r.pair.second), r.matches);
+    EXPECT_EQ(db.ReadTwoViewGeometry(r.pair.first, r.pair.second).inlier_matches, r.geometry.inlier_matches);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Schemas, WriterTransactionsTest, ::testing::Values(false, true),
+                         [](const ::testing::TestParamInfo<bool>& info) {
+                           return info.param ? "Colmap4x" : "Colmap38";
+                         });
+
+}  // namespace
+}  // namespace cashash
