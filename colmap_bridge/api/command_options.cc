@@ -93,15 +93,16 @@ void AddSequentialMatchingOptions(OptionTable* table, SequentialPairingOptions* 
              "Retrieved images fewer than this many places from the query are no loop pairs (0: no limit)");
   const std::string ignored = " (COLMAP's vocabulary tree; accepted and not used)";
   table->Add({"SequentialMatching.loop_detection_num_nearest_neighbors"}, &o->loop_detection_num_nearest_neighbors,
-             "Visual words per query feature" + ignored);
+             "Visual words a query feature looks up per hash table (at most " +
+                 std::to_string(RetrievalOptions::kMaxNearestNeighbors) + " are used)");
   table->Add({"SequentialMatching.loop_detection_num_checks"}, &o->loop_detection_num_checks,
              "Nearest-neighbour checks of the tree search" + ignored);
   table->Add({"SequentialMatching.loop_detection_num_images_after_verification"},
              &o->loop_detection_num_images_after_verification, "Images kept after spatial verification" + ignored);
   table->Add({"SequentialMatching.loop_detection_max_num_features"}, &o->loop_detection_max_num_features,
-             "Features per image indexed" + ignored);
+             "Features indexed per image, largest scales first (-1: all)");
   table->Add({"SequentialMatching.vocab_tree_path"}, &o->vocab_tree_path, "Vocabulary tree file" + ignored);
-  table->Add({"SequentialMatching.num_threads"}, &o->num_threads, "Threads of the loop retrieval, -1 for all cores");
+  table->Add({"SequentialMatching.num_threads"}, &o->num_threads, "Threads of the loop retrieval (reading, hashing, indexing, querying), -1 for all cores");
 }
 
 // COLMAP's SpatialMatching.* options, with its names and defaults.

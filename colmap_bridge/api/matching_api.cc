@@ -309,8 +309,9 @@ MatchingSummary MatchSequential(const std::string& database_path, const MatcherC
                            const MatchingCallbacks& callbacks) {
     std::unique_ptr<ImageRetrieval> own_retrieval;
     if (checked.sequential.loop_detection && retrieval == nullptr) {
-      own_retrieval = CreateImageRetrievalForRun(checked, database_path);
-      if (!own_retrieval) throw std::invalid_argument(LoopDetectionUnavailableMessage());
+      std::vector<image_t> image_ids;
+      for (const Image& image : source.images()) image_ids.push_back(image.image_id);
+      own_retrieval = CreateImageRetrievalForRun(checked, database_path, image_ids);
       retrieval = own_retrieval.get();
     }
     const SelectedPairs selected =

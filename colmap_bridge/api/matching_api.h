@@ -97,8 +97,8 @@ MatchingSummary MatchPairList(const std::string& database_path, const std::strin
 // overlap: 1, 2, 4, ... places on), rig frames expanded; with
 // loop_detection also every loop_detection_period-th image with the images
 // `retrieval` finds most like it. Without a retrieval of the caller's, the
-// run's own (CreateImageRetrievalForRun, pair_selection.h); where there is
-// none, loop detection is refused (std::invalid_argument naming the option).
+// run's own: an index over the run's images from their hash codes
+// (CreateImageRetrievalForRun, pair_selection.h).
 MatchingSummary MatchSequential(const std::string& database_path, const MatcherCommandOptions& options,
                                 const MatchingCallbacks& callbacks = {}, ImageRetrieval* retrieval = nullptr);
 

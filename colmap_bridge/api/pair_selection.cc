@@ -1,11 +1,16 @@
 #include "colmap_bridge/api/pair_selection.h"
 
+#include <algorithm>
 #include <sstream>
 #include <stdexcept>
 #include <unordered_map>
+#include <utility>
 
+#include "cashash/base/parallel_for.h"
 #include "cashash/pipeline/sequential_pairs.h"
 #include "cashash/pipeline/spatial_pairs.h"
+#include "cashash/retrieval/retrieval_options.h"
+#include "colmap_bridge/api/retrieval_api.h"
 #include "colmap_bridge/image_frames.h"
 #include "colmap_bridge/position_priors.h"
 
@@ -34,15 +39,62 @@ std::string Plural(size_t count, const std::string& noun) {
 // "1 image has", "3 images have".
 std::string ImagesHave(size_t count) { return Plural(count, "image") + (count == 1 ? " has" : " have"); }
 
+// Loop detection's retrieval: an index over the run's images built from
+// the database's own descriptors (retrieval_api.h), asked one query image
+// at a time on the options' threads.
+class DatabaseImageRetrieval : public ImageRetrieval {
+ public:
+  DatabaseImageRetrieval(DatabaseRetrievalIndex index, int num_threads)
+      : index_(std::move(index)), num_threads_(num_threads) {
+    for (size_t i = 0; i < index_.image_ids.size(); ++i) position_of_.emplace(index_.image_ids[i], i);
+  }
+
+  std::vector<std::vector<image_t>> MostSimilarImages(const std::vector<image_t>& query_image_ids,
+                                                      int num_images) override {
+    std::vector<std::vector<image_t>> result(query_image_ids.size());
+    if (num_images <= 0) return result;
+    ParallelFor(query_image_ids.size(), num_threads_, [&](size_t q) {
+      const auto position = position_of_.find(query_image_ids[q]);
+      // An image without an entry in the index has no words to ask with.
+      if (position == position_of_.end()) return;
+      for (const RetrievalNeighbor& neighbor : index_.index->TopK(position->second, static_cast<size_t>(num_images))) {
+        result[q].push_back(index_.image_ids[neighbor.image]);
+      }
+    });
+    return result;
+  }
+
+ private:
+  DatabaseRetrievalIndex index_;
+  int num_threads_;
+  std::unordered_map<image_t, size_t> position_of_;
+};
+
 }  // namespace
 
-std::unique_ptr<ImageRetrieval> CreateImageRetrievalForRun(const MatcherCommandOptions&, const std::string&) {
-  return nullptr;
+std::unique_ptr<ImageRetrieval> CreateImageRetrievalForRun(const MatcherCommandOptions& options,
+                                                           const std::string& database_path,
+                                                           const std::vector<image_t>& image_ids) {
+  const SequentialPairingOptions& sequential = options.sequential;
+  RetrievalOptions retrieval;
+  retrieval.num_images = sequential.loop_detection_num_images;
+  retrieval.max_num_features = sequential.loop_detection_max_num_features;
+  // COLMAP's loop_detection_num_nearest_neighbors is the number of visual
+  // words of the tree one query feature is assigned to (default 1); here
+  // it is the number of hash cells a query feature looks up per table, its
+  // own and the nearest across its least certain bits, which is the same
+  // idea. Values beyond the cells the retrieval can spread to are capped
+  // rather than refused, so that COLMAP command lines run unchanged.
+  retrieval.num_nearest_neighbors =
+      std::min(std::max(sequential.loop_detection_num_nearest_neighbors, 1), RetrievalOptions::kMaxNearestNeighbors);
+  retrieval.num_threads = sequential.num_threads;
+  retrieval.random_seed = options.random_seed;
+  DatabaseRetrievalIndex index = BuildDatabaseRetrievalIndex(database_path, retrieval, image_ids);
+  return std::make_unique<DatabaseImageRetrieval>(std::move(index), sequential.num_threads);
 }
 
 std::string LoopDetectionUnavailableMessage() {
-  return "--SequentialMatching.loop_detection 1 needs image retrieval from the cascade's codes, which this build "
-         "of cashash does not have yet; run with --SequentialMatching.loop_detection 0";
+  return "--SequentialMatching.loop_detection 1 needs an image retrieval, and none was given";
 }
 
 SelectedPairs SelectSequentialPairs(const Database& database, const std::vector<Image>& images,

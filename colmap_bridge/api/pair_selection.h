@@ -21,12 +21,17 @@ struct SelectedPairs {
 };
 
 // The retrieval for sequential loop detection when the caller brings none:
-// image retrieval from the cascade's codes, built from the database's own
-// descriptors. Returns nullptr where this build has none.
+// image retrieval from the cascade's codes (retrieval_api.h), an index over
+// `image_ids` (all images of the database when empty) built from the
+// database's own descriptors with options.sequential's loop_detection_*
+// settings, num_threads, and options.random_seed. Throws as
+// BuildDatabaseRetrievalIndex does.
 std::unique_ptr<ImageRetrieval> CreateImageRetrievalForRun(const MatcherCommandOptions& options,
-                                                           const std::string& database_path);
+                                                           const std::string& database_path,
+                                                           const std::vector<image_t>& image_ids = {});
 
-// The message of a loop detection without a retrieval, naming the option.
+// The message of a loop detection without a retrieval (a library caller's
+// mistake), naming the option.
 std::string LoopDetectionUnavailableMessage();
 
 // COLMAP's sequential pairs of the images (options.sequential), plus the

@@ -1,7 +1,9 @@
 // sequential_matcher and spatial_matcher through the library (MatchSequential,
 // MatchSpatial) on a small generated street: the pairs written are COLMAP's,
-// reruns resume, loop detection goes through an ImageRetrieval, and missing
-// priors or retrieval are named.
+// reruns resume, loop detection goes through an ImageRetrieval (the
+// caller's, or the run's own from the hash codes), and missing priors are
+// named.
+#include <algorithm>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -112,16 +114,34 @@ TEST_F(GeneratedStreet, LoopDetectionAsksTheRetrievalAndAddsItsPairs) {
   EXPECT_EQ(StoredPairs(path_), expected);
 }
 
-TEST_F(GeneratedStreet, LoopDetectionWithoutRetrievalNamesTheOption) {
+TEST_F(GeneratedStreet, LoopDetectionRetrievesOverlappingImagesBeyondTheOverlap) {
+  // The street's images overlap some ten places along it; the sequential
+  // pairs reach two. Every image asks the retrieval from the database's
+  // own descriptors, and only images at least three places away count.
+  options_.sequential.overlap = 2;
+  options_.sequential.quadratic_overlap = false;
   options_.sequential.loop_detection = true;
-  try {
-    MatchSequential(path_, options_, callbacks_);
-    ADD_FAILURE() << "loop detection ran without a retrieval";
-  } catch (const std::invalid_argument& error) {
-    EXPECT_NE(std::string(error.what()).find("--SequentialMatching.loop_detection"), std::string::npos)
-        << error.what();
-  }
-  EXPECT_TRUE(StoredPairs(path_).empty());
+  options_.sequential.loop_detection_period = 1;
+  options_.sequential.loop_detection_num_images = 2;
+  options_.sequential.loop_detection_min_index_distance = 3;
+  options_.sequential.num_threads = 1;
+  const MatchingSummary summary = MatchSequential(path_, options_, callbacks_);
+  const std::set<pair_t> stored = StoredPairs(path_);
+  const std::set<pair_t> overlap = WithinSteps(2);
+  EXPECT_TRUE(std::includes(stored.begin(), stored.end(), overlap.begin(), overlap.end()));
+  EXPECT_GT(stored.size(), overlap.size());
+  EXPECT_EQ(summary.pairs_requested, stored.size());
+  // Loop pairs that verify: images that truly overlap, found by retrieval.
+  size_t verified_loops = 0;
+  const Database db(path_, /*read_only=*/true);
+  db.UseStatement("SELECT pair_id FROM two_view_geometries WHERE rows >= 15", [&](SqliteStatement& s) {
+    while (s.Step()) {
+      const auto [image1, image2] = PairIdToImagePair(static_cast<pair_t>(s.ColumnInt64(0)));
+      if (image2 > image1 + 2) ++verified_loops;
+    }
+  });
+  EXPECT_GT(verified_loops, 0u);
+  EXPECT_TRUE(warnings_.empty()) << testing::PrintToString(warnings_);
 }
 
 TEST_F(GeneratedStreet, SpatialMatchesNeighboursWithinMaxDistance) {

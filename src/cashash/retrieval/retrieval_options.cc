@@ -7,8 +7,9 @@ namespace cashash {
 
 std::string RetrievalOptions::Check() const {
   if (num_images < 1) return "--VocabTreeMatching.num_images must be >= 1, got " + std::to_string(num_images);
-  if (num_nearest_neighbors < 1 || num_nearest_neighbors > 8) {
-    return "--VocabTreeMatching.num_nearest_neighbors must be in [1, 8], got " +
+  if (num_nearest_neighbors < 1 || num_nearest_neighbors > kMaxNearestNeighbors) {
+    return "--VocabTreeMatching.num_nearest_neighbors must be in [1, " + std::to_string(kMaxNearestNeighbors) +
+           "], got " +
            std::to_string(num_nearest_neighbors);
   }
   if (max_num_features == 0 || max_num_features < -1) {

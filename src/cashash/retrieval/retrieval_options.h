@@ -46,6 +46,7 @@ struct RetrievalOptions {
   uint64_t random_seed = 0;
   int num_threads = -1;  // -1: every core
 
+  static constexpr int kMaxNearestNeighbors = 8;
   static constexpr int kMaxTables = 16;
   static constexpr int kMinBitsPerWord = 8;
   static constexpr int kMaxBitsPerWord = 24;
