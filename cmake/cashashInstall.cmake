@@ -37,6 +37,7 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/src/cashash DESTINATION ${CMAKE_INSTALL_
 # private.
 install(FILES ${PROJECT_SOURCE_DIR}/colmap_bridge/api/matching_api.h ${PROJECT_SOURCE_DIR}/colmap_bridge/api/command_options.h
               ${PROJECT_SOURCE_DIR}/colmap_bridge/api/run_resolution.h
+              ${PROJECT_SOURCE_DIR}/colmap_bridge/api/run_gpu_resources.h
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/colmap_bridge/api COMPONENT devel)
 if(CASHASH_WITH_CUDA)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/cuda/cashash_cuda DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}

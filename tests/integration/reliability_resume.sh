@@ -26,16 +26,19 @@ trap cleanup EXIT
 match() {  # match DB [extra args]: the command every run uses
   local db="$1"; shift
   "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 --CasHash.matcher cascade \
-    --ExhaustiveMatching.block_size 5 "$@"
+    --ExhaustiveMatching.block_size 5 --database_commit_seconds 0 "$@"
 }
 
+# A commit per chunk (--database_commit_seconds 0), so that a kill lands
+# between commits while most chunks are still to come; grouped commits are
+# killed in writer_kill_resume.sh.
 # Starts a run in the background and returns once it has committed at least
 # MIN_PAIRS pairs (PID holds its process id).
 start_and_wait_for_rows() {
   local db="$1" log="$2" min_pairs="$3"
   # exec: the signals must reach cashash itself, not a subshell.
   (exec "$CASHASH" exhaustive_matcher --database_path "$db" --SiftMatching.use_gpu 0 --CasHash.matcher cascade \
-    --ExhaustiveMatching.block_size 5) >"$log" 2>&1 &
+    --ExhaustiveMatching.block_size 5 --database_commit_seconds 0) >"$log" 2>&1 &
   PID=$!
   echo "$PID" >"$WORK/pid"
   for _ in $(seq 600); do
