@@ -43,38 +43,35 @@ void AddUnique(DatabasePositionPriors* out, std::unordered_set<image_t>* seen, c
   out->priors.push_back(prior);
 }
 
+// The rows (image id, position blob, coordinate system) of a pose_priors
+// query, the first of each image kept.
+void AddPriorRows(SqliteStatement& s, DatabasePositionPriors* out) {
+  std::unordered_set<image_t> seen;
+  while (s.Step()) {
+    PositionPrior prior;
+    prior.image_id = static_cast<image_t>(s.ColumnInt64(0));
+    prior.position = PositionAt(s, 1, prior.image_id);
+    prior.coordinate_system = CoordinateSystemOf(s.ColumnInt64(2));
+    AddUnique(out, &seen, prior);
+  }
+}
+
 // COLMAP 4.0 and later: a prior per sensor; those of cameras belong to the
 // image corr_data_id.
 void ReadPosePriorsOf4x(const Database& database, DatabasePositionPriors* out) {
-  std::unordered_set<image_t> seen;
   database.UseStatement(
       "SELECT corr_data_id, position, coordinate_system FROM pose_priors WHERE corr_sensor_type = ? "
       "ORDER BY corr_data_id",
       [&](SqliteStatement& s) {
         s.BindInt64(1, kCameraSensorType);
-        while (s.Step()) {
-          PositionPrior prior;
-          prior.image_id = static_cast<image_t>(s.ColumnInt64(0));
-          prior.position = PositionAt(s, 1, prior.image_id);
-          prior.coordinate_system = CoordinateSystemOf(s.ColumnInt64(2));
-          AddUnique(out, &seen, prior);
-        }
+        AddPriorRows(s, out);
       });
 }
 
 // COLMAP 3.10 to 3.13: one prior per image, keyed by image_id.
 void ReadPosePriorsByImage(const Database& database, DatabasePositionPriors* out) {
-  std::unordered_set<image_t> seen;
   database.UseStatement("SELECT image_id, position, coordinate_system FROM pose_priors ORDER BY image_id",
-                        [&](SqliteStatement& s) {
-                          while (s.Step()) {
-                            PositionPrior prior;
-                            prior.image_id = static_cast<image_t>(s.ColumnInt64(0));
-                            prior.position = PositionAt(s, 1, prior.image_id);
-                            prior.coordinate_system = CoordinateSystemOf(s.ColumnInt64(2));
-                            AddUnique(out, &seen, prior);
-                          }
-                        });
+                        [&](SqliteStatement& s) { AddPriorRows(s, out); });
 }
 
 // COLMAP 3.8: the prior_t* columns of table images, read as 3.8 reads them.
