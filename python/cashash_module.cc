@@ -83,7 +83,8 @@ py::dict RunToDict(const colmap::ResolvedRun& resolved) {
   run["tau"] = resolved.options.cashash.tau;
   run["exact_rematch_min_matches"] = resolved.options.cashash.exact_rematch_min_matches;
   run["exact_rematch_max_matches"] = resolved.options.cashash.exact_rematch_max_matches;
-  run["rematch_on_matching_thread"] = resolved.rematch_on_matching_thread;
+  run["rematch_on_matching_thread"] = resolved.rematch.where == RematchPlace::kMatchingThread;
+  run["exact_rematch_where"] = RematchPlaceName(resolved.rematch.where);
   run["block_size"] = resolved.options.block_size;
   run["blocks_per_group"] = resolved.schedule.blocks_per_group;
   run["gpu_index"] = resolved.gpu_index;
@@ -199,9 +200,19 @@ py::dict MatchInMemory(const U8Array& descriptors1, const U8Array& descriptors2,
   PairMatchingResult result;
   {
     py::gil_scoped_release no_gil;
-    const std::unique_ptr<FeatureMatcher> matcher =
+    const std::unique_ptr<MatchingBackend> matcher =
         colmap::CreateMatcherForRun(run, ComputeMeanDescriptor({&d1, &d2}), nullptr);
-    result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get());
+    // The run's exact rematch, on this thread: one pair has nothing to
+    // overlap it with.
+    ExactRematchPolicy policy = run.rematch;
+    if (policy.enabled()) policy.where = RematchPlace::kMatchingThread;
+    ExactRematchStage rematch(policy, matcher.get());
+    const AfterPairMatching after_matching = [&](const std::vector<ImagePair>& pairs,
+                                                 std::vector<FeatureMatches>* matches) {
+      rematch.AfterMatching(pairs, matches);
+    };
+    result = MatchImagePair(k1, d1, k2, d2, pair_options, c1 ? &*c1 : nullptr, c2 ? &*c2 : nullptr, matcher.get(),
+                            after_matching);
   }
   py::dict out;
   out["matches"] = MatchesToArray(result.matches);

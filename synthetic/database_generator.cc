@@ -17,7 +17,7 @@
 
 #include <Eigen/Geometry>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/geometry/random_sampler.h"
 #include "cashash/base/parallel_for.h"
 #include "colmap_bridge/colmap38_schema.h"
@@ -89,7 +89,7 @@ std::vector<std::vector<bool>> RepeatedViews(const std::vector<FeatureDescriptor
   }
   std::vector<std::vector<bool>> repeated(images.size());
   for (size_t i = 0; i < images.size(); ++i) repeated[i].assign(images[i].rows(), false);
-  const std::vector<FeatureMatches> matches = matcher->MatchPairs(pairs);
+  const std::vector<FeatureMatches> matches = matcher->Match(pairs);
   for (size_t p = 0; p < pairs.size(); ++p) {
     for (const FeatureMatch& m : matches[p]) repeated[pairs[p].second][m.point2D_idx2] = true;
   }

@@ -12,8 +12,9 @@
 #include <vector>
 
 #include "cashash/base/phase_clock.h"
-#include "cashash/matchers/exact_rematch_feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
+#include "cashash/pipeline/exact_rematch_stage.h"
 #include "cashash/pipeline/image_retrieval.h"
 #include "cashash/pipeline/matching_pipeline.h"
 #include "colmap_bridge/api/command_options.h"
@@ -109,27 +110,29 @@ MatchingSummary MatchSequential(const std::string& database_path, const MatcherC
 MatchingSummary MatchSpatial(const std::string& database_path, const MatcherCommandOptions& options,
                              const MatchingCallbacks& callbacks = {});
 
-// The matcher backend the resolved run asks for: the GPU one when use_gpu is
-// set and a device is usable (each GPU matcher within
-// run.gpu_memory_budget_bytes), else the CPU one (reporting why through
-// `warning`).
+// The matcher backend the resolved run asks for: per device of the run
+// (run.gpu_indices) a GPU backend, each within run.gpu_memory_budget_bytes
+// and inside a fallback to the CPU backend on device-memory errors (whose
+// warning goes through `warning`), several under a SplitFeatureMatcher;
+// else the CPU backend. The backend both matches (FeatureMatcher) and
+// matches exactly from its images (ExactMatcher), whatever it is made of.
 //
 // --CasHash.matcher auto (the default) never gets here: ResolveRun has
 // decided it from the run's data (MatcherRule, run_resolution.h, over
 // ChooseAutoMatcher, cashash/matching/matcher_choice.h), and a run still
-// naming auto is refused (std::logic_error). With an exact rematch threshold
-// > 0 the cascade backend is an ExactRematchFeatureMatcher: pairs that may
-// verify (with fewer cascade matches than the window's upper bound
-// exact_rematch_max_matches, where that is set) are matched again by brute
-// force, from the descriptors the cascade holds, on the matching thread or
-// deferred as run.rematch_on_matching_thread says. With `gpu`, every GPU
-// part takes its device memory from that device's owner in it (one budget
-// for the run); without, each GPU matcher owns its memory under
+// naming auto is refused (std::logic_error). With `gpu`, every GPU part
+// takes its device memory from that device's owner in it (one budget for
+// the run); without, each GPU matcher owns its memory under
 // run.gpu_memory_budget_bytes.
-std::unique_ptr<FeatureMatcher> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
-                                                    const std::function<void(const std::string&)>& warning,
-                                                    const std::shared_ptr<ExactRematchCounts>& counts = nullptr,
-                                                    RunGpuResources* gpu = nullptr);
+std::unique_ptr<MatchingBackend> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
+                                                     const std::function<void(const std::string&)>& warning,
+                                                     RunGpuResources* gpu = nullptr);
+
+// The run's exact rematch (run.rematch) over `backend`, the cascade that
+// CreateMatcherForRun made: on the verification threads with brute-force
+// matchers on the run's GPU for held images that find no device memory.
+std::unique_ptr<ExactRematchStage> CreateRematchForRun(const ResolvedRun& run, const MeanDescriptor& mean,
+                                                       MatchingBackend* backend, RunGpuResources* gpu = nullptr);
 
 }  // namespace colmap
 }  // namespace cashash

@@ -11,9 +11,9 @@
 #include <utility>
 
 #include "cashash/base/caching_block_allocator.h"
-#include "cashash/matchers/exact_rematch_feature_matcher.h"
 #include "cashash/matchers/retaining_feature_matcher.h"
 #include "cashash/matching/guided_matching.h"
+#include "cashash/pipeline/exact_rematch_stage.h"
 #include "cashash/pipeline/feature_cache.h"
 #include "cashash/pipeline/pair_chunk_source.h"
 #include "cashash/pipeline/pair_triangle.h"
@@ -138,14 +138,14 @@ struct RunPlan {
   RunShare share;
   const ResolvedRun& run;  // the request's, as ResolveRun made it
   std::unique_ptr<GroupFeatureCache> cache;
-  std::unique_ptr<KeypointRecordingSource> keypoint_source;  // guided only
   FeatureSource* features = nullptr;
   std::unique_ptr<GpuMemorySampler> gpu_memory;
   // One owner of device memory per GPU, shared by the matchers, the
   // rematch and the verifier under --max_gpu_memory.
   std::unique_ptr<RunGpuResources> gpu_resources;
-  std::shared_ptr<ExactRematchCounts> rematch_counts;
   std::unique_ptr<FeatureMatcher> matcher;
+  // The exact rematch over the backend inside matcher (none: guided runs).
+  std::unique_ptr<ExactRematchStage> rematch;
   GuidedFeatureMatcher* guided = nullptr;       // inside matcher, if any
   RetainingFeatureMatcher* retaining = nullptr;  // inside matcher, if any
   size_t keep_bytes = 0;                          // the retaining matcher's cap
@@ -211,21 +211,22 @@ RunShare ShareOfRun(RunRequest& request, const MatchingCallbacks& callbacks) {
 void ComposeMatcher(const RunRequest& request, const MeanDescriptor& mean, const MatchingCallbacks& callbacks,
                     RunPlan* plan) {
   const MatcherCommandOptions& options = plan->run.options;
-  plan->rematch_counts = std::make_shared<ExactRematchCounts>();
-  plan->matcher = CreateMatcherForRun(plan->run, mean, [&](const std::string& text) { Warn(callbacks, text); },
-                                      plan->rematch_counts, plan->gpu_resources.get());
+  std::unique_ptr<MatchingBackend> backend = CreateMatcherForRun(
+      plan->run, mean, [&](const std::string& text) { Warn(callbacks, text); }, plan->gpu_resources.get());
   // Guided matching (Ga-CasHash, cashash/matching/guided_matching.h): a
-  // second matcher for the top-scale subsets, the stage-1 F estimator, and
-  // the pipeline's features read through a source that keeps the keypoints.
+  // second matcher for the top-scale subsets and the stage-1 F estimator;
+  // the pipeline adds its images with their keypoints (the guided
+  // matcher's traits ask for them).
   if (options.guided.enabled) {
-    plan->keypoint_source = std::make_unique<KeypointRecordingSource>(nullptr);
     auto guided = std::make_unique<GuidedFeatureMatcher>(
-        std::move(plan->matcher), CreateMatcherForRun(plan->run, mean, nullptr, nullptr, plan->gpu_resources.get()),
-        CreateFundamentalEstimatorOnDevice(options, plan->run.gpu_index, plan->gpu_resources.get()),
-        plan->keypoint_source.get(), options.guided,
+        std::move(backend), CreateMatcherForRun(plan->run, mean, nullptr, plan->gpu_resources.get()),
+        CreateFundamentalEstimatorOnDevice(options, plan->run.gpu_index, plan->gpu_resources.get()), options.guided,
         options.sift.max_num_matches, options.two_view.random_seed, options.sift.num_threads);
     plan->guided = guided.get();
     plan->matcher = std::move(guided);
+  } else {
+    plan->rematch = CreateRematchForRun(plan->run, mean, backend.get(), plan->gpu_resources.get());
+    plan->matcher = std::move(backend);
   }
   const size_t keep_bytes = request.run.schedule.matcher_keep_bytes;
   if (keep_bytes > 0) {
@@ -295,10 +296,6 @@ void PlanRun(RunRequest& request, RunShare share, const MatchingCallbacks& callb
   const MeanDescriptor& mean = request.mean.get();
   clock.Mark("waiting for the hashing mean");
   ComposeMatcher(request, mean, callbacks, plan);
-  if (plan->keypoint_source) {
-    plan->keypoint_source->SetInner(plan->features);
-    plan->features = plan->keypoint_source.get();
-  }
   clock.Mark("making the matcher");
   OpenSink(plan);
   clock.Mark("opening the database for writing");
@@ -321,12 +318,11 @@ void DismantlePlan(RunPlan& plan, PhaseClock& clock) {
   plan.locked_sink.reset();
   plan.database_sink.reset();
   clock.Mark("closing the database");
+  plan.rematch.reset();
   plan.matcher.reset();
-  plan.rematch_counts.reset();
   plan.gpu_resources.reset();  // the blocks the owners still cache
   clock.Mark("freeing the matcher");
   plan.features = nullptr;
-  plan.keypoint_source.reset();
   plan.cache.reset();
   clock.Mark("stopping the feature reader");
 }
@@ -362,14 +358,15 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
   if (plan.guided != nullptr) {
     Info(callbacks, DescribeGuidedMatching(plan.guided->stats(), options.guided));
   }
-  if (plan.rematch_counts->rematched > 0) {
+  if (plan.rematch && plan.rematch->counts().rematched > 0) {
+    const ExactRematchCounts& counts = plan.rematch->counts();
     std::ostringstream text;
-    text << "Exact rematch: " << plan.rematch_counts->rematched << " of " << plan.rematch_counts->pairs
+    text << "Exact rematch: " << counts.rematched << " of " << counts.pairs
          << " pairs had " << (options.cashash.exact_rematch_max_matches > 0 ? "" : "at least ")
          << options.cashash.exact_rematch_min_matches;
     if (options.cashash.exact_rematch_max_matches > 0) text << " to " << options.cashash.exact_rematch_max_matches - 1;
     text << " cascade matches and were matched again exactly in " << std::fixed << std::setprecision(3)
-         << plan.rematch_counts->exact_us * 1e-6 << " s";
+         << counts.exact_us * 1e-6 << " s on the " << RematchPlaceName(plan.rematch->policy().where);
     Info(callbacks, text.str());
   }
   if (!plan.cache) return;
@@ -377,6 +374,12 @@ void ReportMatcherStats(const RunPlan& plan, size_t num_images, const MatchingCa
   Info(callbacks, "Features: " + std::to_string(stats.source_loads) + " image reads for " +
                       std::to_string(num_images) + " images in " + std::to_string(stats.steps) +
                       " group steps, at most " + FormatMemorySize(stats.peak_bytes) + " cached");
+}
+
+// The matcher's name for the log and the summary: with its exact rematch,
+// "<backend>+exact-rematch".
+std::string RunMatcherName(const RunPlan& plan) {
+  return plan.matcher->Name() + (plan.rematch && plan.rematch->policy().enabled() ? "+exact-rematch" : "");
 }
 
 // The trace file of this rank: options.pipeline_trace_path, under MPI with
@@ -427,9 +430,10 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
   pipeline.SetProgressCallback(report_progress);
   if (callbacks.stop != nullptr) pipeline.SetStopFlag(callbacks.stop);
   if (plan.verifier) pipeline.SetBatchVerifier(plan.verifier.get());
+  if (plan.rematch) pipeline.SetExactRematch(plan.rematch.get());
 
   MatchingSummary summary;
-  summary.matcher_name = plan.matcher->Name();
+  summary.matcher_name = RunMatcherName(plan);
   Info(callbacks, "Matcher: " + summary.matcher_name);
   clock.Mark("starting the pipeline");
   if (share.rank > 0) {
@@ -437,7 +441,7 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
     report.stats = pipeline.Run(share.my_chunks());
     clock.Restart();
     WriteTrace(trace, trace_path, callbacks);
-    report.matcher_name = plan.matcher->Name();
+    report.matcher_name = RunMatcherName(plan);
     MpiResultSender::SendReport(report);
     return MatchingSummary();  // rank 0 reports the run
   }
@@ -460,12 +464,11 @@ MatchingSummary ExecutePlan(RunPlan& plan, size_t num_images, PhaseClock& clock,
     clock.Restart();
   }
   WriteTrace(trace, trace_path, callbacks);
-  // The GPU matcher may have handed over to the CPU on running out of memory.
-  summary.matcher_name = plan.matcher->Name();
   plan.gpu_memory->Sample();
   plan.gpu_memory->Fill(&summary);  // rank 0's device
   summary.gpu_memory = plan.gpu_resources->Books();
-  summary.gpu_memory_fallbacks = summary.gpu_memory.matcher_fallbacks + plan.rematch_counts->tickets_without_memory +
+  summary.gpu_memory_fallbacks = summary.gpu_memory.matcher_fallbacks +
+                                 (plan.rematch ? plan.rematch->counts().held_without_memory.load() : 0) +
                                  (plan.verifier ? plan.verifier->CallsWithoutDeviceMemory() : 0);
   ReportGpuMemory(summary, callbacks);
   ReportMatcherStats(plan, num_images, callbacks);  // rank 0's share

@@ -70,6 +70,18 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
 
 }  // namespace
 
+ExactRematchPolicy RematchPolicyRule(const MatcherCommandOptions& resolved, bool bucket_screen, size_t num_gpus) {
+  ExactRematchPolicy policy;
+  const CasHashOptions& cashash = resolved.cashash;
+  if (cashash.matcher != MatcherType::kCascade || resolved.guided.enabled || cashash.exact_rematch_min_matches <= 0) {
+    return policy;
+  }
+  policy.min_matches = static_cast<size_t>(cashash.exact_rematch_min_matches);
+  policy.max_matches = static_cast<size_t>(std::max(0, cashash.exact_rematch_max_matches));
+  policy.where = bucket_screen || num_gpus != 1 ? RematchPlace::kMatchingThread : RematchPlace::kVerificationThread;
+  return policy;
+}
+
 int RematchMinMatchesRule(int requested, bool bucket_screen) {
   if (requested >= 0) return requested;
   return bucket_screen ? kBucketScreeningRematchMinMatches : kDefaultRematchMinMatches;
@@ -122,7 +134,6 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   cashash.exact_rematch_max_matches = choice.exact_rematch_max_matches;
   const bool rematch_from_shape = options.cashash.exact_rematch_min_matches == kRematchMinMatchesChosen &&
                                   cashash.exact_rematch_min_matches != kDefaultRematchMinMatches;
-  run.rematch_on_matching_thread = bucket_screen;
   if (options.cashash.matcher != MatcherType::kBruteForce) run.notes.push_back("Matcher: " + choice.reason);
   // tau: where not given, for screening while the exact rematch decides the
   // pairs that may verify, for precision where the cascade's matches are kept.
@@ -145,6 +156,7 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   }
 
   run.gpu_indices = facts.gpu_indices;
+  run.rematch = RematchPolicyRule(run.options, bucket_screen, run.gpu_indices.size());
   run.gpu_index = facts.gpu_indices.empty() ? -1 : facts.gpu_indices.front();
   run.warnings.insert(run.warnings.begin(), facts.device_warnings.begin(), facts.device_warnings.end());
   if (!options.max_gpu_memory.empty()) {

@@ -80,10 +80,12 @@ class KeypointSource : public FeatureSource {
 // alone. Runs on the pipeline's loading thread, as KeypointSource does.
 class StoredMatches : public FeatureMatcher {
  public:
-  explicit StoredMatches(KeypointSource* source) : source_(source) {}
-  void AddImage(image_t, const FeatureDescriptors&) override {}
+  explicit StoredMatches(KeypointSource* source) : FeatureMatcher(MatcherTraits{"stored-matches"}), source_(source) {}
+  void AddImage(const Image&) override {}
   void RemoveImage(image_t) override {}
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override {
+    CheckGuides(pairs, guides);
     std::vector<FeatureMatches> out;
     out.reserve(pairs.size());
     for (const ImagePair& pair : pairs) {
@@ -102,7 +104,6 @@ class StoredMatches : public FeatureMatcher {
     }
     return out;
   }
-  std::string Name() const override { return "stored-matches"; }
 
  private:
   KeypointSource* source_;

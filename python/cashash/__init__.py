@@ -112,7 +112,7 @@ def match_exhaustive(database_path, options=None, progress=None, **kwargs):
     on the CPU for want of device memory); and run, a
     dict of how the run was resolved from the options and the database
     (matcher, num_tables, bits_per_table, tau, exact_rematch_min_matches,
-    exact_rematch_max_matches, rematch_on_matching_thread, block_size, blocks_per_group, gpu_index,
+    exact_rematch_max_matches, rematch_on_matching_thread, exact_rematch_where, block_size, blocks_per_group, gpu_index,
     gpu_memory_budget_bytes, max_host_bytes), as the command line resolves
     the same inputs.
     """

@@ -15,7 +15,7 @@
 // verifying the cascade's matches, verified pairs and inlier matches.
 // A fifth number in a setting is --CasHash.exact_rematch_min_matches: pairs
 // with at least that many cascade matches get brute force's matches, as a
-// run's ExactRematchFeatureMatcher does (0 or absent: the cascade's kept).
+// run's exact rematch stage does (0 or absent: the cascade's kept).
 // With --max_chance_ratio it exits 1 when a setting leaves more than R times
 // brute force's raw matches on the pairs that do not overlap, and with
 // --min_kept K when it verifies fewer than K times brute force's verified

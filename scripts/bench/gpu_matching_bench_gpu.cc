@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
       auto cpu = CreateCpuFeatureMatcher(sift, cas, mean);
       for (size_t i = 0; i < images.size(); ++i) cpu->AddImage(image_t(i), images[i]);
       const auto start = Clock::now();
-      cpu->MatchPairs(cpu_subset);
+      cpu->Match(cpu_subset);
       row.cpu_cascade = cpu_subset.size() / Seconds(start);
     }
     if (gpu) {
@@ -223,19 +223,19 @@ int main(int argc, char** argv) {
         auto matcher = cashash::cuda::CreateGpuFeatureMatcher(sift, cas, mean, 0);
         for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(image_t(i), images[i]);
         auto start = Clock::now();
-        matcher->MatchPairs({pairs.front()});  // hashes every image
+        matcher->Match({pairs.front()});  // hashes every image
         row.hash_ms = 1e3 * Seconds(start);
         std::vector<double> rates;
         std::vector<FeatureMatches> all;
         for (int r = 0; r < args.repeats; ++r) {
           start = Clock::now();
-          all = matcher->MatchPairs(pairs);
+          all = matcher->Match(pairs);
           rates.push_back(pairs.size() / Seconds(start));
         }
         std::sort(rates.begin(), rates.end());
         row.gpu_cascade = rates[rates.size() / 2];
         row.matches_per_pair = double(CountMatches(all)) / pairs.size();
-        cascade_subset = matcher->MatchPairs(bf_subset);
+        cascade_subset = matcher->Match(bf_subset);
         tiled_all = std::move(all);
       }
       // The same pairs by the other kernels (GpuMatcherConfig::cascade_kernel).
@@ -244,12 +244,12 @@ int main(int argc, char** argv) {
         config.cascade_kernel = kernel;
         auto matcher = cashash::cuda::CreateGpuFeatureMatcher(sift, cas, mean, config);
         for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(image_t(i), images[i]);
-        matcher->MatchPairs({pairs.front()});
+        matcher->Match({pairs.front()});
         std::vector<double> rates;
         std::vector<FeatureMatches> other;
         for (int r = 0; r < args.repeats; ++r) {
           const auto start = Clock::now();
-          other = matcher->MatchPairs(pairs);
+          other = matcher->Match(pairs);
           rates.push_back(pairs.size() / Seconds(start));
         }
         std::sort(rates.begin(), rates.end());
@@ -262,9 +262,9 @@ int main(int argc, char** argv) {
         bf_options.matcher = MatcherType::kBruteForce;
         auto bf = cashash::cuda::CreateGpuFeatureMatcher(sift, bf_options, mean, 0);
         for (size_t i = 0; i < images.size(); ++i) bf->AddImage(image_t(i), images[i]);
-        bf->MatchPairs({bf_subset.front()});  // warm-up
+        bf->Match({bf_subset.front()});  // warm-up
         const auto start = Clock::now();
-        const auto exact = bf->MatchPairs(bf_subset);
+        const auto exact = bf->Match(bf_subset);
         row.gpu_bf = bf_subset.size() / Seconds(start);
         row.recall = Recall(cascade_subset, exact);
       } catch (const std::exception& e) {

@@ -222,7 +222,7 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
 // rematch stays there instead of going to the verification threads.
 TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
   const auto on_matching_thread = [](const MatcherCommandOptions& options, size_t features) {
-    return ResolveOnGpu(options, {features, features}).rematch_on_matching_thread;
+    return ResolveOnGpu(options, {features, features}).rematch.where == RematchPlace::kMatchingThread;
   };
   MatcherCommandOptions defaults;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);

@@ -41,7 +41,7 @@ std::string Decisions(const ResolvedRun& run) {
   std::ostringstream out;
   out << MatcherTypeToString(c.matcher) << " " << c.num_tables << "x" << c.bits_per_table << " tau " << c.tau
       << " rematch " << c.exact_rematch_min_matches << " to " << c.exact_rematch_max_matches
-      << (run.rematch_on_matching_thread ? " on-matching" : " deferred")
+      << " on the " << RematchPlaceName(run.rematch.where)
       << " block " << run.options.block_size << " groups " << run.schedule.blocks_per_group << " keep "
       << run.schedule.matcher_keep_bytes << " host " << run.max_host_bytes << " gpu " << run.max_gpu_bytes
       << " budget " << run.gpu_memory_budget_bytes << " device " << run.gpu_index;
@@ -65,10 +65,10 @@ struct Row {
   void (*set)(MatcherCommandOptions*);  // the same, as Python's keywords set them
   RunFacts facts;
   // Expected: matcher, tables, tau, rematch threshold, the window's upper
-  // bound (0: none) and the rematch's placement, block size.
+  // bound (0: none) and where the rematch runs, block size.
   const char* matcher;
   int num_tables, bits_per_table, tau, rematch, rematch_max;
-  bool on_matching_thread;
+  RematchPlace where;
   int block_size;
   size_t budget;
   const char* command = "exhaustive_matcher";
@@ -84,108 +84,111 @@ const std::vector<Row>& Table() {
   constexpr int kPrecision = kCascadeTauForPrecision;
   constexpr int kBucket = kBucketScreeningRematchMinMatches;
   constexpr int kRuns = kDefaultRematchMinMatches;
+  constexpr RematchPlace kNowhere = RematchPlace::kNowhere;
+  constexpr RematchPlace kMatching = RematchPlace::kMatchingThread;
+  constexpr RematchPlace kVerification = RematchPlace::kVerificationThread;
   const auto none = [](MatcherCommandOptions*) {};
   static const std::vector<Row> rows = {
       // On the GPU auto is the cascade with the runs' rematch of every pair
       // that may verify: tables that screen, the bucket screen's threshold.
       {"GPU defaults, 8,192 features: the bucket screen and its threshold", {}, none, GpuFacts(2, 8192, false),
-       "cascade", 3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
+       "cascade", 3, 9, kCascade, kBucket, 0, kMatching, kDefaultBlockSize, 0},
       {"GPU defaults, 16,384 features", {}, none, GpuFacts(2, 16384, false), "cascade", 3, 10, kCascade, kBucket, 0,
-       true, kDefaultBlockSize, 0},
+       kMatching, kDefaultBlockSize, 0},
       {"GPU defaults, 4,096 features: 8 x 8, deferred rematch from 12", {}, none, GpuFacts(2, 4096, false), "cascade",
-       8, 8, kCascade, kRuns, 0, false, kDefaultBlockSize, 0},
+       8, 8, kCascade, kRuns, 0, kVerification, kDefaultBlockSize, 0},
       {"GPU, an explicit 12 stays 12", {"--CasHash.exact_rematch_min_matches", "12"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, GpuFacts(2, 8192, false),
-       "cascade", 3, 9, kCascade, 12, 0, true, kDefaultBlockSize, 0},
+       "cascade", 3, 9, kCascade, 12, 0, kMatching, kDefaultBlockSize, 0},
       {"GPU, no rematch: tables for recall, tau for precision", {"--CasHash.exact_rematch_min_matches", "0"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 0; }, GpuFacts(2, 8192, false),
-       "cascade", 8, 7, kPrecision, 0, 0, false, kDefaultBlockSize, 0},
+       "cascade", 8, 7, kPrecision, 0, 0, kNowhere, kDefaultBlockSize, 0},
       {"GPU, tables given: the user's shape and 12", {"--CasHash.num_tables", "6"},
        [](MatcherCommandOptions* o) { o->cashash.num_tables = 6; }, GpuFacts(2, 8192, false), "cascade", 6, 8,
-       kCascade, kRuns, 0, false, kDefaultBlockSize, 0},
+       kCascade, kRuns, 0, kVerification, kDefaultBlockSize, 0},
       {"GPU, a typed window is kept: tables and tau for the cascade's matches",
        {"--CasHash.exact_rematch_max_matches", "96"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 96; }, GpuFacts(2, 8192, false),
-       "cascade", 8, 7, kPrecision, kRuns, 96, false, kDefaultBlockSize, 0},
+       "cascade", 8, 7, kPrecision, kRuns, 96, kVerification, kDefaultBlockSize, 0},
       {"tau given", {"--CasHash.tau", "40", "--CasHash.matcher", "cascade"},
        [](MatcherCommandOptions* o) {
          o->cashash.tau = 40;
          o->cashash.matcher = MatcherType::kCascade;
        },
-       GpuFacts(2, 8192, false), "cascade", 3, 9, 40, kBucket, 0, true, kDefaultBlockSize, 0},
+       GpuFacts(2, 8192, false), "cascade", 3, 9, 40, kBucket, 0, kMatching, kDefaultBlockSize, 0},
       {"the cascade named on the CPU: auto's window and tables for recall", {"--CasHash.matcher", "cascade"},
        [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kCascade; }, Facts(2, 8192, false), "cascade",
-       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, kDefaultBlockSize, 0},
       // On the CPU auto is the cascade's own matches (tables for recall,
       // tau for precision) and the exact rematch of the window [12, 64).
       {"CPU defaults, 8,192 features: the rematch window, the cascade for recall", {}, none, Facts(2, 8192, false),
-       "cascade", 8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+       "cascade", 8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, kDefaultBlockSize, 0},
       // From 16,384 features the CPU's recall tables have buckets of about 4
       // features (no 64-bit signature); the GPU keeps 8 x 8.
       {"CPU defaults, 16,384 features: buckets of about 4 features", {}, none, Facts(2, 16384, false), "cascade", 19,
-       12, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+       12, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, kDefaultBlockSize, 0},
       {"GPU, the same window at 16,384 features: 8 x 8",
        {"--CasHash.exact_rematch_min_matches", "12", "--CasHash.exact_rematch_max_matches", "64"},
        [](MatcherCommandOptions* o) {
          o->cashash.exact_rematch_min_matches = 12;
          o->cashash.exact_rematch_max_matches = 64;
        },
-       GpuFacts(2, 16384, false), "cascade", 8, 8, kPrecision, 12, 64, false, kDefaultBlockSize, 0},
+       GpuFacts(2, 16384, false), "cascade", 8, 8, kPrecision, 12, 64, kVerification, kDefaultBlockSize, 0},
       {"CPU, tables given at 16,384 features: the user's", {"--CasHash.num_tables", "8", "--CasHash.bits_per_table", "8"},
        [](MatcherCommandOptions* o) {
          o->cashash.num_tables = 8;
          o->cashash.bits_per_table = 8;
        },
-       Facts(2, 16384, false), "cascade", 8, 8, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false,
+       Facts(2, 16384, false), "cascade", 8, 8, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching,
        kDefaultBlockSize, 0},
       {"CPU defaults, 4,096 features", {}, none, Facts(2, 4096, false), "cascade", 8, 7, kPrecision,
-       kCpuRematchWindowMin, kCpuRematchWindowMax, false, kDefaultBlockSize, 0},
+       kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, kDefaultBlockSize, 0},
       {"CPU, a typed threshold is kept: no window, the bucket screen", {"--CasHash.exact_rematch_min_matches", "12"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, Facts(2, 8192, false), "cascade",
-       3, 9, kCascade, 12, 0, true, kDefaultBlockSize, 0},
+       3, 9, kCascade, 12, 0, kMatching, kDefaultBlockSize, 0},
       {"CPU, a typed window is kept", {"--CasHash.exact_rematch_max_matches", "96"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_max_matches = 96; }, Facts(2, 8192, false), "cascade",
-       8, 7, kPrecision, kRuns, 96, false, kDefaultBlockSize, 0},
+       8, 7, kPrecision, kRuns, 96, kMatching, kDefaultBlockSize, 0},
       {"CPU, a typed threshold and window are kept",
        {"--CasHash.exact_rematch_min_matches", "20", "--CasHash.exact_rematch_max_matches", "48"},
        [](MatcherCommandOptions* o) {
          o->cashash.exact_rematch_min_matches = 20;
          o->cashash.exact_rematch_max_matches = 48;
        },
-       Facts(2, 8192, false), "cascade", 8, 7, kPrecision, 20, 48, false, kDefaultBlockSize, 0},
+       Facts(2, 8192, false), "cascade", 8, 7, kPrecision, 20, 48, kMatching, kDefaultBlockSize, 0},
       {"CPU, no rematch", {"--CasHash.exact_rematch_min_matches", "0"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 0; }, Facts(2, 8192, false), "cascade",
-       8, 7, kPrecision, 0, 0, false, kDefaultBlockSize, 0},
+       8, 7, kPrecision, 0, 0, kNowhere, kDefaultBlockSize, 0},
       {"CPU, brute force named", {"--CasHash.matcher", "bruteforce"},
        [](MatcherCommandOptions* o) { o->cashash.matcher = MatcherType::kBruteForce; }, Facts(2, 8192, false),
-       "bruteforce", 3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 0},
+       "bruteforce", 3, 9, kCascade, kBucket, 0, kNowhere, kDefaultBlockSize, 0},
       {"guided matching: the cascade for auto, recall, no screen", {}, [](MatcherCommandOptions* o) {
          o->guided.enabled = true;
        },
-       Facts(2, 8192, false), "cascade", 8, 7, kPrecision, kRuns, 0, false, kDefaultBlockSize, 0, "guided_matcher"},
+       Facts(2, 8192, false), "cascade", 8, 7, kPrecision, kRuns, 0, kNowhere, kDefaultBlockSize, 0, "guided_matcher"},
       {"guided matching on the GPU", {}, [](MatcherCommandOptions* o) { o->guided.enabled = true; },
-       GpuFacts(2, 8192, false), "cascade", 8, 7, kPrecision, kRuns, 0, false, kDefaultBlockSize, 0,
+       GpuFacts(2, 8192, false), "cascade", 8, 7, kPrecision, kRuns, 0, kNowhere, kDefaultBlockSize, 0,
        "guided_matcher"},
       {"a pair list keeps a given block size", {"--ExhaustiveMatching.block_size", "20"},
        [](MatcherCommandOptions* o) { o->block_size = 20; }, Facts(2, 8192, false), "cascade", 8, 7, kPrecision,
-       kCpuRematchWindowMin, kCpuRematchWindowMax, false, 20, 0},
+       kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, 20, 0},
       {"--max_gpu_memory is every GPU matcher's budget, pair lists too", {"--max_gpu_memory", "512M"},
        [](MatcherCommandOptions* o) { o->max_gpu_memory = "512M"; }, Facts(2, 8192, false, 0, 0, 80 * kGiB),
-       "cascade", 3, 9, kCascade, kBucket, 0, true, kDefaultBlockSize, 512 * kMiB},
+       "cascade", 3, 9, kCascade, kBucket, 0, kMatching, kDefaultBlockSize, 512 * kMiB},
       {"exhaustive: the block size from memory, at most 50", {}, none, Facts(300, 8192, true, 16 * kGiB), "cascade",
-       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, 50, 0},
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, 50, 0},
       {"exhaustive with little host memory: smaller blocks", {"--max_host_memory", "200M"},
        [](MatcherCommandOptions* o) { o->max_host_memory = "200M"; }, Facts(300, 8192, true, 16 * kGiB), "cascade",
-       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, -1, 0},
+       8, 7, kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, -1, 0},
       {"exhaustive, a given block size", {"--ExhaustiveMatching.block_size", "30"},
        [](MatcherCommandOptions* o) { o->block_size = 30; }, Facts(300, 8192, true, 16 * kGiB), "cascade", 8, 7,
-       kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, false, 30, 0},
+       kPrecision, kCpuRematchWindowMin, kCpuRematchWindowMax, kMatching, 30, 0},
       {"exhaustive on a GPU with a budget", {"--max_gpu_memory", "8G"},
        [](MatcherCommandOptions* o) { o->max_gpu_memory = "8G"; }, GpuFacts(300, 8192, true), "cascade", 3, 9,
-       kCascade, kBucket, 0, true, 50, 8 * kGiB},
+       kCascade, kBucket, 0, kMatching, 50, 8 * kGiB},
       {"exhaustive on a GPU, little host memory", {"--max_host_memory", "200M"},
        [](MatcherCommandOptions* o) { o->max_host_memory = "200M"; }, GpuFacts(300, 8192, true), "cascade", 3, 9,
-       kCascade, kBucket, 0, true, -1, 0},
+       kCascade, kBucket, 0, kMatching, -1, 0},
   };
   return rows;
 }
@@ -200,7 +203,9 @@ TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
     EXPECT_EQ(run.options.cashash.tau, row.tau);
     EXPECT_EQ(run.options.cashash.exact_rematch_min_matches, row.rematch);
     EXPECT_EQ(run.options.cashash.exact_rematch_max_matches, row.rematch_max);
-    EXPECT_EQ(run.rematch_on_matching_thread, row.on_matching_thread);
+    EXPECT_EQ(run.rematch.where, row.where) << RematchPlaceName(run.rematch.where);
+    EXPECT_EQ(run.rematch.min_matches, run.rematch.enabled() ? static_cast<size_t>(row.rematch) : 0u);
+    EXPECT_EQ(run.rematch.max_matches, run.rematch.enabled() ? static_cast<size_t>(row.rematch_max) : 0u);
     if (row.block_size > 0) {
       EXPECT_EQ(run.options.block_size, row.block_size);
     } else {  // smaller than the default
@@ -217,6 +222,23 @@ TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
       EXPECT_EQ(run.max_gpu_bytes, row.budget > 0 ? row.budget : row.facts.gpu_free_bytes);
     }
   }
+}
+
+// Where the exact rematch runs is the policy's, decided once: on one GPU on
+// the verification threads (unless the bucket screen leaves the matching
+// thread room), on several GPUs on the matching thread, where each chunk's
+// rematch is shared out over the devices as its cascade is.
+TEST(RunResolution, SeveralGpusRematchOnTheMatchingThread) {
+  MatcherCommandOptions options = FromCommandLine({}, "exhaustive_matcher");
+  RunFacts one = GpuFacts(2, 4096, false);
+  EXPECT_EQ(ResolveRun(options, one).rematch.where, RematchPlace::kVerificationThread);
+  RunFacts two = one;
+  two.gpu_indices = {0, 1};
+  const ResolvedRun run = ResolveRun(options, two);
+  EXPECT_EQ(run.rematch.where, RematchPlace::kMatchingThread);
+  EXPECT_EQ(run.rematch.min_matches, static_cast<size_t>(kDefaultRematchMinMatches));
+  // Everything else is the one GPU's run.
+  EXPECT_EQ(run.options.cashash.num_tables, ResolveRun(options, one).options.cashash.num_tables);
 }
 
 // The command line and Python fill the same MatcherCommandOptions from the

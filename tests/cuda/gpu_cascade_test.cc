@@ -96,7 +96,7 @@ std::vector<ImagePair> AllPairs(size_t num_images) {
 std::vector<FeatureMatches> AddAndMatch(FeatureMatcher* matcher, const std::vector<FeatureDescriptors>& images,
                                 const std::vector<ImagePair>& pairs) {
   for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(static_cast<image_t>(i), images[i]);
-  return matcher->MatchPairs(pairs);
+  return matcher->Match(pairs);
 }
 
 struct Agreement {
@@ -367,7 +367,7 @@ std::vector<FeatureDescriptors> ChainOfThreeAndAnEmptyImage(DescriptorSource* so
   return images;
 }
 
-// The cascade's exact rematch (MatchPairsExact, from the descriptors it
+// The cascade's exact matching (MatchExact, from the descriptors it
 // uploaded) returns the GPU brute-force backend's matches, and those of the
 // CPU brute force, on pairs whose images differ in size and on an empty one.
 TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
@@ -381,9 +381,8 @@ TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
   auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
   auto gpu_brute_force = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean, 0);
   auto cpu_brute_force = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean);
-  ASSERT_TRUE(cascade->SupportsExactMatching());
   AddAndMatch(cascade.get(), images, {});
-  const std::vector<FeatureMatches> exact = cascade->MatchPairsExact(pairs);
+  const std::vector<FeatureMatches> exact = cascade->MatchExact(pairs);
   const std::vector<FeatureMatches> gpu = AddAndMatch(gpu_brute_force.get(), images, pairs);
   const std::vector<FeatureMatches> cpu = AddAndMatch(cpu_brute_force.get(), images, pairs);
   ASSERT_EQ(exact.size(), pairs.size());
@@ -398,29 +397,29 @@ TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
   EXPECT_GE(a.value(), 0.999);
 }
 
-// A ticket (DeferExactMatching) taken after a chunk is matched and run on
+// Held images (HoldForExact) taken after a chunk is matched and matched on
 // another thread, after the cascade has dropped those images and uploaded
-// others into the blocks it reuses, gives what MatchPairsExact gave: it
-// holds the images' device blocks until it is let go.
-TEST(GpuCascadeTest, ExactMatchingTicketRunsLaterFromTheBlocksItHolds) {
+// others into the blocks it reuses, give what MatchExact gave: the held
+// matcher keeps the images' device blocks until it is let go.
+TEST(GpuCascadeTest, HeldImagesAreMatchedLaterFromTheBlocksTheyHold) {
   SKIP_WITHOUT_CUDA_DEVICE();
   DescriptorSource source(11);
   const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 2}, {0, 2}, {0, 3}};
   auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), MeanOf(images), 0);
   AddAndMatch(cascade.get(), images, {});
-  const std::vector<FeatureMatches> exact = cascade->MatchPairsExact(pairs);
-  std::unique_ptr<ExactMatchingTicket> ticket = cascade->DeferExactMatching(pairs);
-  ASSERT_NE(ticket, nullptr);
+  const std::vector<FeatureMatches> exact = cascade->MatchExact(pairs);
+  std::unique_ptr<ExactMatcher> held = cascade->HoldForExact(pairs);
+  ASSERT_NE(held, nullptr);
   // The cascade goes on: its images are replaced by others of the same sizes.
   std::vector<FeatureDescriptors> others;
   for (const FeatureDescriptors& d : images) others.push_back(source.Image(d.rows()));
   for (image_t id = 0; id < images.size(); ++id) cascade->RemoveImage(id);
   for (image_t id = 0; id < others.size(); ++id) cascade->AddImage(id + 10, others[id]);
-  cascade->MatchPairs({{10, 11}, {11, 12}});
+  cascade->Match({{10, 11}, {11, 12}});
   std::vector<FeatureMatches> later;
-  std::thread([&]() { later = ticket->Run(); }).join();
-  ticket.reset();
+  std::thread([&]() { later = held->MatchExact(pairs); }).join();
+  held.reset();
   ASSERT_EQ(later.size(), exact.size());
   size_t total = 0;
   for (size_t p = 0; p < pairs.size(); ++p) {

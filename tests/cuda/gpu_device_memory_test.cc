@@ -12,7 +12,7 @@
 #include "cashash/base/caching_block_allocator.h"
 #include "cashash/base/device_memory_error.h"
 #include "synthetic_sift.h"
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "gpu_test_support.h"
 #include "cashash_cuda/utils/device_memory.cuh"
 #include "cashash_cuda/utils/gpu_resources.h"
@@ -129,7 +129,7 @@ TEST_P(GpuImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
   cashash.matcher = GetParam();
   auto matcher = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cashash, mean, 0);
   for (image_t i = 0; i < 6; ++i) matcher->AddImage(i, images[i]);
-  const std::vector<FeatureMatches> first = matcher->MatchPairs(pairs);
+  const std::vector<FeatureMatches> first = matcher->Match(pairs);
   size_t total = 0;
   for (const FeatureMatches& m : first) total += m.size();
   ASSERT_GT(total, 1000u);
@@ -137,9 +137,9 @@ TEST_P(GpuImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
   // shared handle for one of them.
   for (image_t i : {1u, 3u, 5u}) matcher->RemoveImage(i);
   matcher->AddImage(5, images[5]);
-  matcher->AddSharedImage(1, std::make_shared<const FeatureDescriptors>(images[1]));
+  matcher->AddImage(MatcherImage{1, nullptr, std::make_shared<const FeatureDescriptors>(images[1])});
   matcher->AddImage(3, images[3]);
-  EXPECT_EQ(matcher->MatchPairs(pairs), first);
+  EXPECT_EQ(matcher->Match(pairs), first);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, GpuImages, ::testing::Values(MatcherType::kCascade, MatcherType::kBruteForce));

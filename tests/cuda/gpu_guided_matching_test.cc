@@ -9,6 +9,7 @@
 
 #include "gpu_test_support.h"
 
+#include <array>
 #include <cstdlib>
 #include <memory>
 #include <string>
@@ -16,8 +17,9 @@
 
 #include "cashash/pipeline/batch_verifier.h"
 #include "cashash/matching/cascade_hashing.h"
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/matching/guided_matching.h"
+#include "cashash/pipeline/matching_pipeline.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/matching/guided_matching.h"
@@ -31,6 +33,27 @@ using testing_support::GuidedScene;
 using testing_support::MakeGuidedScene;
 using testing_support::MakeRepeatedStructureScene;
 using testing_support::MakeUnrelatedImage;
+
+// Guided pairs: each pair with its F (the band's half-width is given per
+// call).
+struct GuidedPairs {
+  std::vector<ImagePair> pairs;
+  std::vector<std::array<double, 9>> F;
+
+  std::vector<EpipolarGuide> Guides(double max_distance) const {
+    std::vector<EpipolarGuide> guides;
+    for (const std::array<double, 9>& f : F) guides.push_back(EpipolarGuide{f, max_distance});
+    return guides;
+  }
+};
+
+// An image as the pipeline adds it to a matcher that searches within bands:
+// with its keypoints.
+MatcherImage WithKeypoints(const ImageFeatures& features) {
+  auto shared = std::make_shared<const ImageFeatures>(features);
+  return MatcherImage{features.image_id, std::shared_ptr<const Keypoints>(shared, &shared->keypoints),
+                      std::shared_ptr<const FeatureDescriptors>(shared, &shared->descriptors)};
+}
 
 // Matches of a and b that differ, counted both ways.
 size_t Differences(const FeatureMatches& a, const FeatureMatches& b) {
@@ -52,8 +75,9 @@ size_t Differences(const FeatureMatches& a, const FeatureMatches& b) {
 // CPU and GPU guided matching of the same pairs; the band test is the same
 // double arithmetic on both, so only a point within rounding of the band's
 // edge could differ.
-void ExpectSameGuidedMatches(const std::vector<const ImageFeatures*>& images, const std::vector<GuidedPair>& pairs,
+void ExpectSameGuidedMatches(const std::vector<const ImageFeatures*>& images, const GuidedPairs& guided,
                              double max_distance, const char* kernel) {
+  const std::vector<ImagePair>& pairs = guided.pairs;
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures* f : images) descriptors.push_back(&f->descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
@@ -64,13 +88,13 @@ void ExpectSameGuidedMatches(const std::vector<const ImageFeatures*>& images, co
   config.cascade_kernel = kernel != nullptr && std::string(kernel) == "direct" ? cuda::GpuCascadeKernel::kPerQuery
                                                                               : cuda::GpuCascadeKernel::kBucketTiles;
   auto gpu = cuda::CreateGpuFeatureMatcher(sift, cashash, mean, config);
-  ASSERT_TRUE(gpu->SupportsEpipolarGuidance());
+  ASSERT_TRUE(gpu->traits().epipolar_guidance);
   for (size_t k = 0; k < images.size(); ++k) {
-    cpu->AddImage(images[k]->image_id, images[k]->descriptors);
-    gpu->AddImage(images[k]->image_id, images[k]->descriptors);
+    cpu->AddImage(WithKeypoints(*images[k]));
+    gpu->AddImage(WithKeypoints(*images[k]));
   }
-  const std::vector<FeatureMatches> want = cpu->MatchPairsGuided(pairs, max_distance);
-  const std::vector<FeatureMatches> got = gpu->MatchPairsGuided(pairs, max_distance);
+  const std::vector<FeatureMatches> want = cpu->Match(pairs, guided.Guides(max_distance));
+  const std::vector<FeatureMatches> got = gpu->Match(pairs, guided.Guides(max_distance));
   ASSERT_EQ(got.size(), pairs.size());
   size_t total = 0, differ = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
@@ -89,8 +113,8 @@ struct SyntheticPairs {
 };
 
 // Three scenes (6 images), matched as 3 guided pairs plus one pair listed
-// twice, so that keypoint arrays are shared between tasks.
-SyntheticPairs MakeSyntheticPairs(std::vector<GuidedPair>* pairs) {
+// twice, so that images' keypoints are shared between tasks.
+SyntheticPairs MakeSyntheticPairs(GuidedPairs* pairs) {
   SyntheticPairs s;
   for (unsigned seed : {31u, 32u, 33u}) s.scenes.push_back(MakeGuidedScene(2000, seed));
   for (size_t k = 0; k < s.scenes.size(); ++k) {
@@ -100,20 +124,17 @@ SyntheticPairs MakeSyntheticPairs(std::vector<GuidedPair>* pairs) {
     s.images.back().image_id = static_cast<image_t>(2 * k + 2);
   }
   for (size_t k = 0; k < s.scenes.size(); ++k) {
-    GuidedPair p;
-    p.pair = {static_cast<image_t>(2 * k + 1), static_cast<image_t>(2 * k + 2)};
-    p.F = s.scenes[k].F;
-    p.points1 = &s.scenes[k].xy1;
-    p.points2 = &s.scenes[k].xy2;
-    pairs->push_back(p);
+    pairs->pairs.push_back({static_cast<image_t>(2 * k + 1), static_cast<image_t>(2 * k + 2)});
+    pairs->F.push_back(s.scenes[k].F);
   }
-  pairs->push_back(pairs->front());
+  pairs->pairs.push_back(pairs->pairs.front());
+  pairs->F.push_back(pairs->F.front());
   return s;
 }
 
 TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnSyntheticScenes) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  std::vector<GuidedPair> pairs;
+  GuidedPairs pairs;
   const SyntheticPairs s = MakeSyntheticPairs(&pairs);
   std::vector<const ImageFeatures*> images;
   for (const ImageFeatures& f : s.images) images.push_back(&f);
@@ -125,20 +146,21 @@ TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnSyntheticScenes) {
 
 TEST(GpuGuidedMatching, UnboundedBandEqualsUnguidedMatching) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  std::vector<GuidedPair> pairs;
+  GuidedPairs pairs;
   const SyntheticPairs s = MakeSyntheticPairs(&pairs);
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures& f : s.images) descriptors.push_back(&f.descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
   auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
-  for (const ImageFeatures& f : s.images) gpu->AddImage(f.image_id, f.descriptors);
-  std::vector<ImagePair> plain_pairs;
-  for (const GuidedPair& p : pairs) plain_pairs.push_back(p.pair);
-  EXPECT_EQ(gpu->MatchPairsGuided(pairs, 1e9), gpu->MatchPairs(plain_pairs));
-  // Too few positions for an image is refused.
-  std::vector<float> short_xy(10, 0.f);
-  pairs[0].points2 = &short_xy;
-  EXPECT_THROW(gpu->MatchPairsGuided(pairs, 4.0), std::invalid_argument);
+  for (const ImageFeatures& f : s.images) gpu->AddImage(WithKeypoints(f));
+  EXPECT_EQ(gpu->Match(pairs.pairs, pairs.Guides(1e9)), gpu->Match(pairs.pairs));
+  // Too few positions for an image is refused, as is none.
+  ImageFeatures few = s.images[1];
+  few.keypoints.resize(5);
+  gpu->AddImage(WithKeypoints(few));
+  EXPECT_THROW(gpu->Match(pairs.pairs, pairs.Guides(4.0)), std::invalid_argument);
+  gpu->AddImage(few.image_id, few.descriptors);
+  EXPECT_THROW(gpu->Match(pairs.pairs, pairs.Guides(4.0)), std::invalid_argument);
 }
 
 // Images 1 and 2 of a scene and an unrelated image 3, served to a guided
@@ -150,7 +172,6 @@ struct GpuGuidedRig {
     ImageFeatures LoadFeatures(image_t id) override { return images[id - 1]; }
     const Camera& CameraOfImage(image_t) const override { return camera; }
   } source;
-  std::unique_ptr<KeypointRecordingSource> recording;
   std::unique_ptr<GuidedFeatureMatcher> matcher;
 
   GpuGuidedRig(const GuidedScene& scene, const GuidedMatchingOptions& options) {
@@ -159,11 +180,14 @@ struct GpuGuidedRig {
         ComputeMeanDescriptor({&source.images[0].descriptors, &source.images[1].descriptors});
     const SiftMatchingOptions sift;
     const CasHashOptions cashash;
-    recording = std::make_unique<KeypointRecordingSource>(&source);
     matcher = std::make_unique<GuidedFeatureMatcher>(
         cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0), cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0),
-        cuda::CreateGpuFundamentalEstimator(TwoViewGeometryOptions(), 0), recording.get(), options, 32768, 0, -1);
-    for (image_t id : {1u, 2u, 3u}) matcher->AddImage(id, recording->LoadFeatures(id).descriptors);
+        cuda::CreateGpuFundamentalEstimator(TwoViewGeometryOptions(), 0), options, 32768, 0, -1);
+    for (image_t id : {1u, 2u, 3u}) {
+      ImageFeatures features = source.LoadFeatures(id);
+      features.image_id = id;
+      matcher->AddImage(WithKeypoints(features));
+    }
   }
 };
 
@@ -175,7 +199,7 @@ TEST(GpuGuidedMatching, GuidedMatcherFromGpuPartsDecidesAsTheCpuOne) {
     options.restrict_search_to_band = search_in_band;
     GpuGuidedRig rig(scene, options);
     EXPECT_NE(rig.matcher->Name().find("gpu-cascade"), std::string::npos);
-    const std::vector<FeatureMatches> result = rig.matcher->MatchPairs({{1, 2}, {1, 3}, {3, 2}});
+    const std::vector<FeatureMatches> result = rig.matcher->Match({{1, 2}, {1, 3}, {3, 2}});
     EXPECT_EQ(rig.matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
     EXPECT_EQ(rig.matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
     EXPECT_EQ(rig.matcher->last_outcomes()[2], GuidedStage1Outcome::kTooFewMatches);
@@ -194,7 +218,7 @@ TEST(GpuGuidedMatching, RejectsRepeatedStructureOnTheEpipolarLine) {
   SKIP_WITHOUT_CUDA_DEVICE();
   const GuidedScene scene = MakeRepeatedStructureScene(1500, 23);
   GpuGuidedRig rig(scene, GuidedMatchingOptions());
-  const FeatureMatches guided = rig.matcher->MatchPairs({{1, 2}})[0];
+  const FeatureMatches guided = rig.matcher->Match({{1, 2}})[0];
   ASSERT_EQ(rig.matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
   size_t right = 0, on_line = 0;
   for (const FeatureMatch& m : guided) {
@@ -215,32 +239,26 @@ TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnAGeneratedStreet) {
   for (const ImageFeatures& f : images) descriptors.push_back(&f.descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
   auto cpu = CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean);
-  std::vector<std::vector<float>> xy(images.size());
-  for (size_t k = 0; k < images.size(); ++k) {
-    cpu->AddImage(images[k].image_id, images[k].descriptors);
-    xy[k] = InterleavedPositions(images[k].keypoints, images[k].keypoints.size());
-  }
+  for (size_t k = 0; k < images.size(); ++k) cpu->AddImage(images[k].image_id, images[k].descriptors);
   // F of every pair from the CPU's exhaustive matches.
-  std::vector<GuidedPair> pairs;
+  GuidedPairs pairs;
   for (size_t a = 0; a < images.size(); ++a) {
     for (size_t b = a + 1; b < images.size(); ++b) {
       const ImagePair pair{images[a].image_id, images[b].image_id};
-      const FeatureMatches matches = cpu->MatchPairs({pair})[0];
+      const FeatureMatches matches = cpu->Match({pair})[0];
       if (matches.size() < 16) continue;
       const TwoViewPoints points = PrepareTwoViewPoints(KeypointPositions(images[a].keypoints),
                                                         KeypointPositions(images[b].keypoints), matches);
       const TwoViewModelEstimate F = EstimateFundamental(points, TwoViewGeometryOptions());
       if (!F.success) continue;
-      GuidedPair g;
-      g.pair = pair;
+      std::array<double, 9> f{};
       for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) g.F[3 * r + c] = F.model(r, c);
-      g.points1 = &xy[a];
-      g.points2 = &xy[b];
-      pairs.push_back(g);
+        for (int c = 0; c < 3; ++c) f[3 * r + c] = F.model(r, c);
+      pairs.pairs.push_back(pair);
+      pairs.F.push_back(f);
     }
   }
-  ASSERT_FALSE(pairs.empty());
+  ASSERT_FALSE(pairs.pairs.empty());
   std::vector<const ImageFeatures*> pointers;
   for (const ImageFeatures& f : images) pointers.push_back(&f);
   for (const double d : {4.0, 8.0}) {

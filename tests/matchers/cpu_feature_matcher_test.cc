@@ -8,7 +8,7 @@
 
 #include "cashash/matching/brute_force_matcher.h"
 #include "cashash/matching/cascade_matcher.h"
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/base/parallel_for.h"
 #include "synthetic_sift.h"
@@ -60,7 +60,7 @@ std::vector<FeatureMatches> RunMatcher(const std::vector<FeatureDescriptors>& im
   for (const auto& image : images) pointers.push_back(&image);
   auto matcher = CreateCpuFeatureMatcher(s, o, ComputeMeanDescriptor(pointers));
   for (size_t i = 0; i < images.size(); ++i) matcher->AddImage(image_t(i + 1), images[i]);
-  return matcher->MatchPairs(AllPairs(int(images.size())));
+  return matcher->Match(AllPairs(int(images.size())));
 }
 
 class CpuMatcherTypes : public ::testing::TestWithParam<MatcherType> {};
@@ -142,12 +142,12 @@ TEST_P(CpuMatcherTypes, EmptyAndSingleFeatureImages) {
   matcher->AddImage(1, empty);
   matcher->AddImage(2, one);
   matcher->AddImage(3, many);
-  const auto results = matcher->MatchPairs({{1, 3}, {3, 1}, {1, 1}, {2, 3}, {3, 2}, {1, 2}});
+  const auto results = matcher->Match({{1, 3}, {3, 1}, {1, 1}, {2, 3}, {3, 2}, {1, 2}});
   ASSERT_EQ(results.size(), 6u);
   for (int i : {0, 1, 2, 5}) EXPECT_TRUE(results[i].empty());
   EXPECT_EQ(results[3], (FeatureMatches{{0, 30}}));
   EXPECT_EQ(results[4], (FeatureMatches{{30, 0}}));
-  EXPECT_TRUE(matcher->MatchPairs({}).empty());
+  EXPECT_TRUE(matcher->Match({}).empty());
 }
 
 TEST_P(CpuMatcherTypes, ReplaceRemoveAndUnknownImages) {
@@ -159,13 +159,13 @@ TEST_P(CpuMatcherTypes, ReplaceRemoveAndUnknownImages) {
   EXPECT_EQ(matcher->Name(), GetParam() == MatcherType::kCascade ? "cpu-cascade" : "cpu-bruteforce");
   matcher->AddImage(1, images[0]);
   matcher->AddImage(2, images[0]);
-  const size_t self_matches = matcher->MatchPairs({{1, 2}})[0].size();
+  const size_t self_matches = matcher->Match({{1, 2}})[0].size();
   matcher->AddImage(2, images[1]);  // replaces
-  const size_t other_matches = matcher->MatchPairs({{1, 2}})[0].size();
+  const size_t other_matches = matcher->Match({{1, 2}})[0].size();
   EXPECT_GT(self_matches, other_matches);
-  EXPECT_THROW(matcher->MatchPairs({{1, 9}}), std::out_of_range);
+  EXPECT_THROW(matcher->Match({{1, 9}}), std::out_of_range);
   matcher->RemoveImage(2);
-  EXPECT_THROW(matcher->MatchPairs({{1, 2}}), std::out_of_range);
+  EXPECT_THROW(matcher->Match({{1, 2}}), std::out_of_range);
 }
 
 INSTANTIATE_TEST_SUITE_P(Both, CpuMatcherTypes,

@@ -13,25 +13,35 @@ namespace cashash {
 namespace {
 
 // Stands in for the GPU backend: wraps a CPU matcher and throws the given
-// error at the n-th call (AddImage and MatchPairs counted together).
-class FailingMatcher : public FeatureMatcher {
+// error at the n-th call (AddImage, Match and MatchExact counted together).
+class FailingMatcher : public MatchingBackend {
  public:
   // Throws DeviceMemoryError(message), or with `device_memory` false a
   // plain std::runtime_error, at call `fail_at_call`.
-  FailingMatcher(std::unique_ptr<FeatureMatcher> inner, int fail_at_call, std::string message,
+  FailingMatcher(std::unique_ptr<MatchingBackend> inner, int fail_at_call, std::string message,
                  bool device_memory = true)
-      : inner_(std::move(inner)), fail_at_call_(fail_at_call), message_(std::move(message)),
+      : MatchingBackend(MatcherTraits{"failing-gpu", true}),
+        inner_(std::move(inner)),
+        fail_at_call_(fail_at_call),
+        message_(std::move(message)),
         device_memory_(device_memory) {}
-  void AddImage(image_t id, const FeatureDescriptors& d) override {
+  void AddImage(const Image& image) override {
     MaybeFail();
-    inner_->AddImage(id, d);
+    inner_->AddImage(image);
   }
   void RemoveImage(image_t id) override { inner_->RemoveImage(id); }
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override {
     MaybeFail();
-    return inner_->MatchPairs(pairs);
+    return inner_->Match(pairs, guides);
   }
-  std::string Name() const override { return "failing-gpu"; }
+  std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override {
+    MaybeFail();
+    return inner_->MatchExact(pairs);
+  }
+  std::unique_ptr<ExactMatcher> HoldForExact(const std::vector<ImagePair>& pairs) override {
+    return inner_->HoldForExact(pairs);
+  }
 
  private:
   void MaybeFail() {
@@ -39,7 +49,7 @@ class FailingMatcher : public FeatureMatcher {
     if (device_memory_) throw DeviceMemoryError(message_);
     throw std::runtime_error(message_);
   }
-  std::unique_ptr<FeatureMatcher> inner_;
+  std::unique_ptr<MatchingBackend> inner_;
   int calls_ = 0;
   int fail_at_call_;
   std::string message_;
@@ -77,10 +87,10 @@ std::vector<FeatureMatches> AddAndMatch(FeatureMatcher* matcher, const Scene& sc
   for (size_t i = 0; i < scene.images.size(); ++i) matcher->AddImage(static_cast<image_t>(i), scene.images[i]);
   matcher->RemoveImage(4);
   matcher->AddImage(4, scene.images[4]);
-  return matcher->MatchPairs(scene.pairs);
+  return matcher->Match(scene.pairs);
 }
 
-std::unique_ptr<FeatureMatcher> Cpu(const Scene& scene) {
+std::unique_ptr<MatchingBackend> Cpu(const Scene& scene) {
   return CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), scene.mean);
 }
 
@@ -97,15 +107,17 @@ TEST(FallbackFeatureMatcher, DeviceMemoryErrorsMoveTheRunToTheFallback) {
         std::make_unique<FailingMatcher>(Cpu(scene), fail_at, "GPU out of memory allocating 2 MiB for image 2"),
         [&] { return Cpu(scene); }, IsDeviceMemoryError,
         [&](const std::string& text) { warnings.push_back(text); });
+    // The traits are the primary's, fixed when it is built.
     EXPECT_EQ(matcher->Name(), "failing-gpu");
+    EXPECT_TRUE(matcher->traits().epipolar_guidance);
     EXPECT_EQ(AddAndMatch(matcher.get(), scene), expected) << "fail at call " << fail_at;
-    EXPECT_EQ(matcher->Name(), Cpu(scene)->Name());
+    EXPECT_EQ(matcher->Name(), "failing-gpu");
     // One warning, naming the backend that failed, its error and the one
     // that goes on.
     ASSERT_EQ(warnings.size(), 1u);
     EXPECT_NE(warnings[0].find("failing-gpu"), std::string::npos) << warnings[0];
     EXPECT_NE(warnings[0].find("GPU out of memory allocating 2 MiB for image 2"), std::string::npos) << warnings[0];
-    EXPECT_NE(warnings[0].find(matcher->Name()), std::string::npos) << warnings[0];
+    EXPECT_NE(warnings[0].find(Cpu(scene)->Name()), std::string::npos) << warnings[0];
   }
 }
 
@@ -120,13 +132,31 @@ TEST(FallbackFeatureMatcher, SharedImagesAreKeptWithoutACopyAndRebuiltFrom) {
   auto matcher = CreateFallbackFeatureMatcher(
       std::make_unique<FailingMatcher>(Cpu(scene), 6, "GPU out of memory allocating 2 MiB for codes"),
       [&] { return Cpu(scene); }, IsDeviceMemoryError, nullptr);
-  for (size_t i = 0; i < shared.size(); ++i) matcher->AddSharedImage(static_cast<image_t>(i), shared[i]);
+  for (size_t i = 0; i < shared.size(); ++i) matcher->AddImage(MatcherImage{static_cast<image_t>(i), nullptr, shared[i]});
   for (const auto& handle : shared) EXPECT_EQ(handle.use_count(), 2) << "held once by the fallback, not copied";
   matcher->RemoveImage(4);
   EXPECT_EQ(shared[4].use_count(), 1) << "released with the image";
-  matcher->AddSharedImage(4, shared[4]);
-  EXPECT_EQ(matcher->MatchPairs(scene.pairs), expected);  // rebuilt on the CPU from the handles
-  EXPECT_NE(matcher->Name(), "failing-gpu");
+  matcher->AddImage(MatcherImage{4, nullptr, shared[4]});
+  EXPECT_EQ(matcher->Match(scene.pairs), expected);  // rebuilt on the CPU from the handles
+}
+
+// Exact matching goes through the same guard: out of memory there moves
+// the run to the fallback too, which gives the same exact matches.
+TEST(FallbackFeatureMatcher, ExactMatchingFallsBackAsMatchingDoes) {
+  const Scene scene = MakeScene();
+  auto cpu = Cpu(scene);
+  for (size_t i = 0; i < scene.images.size(); ++i) cpu->AddImage(static_cast<image_t>(i), scene.images[i]);
+  const std::vector<FeatureMatches> expected = cpu->MatchExact(scene.pairs);
+  std::vector<std::string> warnings;
+  // Fails at the first MatchExact (call 6: five adds first).
+  auto matcher = CreateFallbackFeatureMatcher(
+      std::make_unique<FailingMatcher>(Cpu(scene), 6, "GPU out of memory allocating scratch"),
+      [&] { return Cpu(scene); }, IsDeviceMemoryError, [&](const std::string& text) { warnings.push_back(text); });
+  for (size_t i = 0; i < scene.images.size(); ++i) matcher->AddImage(static_cast<image_t>(i), scene.images[i]);
+  EXPECT_EQ(matcher->MatchExact(scene.pairs), expected);
+  EXPECT_EQ(warnings.size(), 1u);
+  // What it holds afterwards is the fallback's.
+  EXPECT_EQ(matcher->HoldForExact(scene.pairs)->MatchExact(scene.pairs), expected);
 }
 
 TEST(FallbackFeatureMatcher, OtherErrorsPropagate) {

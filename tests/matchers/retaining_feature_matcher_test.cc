@@ -20,14 +20,19 @@ namespace {
 // Image i has i + 1 features; counts AddImage per image and what it holds.
 class CountingMatcher : public FeatureMatcher {
  public:
-  void AddImage(image_t id, const FeatureDescriptors& d) override {
-    if (held.count(id)) throw std::logic_error("added twice without removal");
-    held[id] = d.rows();
-    ++adds[id];
+  CountingMatcher() : FeatureMatcher(MatcherTraits{"counting", true}) {}
+  void AddImage(const Image& image) override {
+    if (held.count(image.id)) throw std::logic_error("added twice without removal");
+    held[image.id] = image.descriptors->rows();
+    ++adds[image.id];
     max_held = std::max(max_held, held.size());
   }
+  using FeatureMatcher::AddImage;
   void RemoveImage(image_t id) override { held.erase(id); }
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override {
+    match_calls += 1;
+    guided_calls += guides.empty() ? 0 : 1;
     std::vector<FeatureMatches> out;
     for (const ImagePair& p : pairs) {
       if (!held.count(p.first) || !held.count(p.second)) throw std::logic_error("image not added");
@@ -37,14 +42,8 @@ class CountingMatcher : public FeatureMatcher {
     }
     return out;
   }
-  // The pipeline's call: the wrapper must pass it on, so that what the inner
-  // matcher defers (the GPU's exact rematch) is deferred.
-  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override {
-    ++deferred_calls;
-    return ChunkMatches{MatchPairs(pairs), nullptr};
-  }
-  std::string Name() const override { return "counting"; }
-  size_t deferred_calls = 0;
+  size_t match_calls = 0;
+  size_t guided_calls = 0;
   std::map<image_t, size_t> held;
   std::map<image_t, int> adds;
   size_t max_held = 0;
@@ -81,7 +80,7 @@ struct RunOutcome {
   RetainingStats stats;
   std::map<pair_t, size_t> results;
   size_t chunks = 0;
-  size_t deferred_calls = 0;
+  size_t match_calls = 0;
 };
 
 constexpr size_t kImages = 60;
@@ -100,12 +99,12 @@ RunOutcome MatchAll(size_t budget_images) {
   options.skip_geometric_verification = true;
   MatchingPipeline pipeline(options, &source, &matcher, &sink);
   pipeline.Run(chunks);
-  return {inner->adds, inner->max_held, matcher.stats(), sink.sizes, chunks.size(), inner->deferred_calls};
+  return {inner->adds, inner->max_held, matcher.stats(), sink.sizes, chunks.size(), inner->match_calls};
 }
 
 TEST(RetainingFeatureMatcher, AmpleBudgetHashesEveryImageOnce) {
   const RunOutcome run = MatchAll(kImages);
-  EXPECT_EQ(run.deferred_calls, run.chunks);
+  EXPECT_EQ(run.match_calls, run.chunks);
   ASSERT_EQ(run.adds.size(), kImages);
   for (const auto& [id, count] : run.adds) EXPECT_EQ(count, 1) << "image " << id;
   EXPECT_EQ(run.stats.images_added, kImages);
@@ -147,6 +146,21 @@ TEST(RetainingFeatureMatcher, DropsTheOldestReleasedFirstAndNeverOneInUse) {
   EXPECT_EQ(matcher.stats().images_dropped, 1u);
   matcher.AddImage(2, d);  // dropped before: added again
   EXPECT_EQ(inner->adds[2], 2);
+}
+
+// The wrapper has the inner matcher's traits and passes every call on,
+// guides included: what a run can do does not depend on it.
+TEST(RetainingFeatureMatcher, HasTheInnerTraitsAndPassesGuidesOn) {
+  auto counting = std::make_unique<CountingMatcher>();
+  CountingMatcher* inner = counting.get();
+  RetainingFeatureMatcher matcher(std::move(counting), 2, [](const FeatureDescriptors&) { return 1; });
+  EXPECT_EQ(matcher.Name(), "counting");
+  EXPECT_TRUE(matcher.traits().epipolar_guidance);
+  FeatureDescriptors d;
+  matcher.AddImage(1, d);
+  matcher.AddImage(2, d);
+  matcher.Match({{1, 2}}, {EpipolarGuide{}});
+  EXPECT_EQ(inner->guided_calls, 1u);
 }
 
 }  // namespace

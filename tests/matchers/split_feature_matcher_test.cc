@@ -45,35 +45,51 @@ Scene MakeScene(int num_images) {
 }
 
 // Records what it is asked, on which thread, and answers through a CPU matcher.
-class RecordingMatcher : public FeatureMatcher {
+class RecordingMatcher : public MatchingBackend {
  public:
-  RecordingMatcher(std::unique_ptr<FeatureMatcher> inner, bool fail) : inner_(std::move(inner)), fail_(fail) {}
-  void AddImage(image_t id, const FeatureDescriptors& d) override {
-    images.insert(id);
-    inner_->AddImage(id, d);
+  RecordingMatcher(std::unique_ptr<MatchingBackend> inner, bool fail)
+      : MatchingBackend(MatcherTraits{"recording", true}), inner_(std::move(inner)), fail_(fail) {}
+  void AddImage(const Image& image) override {
+    images.insert(image.id);
+    inner_->AddImage(image);
   }
+  using FeatureMatcher::AddImage;
   void RemoveImage(image_t id) override {
     images.erase(id);
     inner_->RemoveImage(id);
   }
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
-    calls.push_back(pairs);
-    threads.insert(std::this_thread::get_id());
-    if (fail_) throw std::runtime_error("device 1 failed");
-    return inner_->MatchPairs(pairs);
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override {
+    Record(pairs);
+    guided_calls += guides.empty() ? 0 : 1;
+    return inner_->Match(pairs, guides);
   }
-  std::string Name() const override { return "recording"; }
+  std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override {
+    Record(pairs);
+    return inner_->MatchExact(pairs);
+  }
+  std::unique_ptr<ExactMatcher> HoldForExact(const std::vector<ImagePair>& pairs) override {
+    ++holds;
+    return inner_->HoldForExact(pairs);
+  }
 
   std::set<image_t> images;
   std::vector<std::vector<ImagePair>> calls;
   std::set<std::thread::id> threads;
+  size_t guided_calls = 0;
+  size_t holds = 0;
 
  private:
-  std::unique_ptr<FeatureMatcher> inner_;
+  void Record(const std::vector<ImagePair>& pairs) {
+    calls.push_back(pairs);
+    threads.insert(std::this_thread::get_id());
+    if (fail_) throw std::runtime_error("device 1 failed");
+  }
+  std::unique_ptr<MatchingBackend> inner_;
   bool fail_;
 };
 
-std::unique_ptr<FeatureMatcher> Cpu(const Scene& scene) {
+std::unique_ptr<MatchingBackend> Cpu(const Scene& scene) {
   return CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), scene.mean);
 }
 
@@ -98,7 +114,7 @@ TEST(SplitFeatureMatcher, SlicesCoverEveryItemOnceWithSizesWithinOne) {
 TEST(SplitFeatureMatcher, SameMatchesInTheSameOrderAsOneMatcher) {
   const Scene scene = MakeScene(7);  // 21 pairs
   auto single = Cpu(scene);
-  std::vector<std::unique_ptr<FeatureMatcher>> parts;
+  std::vector<std::unique_ptr<MatchingBackend>> parts;
   std::vector<RecordingMatcher*> recorders;
   for (int k = 0; k < 3; ++k) {
     auto part = std::make_unique<RecordingMatcher>(Cpu(scene), false);
@@ -114,8 +130,8 @@ TEST(SplitFeatureMatcher, SameMatchesInTheSameOrderAsOneMatcher) {
   }
   split.RemoveImage(6);
   split.AddImage(6, scene.images[6]);
-  const std::vector<FeatureMatches> expected = single->MatchPairs(scene.pairs);
-  const std::vector<FeatureMatches> got = split.MatchPairs(scene.pairs);
+  const std::vector<FeatureMatches> expected = single->Match(scene.pairs);
+  const std::vector<FeatureMatches> got = split.Match(scene.pairs);
   size_t total = 0;
   for (const FeatureMatches& m : expected) total += m.size();
   EXPECT_GT(total, 0u);
@@ -136,14 +152,43 @@ TEST(SplitFeatureMatcher, SameMatchesInTheSameOrderAsOneMatcher) {
 
   // Calls with fewer than two pairs per part stay on the first part.
   const std::vector<ImagePair> few(scene.pairs.begin(), scene.pairs.begin() + 5);
-  EXPECT_EQ(split.MatchPairs(few), single->MatchPairs(few));
+  EXPECT_EQ(split.Match(few), single->Match(few));
   EXPECT_EQ(recorders[0]->calls.size(), 2u);
   EXPECT_EQ(recorders[1]->calls.size(), 1u);
 }
 
+// Exact matching, now or from held images, is shared out as matching is,
+// and gives the single backend's exact matches in the callers' order.
+TEST(SplitFeatureMatcher, ExactMatchingIsSharedOutAsMatchingIs) {
+  const Scene scene = MakeScene(7);  // 21 pairs
+  auto single = Cpu(scene);
+  std::vector<std::unique_ptr<MatchingBackend>> parts;
+  std::vector<RecordingMatcher*> recorders;
+  for (int k = 0; k < 3; ++k) {
+    auto part = std::make_unique<RecordingMatcher>(Cpu(scene), false);
+    recorders.push_back(part.get());
+    parts.push_back(std::move(part));
+  }
+  SplitFeatureMatcher split(std::move(parts));
+  EXPECT_TRUE(split.traits().epipolar_guidance);
+  for (size_t i = 0; i < scene.images.size(); ++i) {
+    single->AddImage(image_t(i), scene.images[i]);
+    split.AddImage(image_t(i), scene.images[i]);
+  }
+  const std::vector<FeatureMatches> expected = single->MatchExact(scene.pairs);
+  EXPECT_EQ(split.MatchExact(scene.pairs), expected);
+  for (RecordingMatcher* r : recorders) ASSERT_EQ(r->calls.size(), 1u);
+  std::unique_ptr<ExactMatcher> held = split.HoldForExact(scene.pairs);
+  for (size_t i = 0; i < scene.images.size(); ++i) split.RemoveImage(image_t(i));
+  std::vector<FeatureMatches> later;
+  std::thread([&] { later = held->MatchExact(scene.pairs); }).join();
+  EXPECT_EQ(later, expected);
+  for (RecordingMatcher* r : recorders) EXPECT_EQ(r->holds, 1u);
+}
+
 TEST(SplitFeatureMatcher, AnErrorOfOnePartReachesTheCaller) {
   const Scene scene = MakeScene(5);
-  std::vector<std::unique_ptr<FeatureMatcher>> parts;
+  std::vector<std::unique_ptr<MatchingBackend>> parts;
   parts.push_back(std::make_unique<RecordingMatcher>(Cpu(scene), false));
   parts.push_back(std::make_unique<RecordingMatcher>(Cpu(scene), true));
   SplitFeatureMatcher split(std::move(parts));
@@ -151,14 +196,14 @@ TEST(SplitFeatureMatcher, AnErrorOfOnePartReachesTheCaller) {
   EXPECT_THROW(
       {
         try {
-          split.MatchPairs(scene.pairs);
+          split.Match(scene.pairs);
         } catch (const std::runtime_error& e) {
           EXPECT_STREQ(e.what(), "device 1 failed");
           throw;
         }
       },
       std::runtime_error);
-  EXPECT_THROW(SplitFeatureMatcher(std::vector<std::unique_ptr<FeatureMatcher>>{}), std::invalid_argument);
+  EXPECT_THROW(SplitFeatureMatcher(std::vector<std::unique_ptr<MatchingBackend>>{}), std::invalid_argument);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 // filter inside the cascade, the top-scale subsets, the stage-1 decision and
 // the two-stage GuidedFeatureMatcher (guided_matching.h).
 #include "cashash/matching/guided_matching.h"
+#include "cashash/pipeline/matching_pipeline.h"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +11,7 @@
 
 #include "cashash/matching/cascade_matcher.h"
 #include "cashash/matching/epipolar_band.h"
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "synthetic_guided.h"
 
 namespace cashash {
@@ -240,29 +241,34 @@ TEST(GuidedCascade, CpuMatcherMatchesPairsGuided) {
   const SiftMatchingOptions sift;
   const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
   auto matcher = CreateCpuFeatureMatcher(sift, options, mean);
-  ASSERT_TRUE(matcher->SupportsEpipolarGuidance());
-  matcher->AddImage(1, scene.image1.descriptors);
-  matcher->AddImage(2, scene.image2.descriptors);
-  GuidedPair pair;
-  pair.pair = {1, 2};
-  pair.F = scene.F;
-  pair.points1 = &scene.xy1;
-  pair.points2 = &scene.xy2;
-  const std::vector<FeatureMatches> got = matcher->MatchPairsGuided({pair}, 4.0);
+  ASSERT_TRUE(matcher->traits().epipolar_guidance);
+  matcher->AddImage(MatcherImage{1, std::make_shared<const Keypoints>(scene.image1.keypoints),
+                                 std::make_shared<const FeatureDescriptors>(scene.image1.descriptors)});
+  matcher->AddImage(MatcherImage{2, std::make_shared<const Keypoints>(scene.image2.keypoints),
+                                 std::make_shared<const FeatureDescriptors>(scene.image2.descriptors)});
+  const std::vector<EpipolarGuide> guides = {EpipolarGuide{scene.F, 4.0}};
+  const std::vector<FeatureMatches> got = matcher->Match({{1, 2}}, guides);
   const HashedScene h = Hash(scene, options);
   CascadeScratch scratch;
   EpipolarGuidance guidance{scene.F.data(), scene.xy1.data(), scene.xy2.data(), 4.0};
   ASSERT_EQ(got.size(), 1u);
   EXPECT_EQ(got[0], CascadeMatchPairGuided(h.a, h.b, guidance, sift, options, &scratch));
-  // Too few positions for the image's features.
-  std::vector<float> short_xy(scene.xy2.begin(), scene.xy2.begin() + 10);
-  pair.points2 = &short_xy;
-  EXPECT_THROW(matcher->MatchPairsGuided({pair}, 4.0), std::invalid_argument);
+  // Too few positions for the image's features, or none.
+  const Keypoints few(scene.image2.keypoints.begin(), scene.image2.keypoints.begin() + 5);
+  matcher->AddImage(MatcherImage{2, std::make_shared<const Keypoints>(few),
+                                 std::make_shared<const FeatureDescriptors>(scene.image2.descriptors)});
+  EXPECT_THROW(matcher->Match({{1, 2}}, guides), std::invalid_argument);
+  matcher->AddImage(2, scene.image2.descriptors);
+  EXPECT_THROW(matcher->Match({{1, 2}}, guides), std::invalid_argument);
+  EXPECT_THROW(matcher->Match({{1, 2}}, {guides[0], guides[0]}), std::invalid_argument) << "one guide per pair";
 
   CasHashOptions brute = options;
   brute.matcher = MatcherType::kBruteForce;
   auto exact = CreateCpuFeatureMatcher(sift, brute, mean);
-  EXPECT_FALSE(exact->SupportsEpipolarGuidance());
+  EXPECT_FALSE(exact->traits().epipolar_guidance);
+  exact->AddImage(1, scene.image1.descriptors);
+  exact->AddImage(2, scene.image2.descriptors);
+  EXPECT_THROW(exact->Match({{1, 2}}, guides), std::logic_error);
 }
 
 // Features of a few images, served as a database would.
@@ -286,9 +292,15 @@ class MemorySource : public FeatureSource {
 
 struct GuidedRig {
   MemorySource memory;
-  std::unique_ptr<KeypointRecordingSource> recording;
   std::unique_ptr<GuidedFeatureMatcher> matcher;
 };
+
+// An image as the pipeline adds it: features shared, keypoints included.
+MatcherImage WithKeypoints(image_t id, const ImageFeatures& features) {
+  auto shared = std::make_shared<const ImageFeatures>(features);
+  return MatcherImage{id, std::shared_ptr<const Keypoints>(shared, &shared->keypoints),
+                      std::shared_ptr<const FeatureDescriptors>(shared, &shared->descriptors)};
+}
 
 // Images 1 and 2 from the scene, 3 unrelated to both; CPU cascade for both
 // stages.
@@ -297,17 +309,13 @@ std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options, const G
   rig->memory.Put(1, scene.image1);
   rig->memory.Put(2, scene.image2);
   rig->memory.Put(3, MakeUnrelatedImage(1500, 22));
-  rig->recording = std::make_unique<KeypointRecordingSource>(&rig->memory);
   const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
   const SiftMatchingOptions sift;
   const CasHashOptions cashash;
   rig->matcher = std::make_unique<GuidedFeatureMatcher>(
       CreateCpuFeatureMatcher(sift, cashash, mean), CreateCpuFeatureMatcher(sift, cashash, mean),
-      CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 2), rig->recording.get(), options, 32768, 0, 2);
-  for (image_t id : {1u, 2u, 3u}) {
-    const ImageFeatures f = rig->recording->LoadFeatures(id);
-    rig->matcher->AddImage(id, f.descriptors);
-  }
+      CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 2), options, 32768, 0, 2);
+  for (image_t id : {1u, 2u, 3u}) rig->matcher->AddImage(WithKeypoints(id, rig->memory.LoadFeatures(id)));
   return rig;
 }
 
@@ -323,7 +331,7 @@ FeatureMatches ExactMatches(const GuidedScene& scene) {
   auto exact = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean);
   exact->AddImage(1, scene.image1.descriptors);
   exact->AddImage(2, scene.image2.descriptors);
-  return exact->MatchPairs({{1, 2}})[0];
+  return exact->Match({{1, 2}})[0];
 }
 
 TEST(GuidedBandFilter, KeepsMatchesNearBothLinesInOrder) {
@@ -341,7 +349,7 @@ TEST(GuidedFeatureMatcher, OverlappingPairsAreGuidedOthersGetNothing) {
   std::unique_ptr<GuidedRig> rig = MakeRig(GuidedMatchingOptions());
   const GuidedScene scene = MakeGuidedScene(1500, 21);
   const std::vector<ImagePair> pairs = {{1, 2}, {1, 3}, {3, 2}};
-  const std::vector<FeatureMatches> result = rig->matcher->MatchPairs(pairs);
+  const std::vector<FeatureMatches> result = rig->matcher->Match(pairs);
   ASSERT_EQ(result.size(), 3u);
   const std::vector<GuidedStage1Outcome>& outcomes = rig->matcher->last_outcomes();
   EXPECT_EQ(outcomes[0], GuidedStage1Outcome::kGuided);
@@ -375,7 +383,7 @@ TEST(GuidedFeatureMatcher, ThePapersSearchInTheBandRecoversDecoyedFeatures) {
   options.restrict_search_to_band = true;
   std::unique_ptr<GuidedRig> rig = MakeRig(options);
   const GuidedScene scene = MakeGuidedScene(1500, 21);
-  const std::vector<FeatureMatches> result = rig->matcher->MatchPairs({{1, 2}});
+  const std::vector<FeatureMatches> result = rig->matcher->Match({{1, 2}});
   EXPECT_EQ(rig->matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
   size_t right = 0;
   for (const FeatureMatch& m : result[0]) right += scene.truth[m.point2D_idx1] == static_cast<int>(m.point2D_idx2);
@@ -401,7 +409,7 @@ TEST(GuidedFeatureMatcher, RejectsRepeatedStructureOnTheEpipolarLine) {
   GuidedMatchingOptions paper;
   paper.restrict_search_to_band = true;
   std::unique_ptr<GuidedRig> searched = MakeRig(paper, scene);
-  const FeatureMatches band_search = searched->matcher->MatchPairs({{1, 2}})[0];
+  const FeatureMatches band_search = searched->matcher->Match({{1, 2}})[0];
   ASSERT_EQ(searched->matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
   size_t right = 0, on_line = 0;
   count(band_search, &right, &on_line);
@@ -409,7 +417,7 @@ TEST(GuidedFeatureMatcher, RejectsRepeatedStructureOnTheEpipolarLine) {
   // The default keeps only exact matches, where the copy off the line is as
   // good a rival: not one wrong match, and the unambiguous features stay.
   std::unique_ptr<GuidedRig> filtered = MakeRig(GuidedMatchingOptions(), scene);
-  const FeatureMatches guided = filtered->matcher->MatchPairs({{1, 2}})[0];
+  const FeatureMatches guided = filtered->matcher->Match({{1, 2}})[0];
   ASSERT_EQ(filtered->matcher->last_outcomes()[0], GuidedStage1Outcome::kGuided);
   count(guided, &right, &on_line);
   EXPECT_EQ(on_line, 0u);
@@ -422,7 +430,7 @@ TEST(GuidedFeatureMatcher, StrictThresholdsSkipThePair) {
   options.min_num_matches = 100000;
   options.fallback_min_num_matches = 100000;
   std::unique_ptr<GuidedRig> rig = MakeRig(options);
-  const std::vector<FeatureMatches> result = rig->matcher->MatchPairs({{1, 2}});
+  const std::vector<FeatureMatches> result = rig->matcher->Match({{1, 2}});
   EXPECT_EQ(rig->matcher->last_outcomes()[0], GuidedStage1Outcome::kTooFewMatches);
   EXPECT_TRUE(result[0].empty());
 }
@@ -433,7 +441,7 @@ TEST(GuidedFeatureMatcher, PairsWithoutAModelGetTheirExactMatches) {
   GuidedMatchingOptions options;
   options.min_num_matches = 100000;
   std::unique_ptr<GuidedRig> rig = MakeRig(options);
-  const std::vector<FeatureMatches> result = rig->matcher->MatchPairs({{1, 2}, {1, 3}});
+  const std::vector<FeatureMatches> result = rig->matcher->Match({{1, 2}, {1, 3}});
   EXPECT_EQ(rig->matcher->last_outcomes()[0], GuidedStage1Outcome::kNoModel);
   EXPECT_EQ(rig->matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
   EXPECT_EQ(result[0], ExactMatches(MakeGuidedScene(1500, 21)));
@@ -442,7 +450,7 @@ TEST(GuidedFeatureMatcher, PairsWithoutAModelGetTheirExactMatches) {
   EXPECT_EQ(rig->matcher->stats().pairs_fallback, 1u);
   options.unguided_fallback = false;
   std::unique_ptr<GuidedRig> without = MakeRig(options);
-  EXPECT_TRUE(without->matcher->MatchPairs({{1, 2}})[0].empty());
+  EXPECT_TRUE(without->matcher->Match({{1, 2}})[0].empty());
   EXPECT_EQ(without->matcher->last_outcomes()[0], GuidedStage1Outcome::kTooFewMatches);
 }
 
@@ -454,14 +462,14 @@ TEST(GuidedFeatureMatcher, UnguidedFallbackMatchesPairsThatFailTheInlierTest) {
   options.unguided_fallback = false;
   std::unique_ptr<GuidedRig> without = MakeRig(options);
   const std::vector<ImagePair> pairs = {{1, 2}, {1, 3}};
-  const std::vector<FeatureMatches> none = without->matcher->MatchPairs(pairs);
+  const std::vector<FeatureMatches> none = without->matcher->Match(pairs);
   ASSERT_EQ(without->matcher->last_outcomes()[0], GuidedStage1Outcome::kFewInliers);
   EXPECT_TRUE(none[0].empty());
   EXPECT_EQ(without->matcher->stats().pairs_fallback, 0u);
 
   options.unguided_fallback = true;
   std::unique_ptr<GuidedRig> with = MakeRig(options);
-  const std::vector<FeatureMatches> result = with->matcher->MatchPairs(pairs);
+  const std::vector<FeatureMatches> result = with->matcher->Match(pairs);
   EXPECT_EQ(with->matcher->last_outcomes()[0], GuidedStage1Outcome::kFewInliers);
   EXPECT_EQ(with->matcher->last_outcomes()[1], GuidedStage1Outcome::kTooFewMatches);
   EXPECT_TRUE(result[1].empty());  // too few stage-1 matches: still nothing
@@ -479,11 +487,11 @@ TEST(GuidedFeatureMatcher, UnguidedFallbackMatchesPairsThatFailTheInlierTest) {
 
 TEST(GuidedFeatureMatcher, NeedsKeypointsAndTheRightBackend) {
   std::unique_ptr<GuidedRig> rig = MakeRig(GuidedMatchingOptions());
-  // An image not read through the recording source has no keypoints.
+  // Its traits ask for keypoints; an image added without them is refused.
+  EXPECT_TRUE(rig->matcher->traits().uses_keypoints);
   EXPECT_THROW(rig->matcher->AddImage(4, MakeUnrelatedImage(10, 1).descriptors), std::logic_error);
-  EXPECT_THROW(rig->matcher->MatchPairs({{1, 4}}), std::out_of_range);
-  MemorySource memory;
-  KeypointRecordingSource recording(&memory);
+  EXPECT_THROW(rig->matcher->Match({{1, 4}}), std::out_of_range);
+  EXPECT_THROW(rig->matcher->Match({{1, 2}}, {EpipolarGuide{}}), std::logic_error) << "it makes its own guides";
   CasHashOptions brute;
   brute.matcher = MatcherType::kBruteForce;
   const MeanDescriptor mean{};
@@ -492,37 +500,13 @@ TEST(GuidedFeatureMatcher, NeedsKeypointsAndTheRightBackend) {
   paper.restrict_search_to_band = true;
   EXPECT_THROW(GuidedFeatureMatcher(CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean),
                                     CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean),
-                                    CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), &recording, paper,
-                                    32768, 0, 1),
+                                    CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), paper, 32768, 0,
+                                    1),
                std::invalid_argument);
   EXPECT_NO_THROW(GuidedFeatureMatcher(CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean),
                                        CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean),
-                                       CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), &recording,
+                                       CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1),
                                        GuidedMatchingOptions(), 32768, 0, 1));
-}
-
-TEST(KeypointRecordingSource, KeepsKeypointsUntilTaken) {
-  MemorySource memory;
-  memory.Put(5, MakeUnrelatedImage(20, 5));
-  KeypointRecordingSource recording(&memory);
-  Keypoints kps;
-  EXPECT_FALSE(recording.Take(5, &kps));
-  const ImageFeatures f = recording.LoadFeatures(5);
-  EXPECT_EQ(f.keypoints.size(), 20u);
-  ASSERT_TRUE(recording.Take(5, &kps));
-  EXPECT_EQ(kps.size(), 20u);
-  EXPECT_EQ(kps[3].x, f.keypoints[3].x);
-  EXPECT_FALSE(recording.Take(5, &kps));  // taken once
-  recording.LoadFeatures(5);
-  recording.Clear();
-  EXPECT_FALSE(recording.Take(5, &kps));
-  // Shared loads are kept as they are, and give the same keypoints.
-  const std::shared_ptr<const ImageFeatures> shared = recording.LoadSharedFeatures(5);
-  EXPECT_EQ(memory.loads, 3);
-  ASSERT_TRUE(recording.Take(5, &kps));
-  ASSERT_EQ(kps.size(), 20u);
-  EXPECT_EQ(kps[7].y, shared->keypoints[7].y);
-  EXPECT_FALSE(recording.Take(5, &kps));
 }
 
 }  // namespace

@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "synthetic_sift.h"
 
 namespace cashash {
@@ -244,7 +244,7 @@ TEST(TableShape, MatcherFromOptionsAtZeroEqualsEightBySeven) {
     auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), options, mean);
     matcher->AddImage(1, a);
     matcher->AddImage(2, b);
-    return matcher->MatchPairs({{1, 2}}).front();
+    return matcher->Match({{1, 2}}).front();
   };
   const FeatureMatches expected = run(explicit_shape);
   EXPECT_GT(expected.size(), 300u);

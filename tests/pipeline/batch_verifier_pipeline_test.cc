@@ -45,23 +45,25 @@ class PointSource : public FeatureSource {
 // 20 matches (k, k) per pair.
 class IdentityMatcher : public FeatureMatcher {
  public:
-  void AddImage(image_t, const FeatureDescriptors&) override {}
+  IdentityMatcher() : FeatureMatcher(MatcherTraits{"identity"}) {}
+  void AddImage(const Image&) override {}
   void RemoveImage(image_t) override {}
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& = {}) override {
     std::vector<FeatureMatches> out(pairs.size());
     for (FeatureMatches& m : out)
       for (point2D_t k = 0; k < 20; ++k) m.push_back({k, k});
     return out;
   }
-  std::string Name() const override { return "identity"; }
 };
 
-// An IdentityMatcher that counts its MatchPairs calls.
+// An IdentityMatcher that counts its Match calls.
 class CountingMatcher : public IdentityMatcher {
  public:
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& = {}) override {
     ++calls;
-    return IdentityMatcher::MatchPairs(pairs);
+    return IdentityMatcher::Match(pairs);
   }
   std::atomic<int> calls{0};
 };
@@ -330,13 +332,14 @@ TEST(BatchVerifierPipeline, ASecondVerifierWaitsWhileMatchingKeepsUp) {
   class PacedMatcher : public IdentityMatcher {
    public:
     explicit PacedMatcher(TwoAtOnceVerifier* v) : v_(v) {}
-    std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+    std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& = {}) override {
       const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
       while (v_->verified.load() < calls_ && std::chrono::steady_clock::now() < give_up) {
         std::this_thread::sleep_for(std::chrono::milliseconds(1));
       }
       ++calls_;
-      return IdentityMatcher::MatchPairs(pairs);
+      return IdentityMatcher::Match(pairs);
     }
 
    private:

@@ -76,14 +76,18 @@ class CountingSource : public FeatureSource {
 // its own (the cache must hand out the right image).
 class CheckingMatcher : public FeatureMatcher {
  public:
-  void AddImage(image_t id, const FeatureDescriptors& d) override {
+  CheckingMatcher() : FeatureMatcher(MatcherTraits{"checking"}) {}
+  void AddImage(const Image& image) override {
+    const image_t id = image.id;
+    const FeatureDescriptors& d = *image.descriptors;
     for (uint8_t byte : d.data) {
       if (byte != static_cast<uint8_t>(id)) throw std::logic_error("wrong features for image " + std::to_string(id));
     }
     sizes_[id] = d.rows();
   }
   void RemoveImage(image_t id) override { sizes_.erase(id); }
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& = {}) override {
     std::vector<FeatureMatches> out;
     for (const ImagePair& p : pairs) {
       if (!sizes_.count(p.first) || !sizes_.count(p.second)) throw std::logic_error("image not added");
@@ -93,7 +97,6 @@ class CheckingMatcher : public FeatureMatcher {
     }
     return out;
   }
-  std::string Name() const override { return "checking"; }
 
  private:
   std::map<image_t, size_t> sizes_;

@@ -35,11 +35,16 @@ class FakeSource : public FeatureSource {
 };
 
 // Returns min(n1, n2) matches (k, k) and checks the images were added.
-class FakeMatcher : public FeatureMatcher {
+class FakeMatcher : public MatchingBackend {
  public:
-  void AddImage(image_t id, const FeatureDescriptors& d) override { sizes_[id] = d.rows(); }
+  FakeMatcher() : MatchingBackend(MatcherTraits{"fake"}) {}
+  void AddImage(const Image& image) override { sizes_[image.id] = image.descriptors->rows(); }
+  using FeatureMatcher::AddImage;
   void RemoveImage(image_t id) override { sizes_.erase(id); }
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override { return Match(pairs); }
+  std::unique_ptr<ExactMatcher> HoldForExact(const std::vector<ImagePair>&) override { return nullptr; }
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& = {}) override {
     std::vector<FeatureMatches> out;
     for (const ImagePair& p : pairs) {
       if (!sizes_.count(p.first) || !sizes_.count(p.second)) throw std::logic_error("image not added");
@@ -49,7 +54,6 @@ class FakeMatcher : public FeatureMatcher {
     }
     return out;
   }
-  std::string Name() const override { return "fake"; }
   size_t num_added() const { return sizes_.size(); }
 
  private:
@@ -142,96 +146,162 @@ TEST(MatchingPipeline, ChunksMadeOnDemandAreWrittenAsTheListWouldBe) {
   EXPECT_EQ(blocks[0], blocks[1]);
 }
 
-// Leaves every pair's matches to DeferredMatching::Complete: MatchPairsDeferred
-// returns none, Complete gives each pair as many matches as the first
-// image's descriptors have rows (read through the pipeline's lookup).
-// Records the threads Complete ran on; the call numbered `fail_at` throws.
-class DeferringMatcher : public FakeMatcher {
+// The cascade of FakeMatcher, and as exact matches of pair (a, b) a matches
+// (image a's rows). Records the threads the exact matches were
+// made on; the exact call numbered `fail_at` throws.
+class RematchedMatcher : public FakeMatcher {
  public:
-  explicit DeferringMatcher(int fail_at = -1) : fail_at_(fail_at) {}
-  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override {
-    MatchPairs(pairs);  // checks the images were added
+  explicit RematchedMatcher(int fail_at = -1) : fail_at_(fail_at) {}
+  std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override {
+    Match(pairs);  // checks the images are still held
+    return Exact(pairs);
+  }
+  std::unique_ptr<ExactMatcher> HoldForExact(const std::vector<ImagePair>& pairs) override {
+    Match(pairs);  // checks the images are held now
     matching_thread = std::this_thread::get_id();
-    ChunkMatches out;
-    out.matches.resize(pairs.size());
-    out.deferred = std::make_unique<Deferred>(pairs, this);
-    return out;
+    return std::make_unique<Held>(this);
   }
   std::atomic<int> completed{0};
   std::thread::id matching_thread;
   std::mutex mutex;
-  std::set<std::thread::id> completing_threads;
+  std::set<std::thread::id> exact_threads;
 
  private:
-  class Deferred : public DeferredMatching {
+  class Held : public ExactMatcher {
    public:
-    Deferred(std::vector<ImagePair> pairs, DeferringMatcher* owner) : pairs_(std::move(pairs)), owner_(owner) {}
-    void Complete(const DescriptorLookup& descriptors, std::vector<FeatureMatches>* matches) override {
-      {
-        std::lock_guard<std::mutex> lock(owner_->mutex);
-        owner_->completing_threads.insert(std::this_thread::get_id());
-      }
-      if (owner_->calls_++ == owner_->fail_at_) throw std::runtime_error("rematch failed on purpose");
-      for (size_t k = 0; k < pairs_.size(); ++k) {
-        const size_t rows = descriptors(pairs_[k].first)->rows();
-        for (point2D_t m = 0; m < rows; ++m) (*matches)[k].push_back({m, m});
-      }
-      ++owner_->completed;
-    }
+    explicit Held(RematchedMatcher* owner) : owner_(owner) {}
+    std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override { return owner_->Exact(pairs); }
 
    private:
-    std::vector<ImagePair> pairs_;
-    DeferringMatcher* owner_;
+    RematchedMatcher* owner_;
   };
+  std::vector<FeatureMatches> Exact(const std::vector<ImagePair>& pairs) {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      exact_threads.insert(std::this_thread::get_id());
+    }
+    if (calls_++ == fail_at_) throw std::runtime_error("rematch failed on purpose");
+    std::vector<FeatureMatches> out(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      const image_t a = pairs[k].first;
+      for (point2D_t m = 0; m < a; ++m) out[k].push_back({m, m});
+    }
+    ++completed;
+    return out;
+  }
   const int fail_at_;
   std::atomic<int> calls_{0};
 };
 
-// The deferred part is complete before verification and writing, on the
-// verification threads; skipped verification writes chunks at once.
-TEST(MatchingPipeline, DeferredMatchingIsCompletedBeforeVerifyingAndWriting) {
+// Every pair with a cascade match (all of them: image i has i >= 1 rows).
+ExactRematchPolicy EveryPair(RematchPlace where) {
+  ExactRematchPolicy policy;
+  policy.min_matches = 1;
+  policy.where = where;
+  return policy;
+}
+
+// On the verification threads, the rematch is complete before verification
+// and writing; skipped verification writes chunks at once.
+TEST(MatchingPipeline, TheRematchOnTheVerificationThreadsIsCompleteBeforeVerifyingAndWriting) {
   for (const bool skip_verification : {true, false}) {
     SCOPED_TRACE(testing::Message() << "skip " << skip_verification);
     FakeSource source;
-    DeferringMatcher matcher;
+    RematchedMatcher matcher;
+    ExactRematchStage rematch(EveryPair(RematchPlace::kVerificationThread), &matcher);
     CollectingSink sink;
     PipelineOptions options = NoVerification();
     options.skip_geometric_verification = skip_verification;
     MatchingPipeline pipeline(options, &source, &matcher, &sink);
+    pipeline.SetExactRematch(&rematch);
     const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
     const PipelineStats stats = pipeline.Run(chunks);
     EXPECT_EQ(stats.pairs_done, 36u);
     EXPECT_EQ(matcher.completed.load(), static_cast<int>(chunks.size()));
+    EXPECT_EQ(rematch.counts().rematched.load(), 36u);
+    EXPECT_EQ(matcher.exact_threads.count(matcher.matching_thread), 0u) << "not on the matching thread";
     ASSERT_EQ(sink.written.size(), 36u);
-    // Pair (a, b) got a matches, from image a's descriptors.
+    // Pair (a, b) got a matches: the exact ones.
     for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first);
   }
 }
 
-// A failure in the deferred part, on a verification thread, stops the run
-// with that error; only whole chunks were written, in order.
-TEST(MatchingPipeline, DeferredMatchingErrorStopsTheRun) {
-  {
+// On the matching thread the rematch happens right after the cascade, from
+// the images the backend holds then.
+TEST(MatchingPipeline, TheRematchOnTheMatchingThreadRunsThere) {
+  FakeSource source;
+  RematchedMatcher matcher;
+  ExactRematchStage rematch(EveryPair(RematchPlace::kMatchingThread), &matcher);
+  CollectingSink sink;
+  MatchingPipeline pipeline(NoVerification(), &source, &matcher, &sink);
+  pipeline.SetExactRematch(&rematch);
+  const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(9), 3);
+  pipeline.Run(chunks);
+  EXPECT_EQ(matcher.exact_threads, (std::set<std::thread::id>{std::this_thread::get_id()}));
+  ASSERT_EQ(sink.written.size(), 36u);
+  for (const auto& [pair_id, n] : sink.written) EXPECT_EQ(n, PairIdToImagePair(pair_id).first);
+}
+
+// A failure of the rematch on a verification thread stops the run with
+// that error; only whole chunks were written, in order.
+TEST(MatchingPipeline, ARematchErrorStopsTheRun) {
+  FakeSource source;
+  RematchedMatcher matcher(/*fail_at=*/3);
+  ExactRematchStage rematch(EveryPair(RematchPlace::kVerificationThread), &matcher);
+  CollectingSink sink;
+  PipelineOptions options = NoVerification();
+  options.skip_geometric_verification = false;
+  MatchingPipeline pipeline(options, &source, &matcher, &sink);
+  pipeline.SetExactRematch(&rematch);
+  const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(15), 3);
+  try {
+    pipeline.Run(chunks);
+    FAIL() << "the error was not rethrown";
+  } catch (const std::runtime_error& e) {
+    EXPECT_STREQ(e.what(), "rematch failed on purpose");
+  }
+  EXPECT_LE(sink.chunks, 3);
+  size_t pairs = 0;
+  for (int c = 0; c < sink.chunks; ++c) pairs += chunks[c].pairs.size();
+  EXPECT_EQ(sink.written.size(), pairs);
+  for (int c = 0; c < sink.chunks; ++c) {
+    for (const ImagePair& p : chunks[c].pairs) EXPECT_TRUE(sink.written.count(ImagePairToPairId(p.first, p.second)));
+  }
+}
+
+// Keypoints travel with an image only to a matcher whose traits say it reads
+// them (guided matching), shared with the loaded features.
+class KeypointCheckingMatcher : public FeatureMatcher {
+ public:
+  explicit KeypointCheckingMatcher(bool uses_keypoints)
+      : FeatureMatcher(MatcherTraits{"keypoints", false, uses_keypoints}) {}
+  void AddImage(const Image& image) override {
+    if (image.keypoints) {
+      ++with_keypoints;
+      EXPECT_EQ(image.keypoints->size(), image.descriptors->rows()) << "the image's own keypoints";
+    }
+    inner_.AddImage(image);
+  }
+  void RemoveImage(image_t id) override { inner_.RemoveImage(id); }
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override {
+    return inner_.Match(pairs, guides);
+  }
+  int with_keypoints = 0;
+
+ private:
+  FakeMatcher inner_;
+};
+
+TEST(MatchingPipeline, KeypointsGoOnlyToAMatcherThatReadsThem) {
+  for (const bool uses_keypoints : {false, true}) {
     FakeSource source;
-    DeferringMatcher matcher(/*fail_at=*/3);
+    KeypointCheckingMatcher matcher(uses_keypoints);
     CollectingSink sink;
-    PipelineOptions options = NoVerification();
-    options.skip_geometric_verification = false;
-    MatchingPipeline pipeline(options, &source, &matcher, &sink);
-    const std::vector<PairChunk> chunks = ExhaustivePairChunks(Ids(15), 3);
-    try {
-      pipeline.Run(chunks);
-      FAIL() << "the error was not rethrown";
-    } catch (const std::runtime_error& e) {
-      EXPECT_STREQ(e.what(), "rematch failed on purpose");
-    }
-    EXPECT_LE(sink.chunks, 3);
-    size_t pairs = 0;
-    for (int c = 0; c < sink.chunks; ++c) pairs += chunks[c].pairs.size();
-    EXPECT_EQ(sink.written.size(), pairs);
-    for (int c = 0; c < sink.chunks; ++c) {
-      for (const ImagePair& p : chunks[c].pairs) EXPECT_TRUE(sink.written.count(ImagePairToPairId(p.first, p.second)));
-    }
+    MatchingPipeline pipeline(NoVerification(), &source, &matcher, &sink);
+    pipeline.Run(ExhaustivePairChunks(Ids(6), 3));
+    EXPECT_EQ(matcher.with_keypoints > 0, uses_keypoints);
+    EXPECT_EQ(sink.written.size(), 15u);
   }
 }
 

@@ -150,12 +150,13 @@ class SizedSource : public FeatureSource {
 
 class NullMatcher : public FeatureMatcher {
  public:
-  void AddImage(image_t, const FeatureDescriptors&) override {}
+  NullMatcher() : FeatureMatcher(MatcherTraits{"null"}) {}
+  void AddImage(const Image&) override {}
   void RemoveImage(image_t) override {}
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& = {}) override {
     return std::vector<FeatureMatches>(pairs.size());
   }
-  std::string Name() const override { return "null"; }
 };
 
 class CountingSink : public ResultSink {

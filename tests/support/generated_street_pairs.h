@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/matching/mean_descriptor.h"
 #include "cashash/pipeline/verification_pairs_file.h"
 #include "colmap_bridge/database_pipeline_io.h"
@@ -66,7 +66,7 @@ inline std::vector<StoredVerificationPair> MatchedStreetPairs(const GeneratedStr
       pairs.emplace_back(street.images[i].image_id, street.images[j].image_id);
     }
   }
-  const std::vector<FeatureMatches> matches = matcher->MatchPairs(pairs);
+  const std::vector<FeatureMatches> matches = matcher->Match(pairs);
   std::vector<StoredVerificationPair> stored;
   size_t p = 0;
   for (size_t i = 0; i < street.images.size(); ++i) {

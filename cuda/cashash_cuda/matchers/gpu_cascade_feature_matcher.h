@@ -4,7 +4,7 @@
 
 #include <memory>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash_cuda/matchers/gpu_matcher_config.h"
 
 namespace cashash {
@@ -12,9 +12,9 @@ namespace cuda {
 
 // Throws std::invalid_argument for options the GPU path does not support and
 // std::runtime_error when the device cannot be used.
-std::unique_ptr<FeatureMatcher> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
-                                                        const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config);
+std::unique_ptr<MatchingBackend> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
+                                                         const CasHashOptions& cashash_options,
+                                                         const MeanDescriptor& mean, const GpuMatcherConfig& config);
 
 }  // namespace cuda
 }  // namespace cashash

@@ -1,6 +1,6 @@
 // Entry points of the GPU backend (cashash_cuda/matchers/gpu_feature_matcher.h): the
-// device queries and the factory, plus the brute-force FeatureMatcher that
-// keeps descriptors on the device and calls the brute-force kernels.
+// device queries and the factory, plus the brute-force backend that keeps
+// descriptors on the device and calls the brute-force kernels.
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 
 #include <cuda_runtime.h>
@@ -17,6 +17,8 @@
 #include "cashash/matching/table_shape.h"
 #include "cashash_cuda/matching/brute_force_matcher.cuh"
 #include "cashash_cuda/matchers/gpu_cascade_feature_matcher.h"
+#include "cashash_cuda/matchers/gpu_exact_matching.cuh"
+#include "cashash_cuda/matchers/gpu_memory_books.cuh"
 #include "cashash_cuda/matching/cascade_matcher.cuh"
 #include "cashash_cuda/utils/architecture_support.h"
 #include "cashash_cuda/utils/device_memory.cuh"
@@ -27,14 +29,63 @@ namespace cashash {
 namespace cuda {
 namespace {
 
-class GpuBruteForceMatcher : public FeatureMatcher {
+MatcherTraits BruteForceTraits() {
+  MatcherTraits traits;
+  traits.name = "gpu-bruteforce";
+  return traits;
+}
+
+// One image's descriptors on the device.
+struct BruteForceImage {
+  std::shared_ptr<PooledDeviceBlock> memory;  // null without features; shared with held exact matchers
+  int rows = 0;
+  DeviceDescriptors descriptors() const {
+    return DeviceDescriptors{memory ? memory->as<uint8_t>() : nullptr, rows};
+  }
+};
+
+// Held images of the brute-force matcher, matched on any thread with
+// kernels of their own stream (made per call: this path only serves tests
+// and callers outside a run, which defers only the cascade's rematch).
+class HeldBruteForceImages : public ExactMatcher {
+ public:
+  HeldBruteForceImages(int device, std::shared_ptr<GpuResources> resources, const MatchThresholds& thresholds,
+                       std::unordered_map<image_t, BruteForceImage> images)
+      : device_(device), resources_(std::move(resources)), thresholds_(thresholds), images_(std::move(images)) {}
+  ~HeldBruteForceImages() override {
+    cudaSetDevice(device_);
+    images_.clear();
+  }
+  std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override {
+    std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> device_pairs;
+    for (const ImagePair& pair : pairs) device_pairs.emplace_back(Find(pair.first), Find(pair.second));
+    ExactKernels kernels(device_, resources_);
+    return MatchPairsInBatches(kernels.kernels(), device_pairs, thresholds_, kernels.scratch_bytes());
+  }
+
+ private:
+  DeviceDescriptors Find(image_t image_id) const {
+    const auto it = images_.find(image_id);
+    if (it == images_.end()) {
+      throw std::invalid_argument("held GPU images: image " + std::to_string(image_id) + " was not held");
+    }
+    return it->second.descriptors();
+  }
+  const int device_;
+  std::shared_ptr<GpuResources> resources_;  // outlives images_
+  const MatchThresholds thresholds_;
+  std::unordered_map<image_t, BruteForceImage> images_;
+};
+
+class GpuBruteForceMatcher : public MatchingBackend {
  public:
   GpuBruteForceMatcher(const SiftMatchingOptions& sift_options, const GpuMatcherConfig& config)
-      : sift_options_(sift_options),
+      : MatchingBackend(BruteForceTraits()),
+        sift_options_(sift_options),
         device_(config.gpu_index),
         resources_(config.resources ? config.resources
                                     : std::make_shared<GpuResources>(config.gpu_index, config.memory_budget_bytes)),
-        budget_(MemoryBudget(resources_->budget_bytes())) {
+        books_(resources_->budget_bytes()) {
     const std::string error = sift_options.Check();
     if (!error.empty()) throw std::invalid_argument(error);
     std::string reason;
@@ -51,61 +102,65 @@ class GpuBruteForceMatcher : public FeatureMatcher {
     if (stream_ != nullptr) cudaStreamDestroy(stream_);
   }
 
-  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override {
+  void AddImage(const Image& added) override {
     CUDA_CHECK(cudaSetDevice(device_));
-    RemoveImage(image_id);
+    RemoveImage(added.id);
+    const FeatureDescriptors& descriptors = *added.descriptors;
     const size_t n = std::min(descriptors.rows(), static_cast<size_t>(sift_options_.max_num_matches));
-    Image image;
+    BruteForceImage image;
     image.rows = static_cast<int>(n);
     if (n > 0) {
       const size_t bytes = n * kDescriptorDim;
-      if (bytes > budget_ || used_ > budget_ - bytes) {
-        throw DeviceMemoryError("GPU memory budget exceeded by image " + std::to_string(image_id) + ": it needs " +
-                                 MiB(bytes) + ", " + MiB(used_) + " of " + MiB(budget_) + " are in use");
+      books_.Reserve(bytes, "image " + std::to_string(added.id));
+      try {
+        // From the pool, through pinned staging, on the stream the kernels
+        // use: no cudaMalloc, no wait (as the cascade's images).
+        image.memory = std::make_shared<PooledDeviceBlock>(resources_.get(), bytes, "image descriptors");
+      } catch (...) {
+        books_.Release(bytes);
+        throw;
       }
-      // From the pool, through pinned staging, on the stream the kernels
-      // use: no cudaMalloc, no wait (as the cascade's images).
-      image.memory = PooledDeviceBlock(resources_.get(), bytes, "image descriptors");
-      uploads_.Upload(descriptors.data.data(), bytes, image.memory.as<uint8_t>(), stream_);
-      used_ += bytes;
+      uploads_.Upload(descriptors.data.data(), bytes, image.memory->as<uint8_t>(), stream_);
     }
-    images_.emplace(image_id, std::move(image));
+    images_.emplace(added.id, std::move(image));
   }
+  using FeatureMatcher::AddImage;
 
   void RemoveImage(image_t image_id) override {
     const auto it = images_.find(image_id);
     if (it == images_.end()) return;
-    used_ -= it->second.memory.bytes();
+    if (it->second.memory) books_.Release(it->second.memory->bytes());
     images_.erase(it);
   }
 
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override {
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override {
+    CheckGuides(pairs, guides);
     CUDA_CHECK(cudaSetDevice(device_));
     std::vector<std::pair<DeviceDescriptors, DeviceDescriptors>> device_pairs;
     device_pairs.reserve(pairs.size());
     for (const ImagePair& pair : pairs) {
-      const Image& a = Find(pair.first);
-      const Image& b = Find(pair.second);
-      device_pairs.emplace_back(DeviceDescriptors{a.memory.as<uint8_t>(), a.rows},
-                                DeviceDescriptors{b.memory.as<uint8_t>(), b.rows});
+      device_pairs.emplace_back(Find(pair.first).descriptors(), Find(pair.second).descriptors());
     }
     return MatchPairsInBatches(kernels_.get(), device_pairs, ToMatchThresholds(sift_options_),
                                resources_->ScratchBytes());
   }
 
-  bool SupportsExactMatching() const override { return true; }
-  std::vector<FeatureMatches> MatchPairsExact(const std::vector<ImagePair>& pairs) override {
-    return MatchPairs(pairs);
+  // Brute force is exact already.
+  std::vector<FeatureMatches> MatchExact(const std::vector<ImagePair>& pairs) override { return Match(pairs); }
+
+  std::unique_ptr<ExactMatcher> HoldForExact(const std::vector<ImagePair>& pairs) override {
+    std::unordered_map<image_t, BruteForceImage> held;
+    for (const ImagePair& pair : pairs) {
+      held.emplace(pair.first, Find(pair.first));
+      held.emplace(pair.second, Find(pair.second));
+    }
+    return std::make_unique<HeldBruteForceImages>(device_, resources_, ToMatchThresholds(sift_options_),
+                                                  std::move(held));
   }
 
-  std::string Name() const override { return "gpu-bruteforce"; }
-
  private:
-  struct Image {
-    PooledDeviceBlock memory;
-    int rows = 0;
-  };
-  const Image& Find(image_t image_id) const {
+  const BruteForceImage& Find(image_t image_id) const {
     const auto it = images_.find(image_id);
     if (it == images_.end()) {
       throw std::invalid_argument("GPU matcher: image " + std::to_string(image_id) + " was not added");
@@ -117,11 +172,10 @@ class GpuBruteForceMatcher : public FeatureMatcher {
   const int device_;
   // First in, last out: the images, kernels and staging return to it.
   std::shared_ptr<GpuResources> resources_;
-  const size_t budget_;
-  size_t used_ = 0;
+  GpuMemoryBooks books_;
   cudaStream_t stream_ = nullptr;
   std::unique_ptr<BruteForceKernels> kernels_;
-  std::unordered_map<image_t, Image> images_;
+  std::unordered_map<image_t, BruteForceImage> images_;
   PinnedUploadRing uploads_{resources_.get()};
 };
 
@@ -190,9 +244,9 @@ bool CudaDeviceUsable(int gpu_index, std::string* reason) {
   return true;
 }
 
-std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
-                                                        const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config) {
+std::unique_ptr<MatchingBackend> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                         const CasHashOptions& cashash_options,
+                                                         const MeanDescriptor& mean, const GpuMatcherConfig& config) {
   // Auto is decided from the run's data before any matcher is built
   // (ChooseAutoMatcher, cashash/matching/matcher_choice.h).
   if (cashash_options.matcher == MatcherType::kAuto) {
@@ -206,9 +260,9 @@ std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOption
   return CreateGpuCascadeMatcher(sift_options, ResolveTableShape(cashash_options, 0), mean, config);
 }
 
-std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
-                                                        const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, int gpu_index) {
+std::unique_ptr<MatchingBackend> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                         const CasHashOptions& cashash_options,
+                                                         const MeanDescriptor& mean, int gpu_index) {
   GpuMatcherConfig config;
   config.gpu_index = gpu_index;
   return CreateGpuFeatureMatcher(sift_options, cashash_options, mean, config);

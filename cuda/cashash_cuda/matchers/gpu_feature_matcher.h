@@ -1,11 +1,12 @@
 // The GPU matching backend: Cascade Hashing and exact brute force on CUDA,
-// behind the same FeatureMatcher interface as the CPU backends.
+// behind the same interfaces as the CPU backends (MatchingBackend:
+// FeatureMatcher and ExactMatcher).
 #pragma once
 
 #include <memory>
 #include <string>
 
-#include "cashash/matchers/feature_matcher.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash_cuda/matchers/gpu_matcher_config.h"
 
 namespace cashash {
@@ -20,14 +21,14 @@ bool CudaDeviceUsable(int gpu_index, std::string* reason);
 // Throws std::runtime_error when the device cannot be used, and
 // std::invalid_argument for MatcherType::kAuto (decided first:
 // ChooseAutoMatcher, cashash/matching/matcher_choice.h).
-std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
-                                                        const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, const GpuMatcherConfig& config);
+std::unique_ptr<MatchingBackend> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                         const CasHashOptions& cashash_options,
+                                                         const MeanDescriptor& mean, const GpuMatcherConfig& config);
 
 // The same on device gpu_index, with no memory cap and the default kernels.
-std::unique_ptr<FeatureMatcher> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
-                                                        const CasHashOptions& cashash_options,
-                                                        const MeanDescriptor& mean, int gpu_index);
+std::unique_ptr<MatchingBackend> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
+                                                         const CasHashOptions& cashash_options,
+                                                         const MeanDescriptor& mean, int gpu_index);
 
 }  // namespace cuda
 }  // namespace cashash

@@ -1,6 +1,6 @@
 // GPU parts of Ga-CasHash (cashash/guided_matching.h): the stage-1 F
 // estimation by the batched GPU RANSAC. Stage 2 is the GPU cascade matcher's
-// MatchPairsGuided (CreateGpuFeatureMatcher).
+// Match with epipolar guides (CreateGpuFeatureMatcher).
 #pragma once
 
 #include <memory>

@@ -6,19 +6,13 @@ namespace cashash {
 
 RetainingFeatureMatcher::RetainingFeatureMatcher(std::unique_ptr<FeatureMatcher> inner, size_t budget_bytes,
                                                  std::function<size_t(const FeatureDescriptors&)> bytes_of)
-    : inner_(std::move(inner)), budget_bytes_(budget_bytes), bytes_of_(std::move(bytes_of)) {}
+    : FeatureMatcher(inner->traits()),
+      inner_(std::move(inner)),
+      budget_bytes_(budget_bytes),
+      bytes_of_(std::move(bytes_of)) {}
 
-void RetainingFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
-  Add(image_id, descriptors, [&] { inner_->AddImage(image_id, descriptors); });
-}
-
-void RetainingFeatureMatcher::AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
-  Add(image_id, *descriptors, [&] { inner_->AddSharedImage(image_id, descriptors); });
-}
-
-void RetainingFeatureMatcher::Add(image_t image_id, const FeatureDescriptors& descriptors,
-                                  const std::function<void()>& add_to_inner) {
-  const auto it = kept_.find(image_id);
+void RetainingFeatureMatcher::AddImage(const Image& image) {
+  const auto it = kept_.find(image.id);
   if (it != kept_.end()) {
     if (!it->second.in_use) {
       released_.erase(it->second.released);
@@ -27,11 +21,11 @@ void RetainingFeatureMatcher::Add(image_t image_id, const FeatureDescriptors& de
     ++stats_.images_reused;
     return;
   }
-  add_to_inner();
+  inner_->AddImage(image);
   Kept kept;
-  kept.bytes = bytes_of_(descriptors);
+  kept.bytes = bytes_of_(*image.descriptors);
   kept.in_use = true;
-  kept_.emplace(image_id, kept);
+  kept_.emplace(image.id, kept);
   bytes_ += kept.bytes;
   stats_.peak_bytes = std::max(stats_.peak_bytes, bytes_);
   ++stats_.images_added;
@@ -58,14 +52,9 @@ void RetainingFeatureMatcher::DropWhileOverBudget() {
   }
 }
 
-std::vector<FeatureMatches> RetainingFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
-  return inner_->MatchPairs(pairs);
+std::vector<FeatureMatches> RetainingFeatureMatcher::Match(const std::vector<ImagePair>& pairs,
+                                                           const std::vector<EpipolarGuide>& guides) {
+  return inner_->Match(pairs, guides);
 }
-
-ChunkMatches RetainingFeatureMatcher::MatchPairsDeferred(const std::vector<ImagePair>& pairs) {
-  return inner_->MatchPairsDeferred(pairs);
-}
-
-std::string RetainingFeatureMatcher::Name() const { return inner_->Name(); }
 
 }  // namespace cashash

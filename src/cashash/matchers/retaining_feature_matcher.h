@@ -30,22 +30,20 @@ struct RetainingStats {
 
 class RetainingFeatureMatcher : public FeatureMatcher {
  public:
-  // bytes_of(descriptors): what the wrapped matcher holds for an image.
+  // bytes_of(descriptors): what the wrapped matcher holds for an image. The
+  // traits are the wrapped matcher's.
   RetainingFeatureMatcher(std::unique_ptr<FeatureMatcher> inner, size_t budget_bytes,
                           std::function<size_t(const FeatureDescriptors&)> bytes_of);
 
-  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
-  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
+  void AddImage(const Image& image) override;
+  using FeatureMatcher::AddImage;
   void RemoveImage(image_t image_id) override;
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
-  ChunkMatches MatchPairsDeferred(const std::vector<ImagePair>& pairs) override;
-  std::string Name() const override;
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override;
 
   const RetainingStats& stats() const { return stats_; }
 
  private:
-  // AddImage and AddSharedImage: add_to_inner passes the image on.
-  void Add(image_t image_id, const FeatureDescriptors& descriptors, const std::function<void()>& add_to_inner);
   struct Kept {
     size_t bytes = 0;
     bool in_use = false;

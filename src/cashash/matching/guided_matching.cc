@@ -13,10 +13,6 @@
 
 namespace cashash {
 
-std::vector<FeatureMatches> FeatureMatcher::MatchPairsGuided(const std::vector<GuidedPair>&, double) {
-  throw std::logic_error("the " + Name() + " matcher does not support epipolar-guided matching");
-}
-
 std::string GuidedMatchingOptions::Check() const {
   if (!(top_scale_fraction > 0 && top_scale_fraction <= 1)) {
     return "--GuidedMatching.top_scale_fraction must be in (0, 1]";
@@ -131,102 +127,74 @@ FeatureMatches KeepMatchesInEpipolarBand(const FeatureMatches& matches, const do
   return kept;
 }
 
-ImageFeatures KeypointRecordingSource::LoadFeatures(image_t image_id) {
-  ImageFeatures features = inner_->LoadFeatures(image_id);
-  auto kept = std::make_shared<ImageFeatures>();
-  kept->keypoints = features.keypoints;
-  std::lock_guard<std::mutex> lock(mutex_);
-  loaded_[image_id] = std::move(kept);
-  return features;
+namespace {
+
+MatcherTraits GuidedTraits(const MatchingBackend* full, const BatchFundamentalEstimator* fundamental) {
+  MatcherTraits traits;
+  traits.name = "guided(" + (full ? full->Name() : std::string("?")) + ", F on " +
+                (fundamental ? fundamental->Name() : std::string("?")) + ")";
+  traits.uses_keypoints = true;
+  return traits;
 }
 
-std::shared_ptr<const ImageFeatures> KeypointRecordingSource::LoadSharedFeatures(image_t image_id) {
-  std::shared_ptr<const ImageFeatures> features = inner_->LoadSharedFeatures(image_id);
-  std::lock_guard<std::mutex> lock(mutex_);
-  loaded_[image_id] = features;
-  return features;
-}
+}  // namespace
 
-bool KeypointRecordingSource::Take(image_t image_id, Keypoints* keypoints) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  const auto it = loaded_.find(image_id);
-  if (it == loaded_.end()) return false;
-  *keypoints = it->second->keypoints;
-  loaded_.erase(it);
-  return true;
-}
-
-void KeypointRecordingSource::Clear() {
-  std::lock_guard<std::mutex> lock(mutex_);
-  loaded_.clear();
-}
-
-GuidedFeatureMatcher::GuidedFeatureMatcher(std::unique_ptr<FeatureMatcher> full,
+GuidedFeatureMatcher::GuidedFeatureMatcher(std::unique_ptr<MatchingBackend> full,
                                            std::unique_ptr<FeatureMatcher> top_scale,
                                            std::unique_ptr<BatchFundamentalEstimator> fundamental,
-                                           KeypointRecordingSource* keypoints, const GuidedMatchingOptions& options,
-                                           int max_num_matches, uint64_t random_seed, int num_threads)
-    : full_(std::move(full)),
+                                           const GuidedMatchingOptions& options, int max_num_matches,
+                                           uint64_t random_seed, int num_threads)
+    : FeatureMatcher(GuidedTraits(full.get(), fundamental.get())),
+      full_(std::move(full)),
       top_scale_(std::move(top_scale)),
       fundamental_(std::move(fundamental)),
-      keypoints_(keypoints),
       options_(options),
       max_num_matches_(static_cast<size_t>(std::max(0, max_num_matches))),
       random_seed_(random_seed),
       num_threads_(num_threads) {
   const std::string error = options.Check();
   if (!error.empty()) throw std::invalid_argument(error);
-  if (!full_ || !top_scale_ || !fundamental_ || keypoints_ == nullptr) {
-    throw std::invalid_argument("GuidedFeatureMatcher: a matcher, the F estimator or the keypoint source is missing");
+  if (!full_ || !top_scale_ || !fundamental_) {
+    throw std::invalid_argument("GuidedFeatureMatcher: a matcher or the F estimator is missing");
   }
-  if (options_.restrict_search_to_band ? !full_->SupportsEpipolarGuidance() : !full_->SupportsExactMatching()) {
+  if (options_.restrict_search_to_band && !full_->traits().epipolar_guidance) {
     throw std::invalid_argument("guided matching needs the cascade matcher (--CasHash.matcher cascade), not " +
                                 full_->Name());
   }
   stats_.searched_in_band = options_.restrict_search_to_band;
 }
 
-void GuidedFeatureMatcher::AddImage(image_t image_id, const FeatureDescriptors& descriptors) {
-  AddGuidedImage(image_id, descriptors, nullptr);
-}
-
-void GuidedFeatureMatcher::AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) {
-  AddGuidedImage(image_id, *descriptors, descriptors);
-}
-
-void GuidedFeatureMatcher::AddGuidedImage(image_t image_id, const FeatureDescriptors& descriptors,
-                                          const std::shared_ptr<const FeatureDescriptors>& shared) {
-  Keypoints keypoints;
-  if (!keypoints_->Take(image_id, &keypoints)) {
-    throw std::logic_error("guided matching: image " + std::to_string(image_id) +
-                           " was not loaded through the keypoint recording source");
+void GuidedFeatureMatcher::AddImage(const Image& added) {
+  if (!added.keypoints) {
+    throw std::logic_error("guided matching: image " + std::to_string(added.id) + " was added without keypoints");
   }
+  const FeatureDescriptors& descriptors = *added.descriptors;
+  const Keypoints& keypoints = *added.keypoints;
   const size_t n = std::min({descriptors.rows(), max_num_matches_, keypoints.size()});
   GuidedImage image;
   image.top_scale_rows = SelectTopScaleFeatures(keypoints, n, options_.top_scale_fraction);
   image.positions.resize(n);
   for (size_t i = 0; i < n; ++i) image.positions[i] = Eigen::Vector2d(keypoints[i].x, keypoints[i].y);
   image.interleaved = InterleavedPositions(keypoints, n);
-  FeatureDescriptors subset;
-  subset.data.resize(image.top_scale_rows.size() * kDescriptorDim);
+  auto subset = std::make_shared<FeatureDescriptors>();
+  subset->data.resize(image.top_scale_rows.size() * kDescriptorDim);
   for (size_t r = 0; r < image.top_scale_rows.size(); ++r) {
-    std::copy_n(descriptors.row(image.top_scale_rows[r]), kDescriptorDim, subset.data.data() + r * kDescriptorDim);
+    std::copy_n(descriptors.row(image.top_scale_rows[r]), kDescriptorDim, subset->data.data() + r * kDescriptorDim);
   }
   const Clock::time_point t0 = Clock::now();
-  top_scale_->AddImage(image_id, subset);
+  top_scale_->AddImage(MatcherImage{added.id, nullptr, std::move(subset)});
   stats_.seconds_stage1 += SecondsSince(t0);
+  // The full matcher needs the keypoints only to search within the bands.
+  MatcherImage full{added.id, options_.restrict_search_to_band ? added.keypoints : nullptr, added.descriptors};
   if (n < descriptors.rows()) {
     // Only the rows with a position are matched (a database keeps as many
     // keypoints as descriptors; this guards against one that does not).
-    FeatureDescriptors head;
-    head.data.assign(descriptors.data.begin(), descriptors.data.begin() + n * kDescriptorDim);
-    full_->AddImage(image_id, head);
-  } else if (shared) {
-    full_->AddSharedImage(image_id, shared);
-  } else {
-    full_->AddImage(image_id, descriptors);
+    auto head = std::make_shared<FeatureDescriptors>();
+    head->data.assign(descriptors.data.begin(), descriptors.data.begin() + n * kDescriptorDim);
+    full.descriptors = std::move(head);
   }
-  images_[image_id] = std::move(image);
+  full_->AddImage(full);
+  images_[added.id] = std::move(image);
 }
 
 void GuidedFeatureMatcher::RemoveImage(image_t image_id) {
@@ -238,7 +206,7 @@ void GuidedFeatureMatcher::RemoveImage(image_t image_id) {
 const GuidedFeatureMatcher::GuidedImage& GuidedFeatureMatcher::Find(image_t image_id) const {
   const auto it = images_.find(image_id);
   if (it == images_.end()) {
-    throw std::out_of_range("MatchPairs: image " + std::to_string(image_id) + " was not added to the guided matcher");
+    throw std::out_of_range("Match: image " + std::to_string(image_id) + " was not added to the guided matcher");
   }
   return it->second;
 }
@@ -246,17 +214,16 @@ const GuidedFeatureMatcher::GuidedImage& GuidedFeatureMatcher::Find(image_t imag
 // One function because the chunk's stages (stage 1, batched F, stage 2,
 // fallback) hand per-pair index maps (candidates, guided_index,
 // fallback_index) and the stats and timings from one stage to the next.
-std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<ImagePair>& pairs) {
-  // Every image of the chunk is added by now; keypoints left over belong to
-  // images a wrapper kept (RetainingFeatureMatcher) and are not needed.
-  keypoints_->Clear();
+std::vector<FeatureMatches> GuidedFeatureMatcher::Match(const std::vector<ImagePair>& pairs,
+                                                        const std::vector<EpipolarGuide>& guides) {
+  if (!guides.empty()) throw std::logic_error("the guided matcher makes its own epipolar guides");
   std::vector<FeatureMatches> results(pairs.size());
   last_outcomes_.assign(pairs.size(), GuidedStage1Outcome::kTooFewMatches);
   stats_.pairs += pairs.size();
 
   // Stage 1: the top-scale subsets, rows mapped back to the images' rows.
   Clock::time_point t0 = Clock::now();
-  std::vector<FeatureMatches> stage1 = top_scale_->MatchPairs(pairs);
+  std::vector<FeatureMatches> stage1 = top_scale_->Match(pairs);
   std::vector<size_t> candidates;
   for (size_t k = 0; k < pairs.size(); ++k) {
     const std::vector<uint32_t>& rows1 = Find(pairs[k].first).top_scale_rows;
@@ -286,7 +253,8 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   std::vector<TwoViewModelEstimate> fundamentals;
   if (!candidates.empty()) fundamentals = fundamental_->Estimate(point_ptrs, seeds);
   stats_.pairs_enough_matches += candidates.size();
-  std::vector<GuidedPair> guided;
+  std::vector<ImagePair> guided;
+  std::vector<EpipolarGuide> guides_of_pairs;
   std::vector<size_t> guided_index;
   std::vector<ImagePair> fallback;
   std::vector<size_t> fallback_index;
@@ -302,13 +270,12 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
       fallback_index.push_back(k);
     }
     if (last_outcomes_[k] != GuidedStage1Outcome::kGuided) continue;
-    GuidedPair g;
-    g.pair = pairs[k];
+    EpipolarGuide g;
     for (int r = 0; r < 3; ++r)
       for (int col = 0; col < 3; ++col) g.F[3 * r + col] = F->model(r, col);
-    g.points1 = &Find(pairs[k].first).interleaved;
-    g.points2 = &Find(pairs[k].second).interleaved;
-    guided.push_back(g);
+    g.max_distance = options_.EpipolarDistance();
+    guided.push_back(pairs[k]);
+    guides_of_pairs.push_back(g);
     guided_index.push_back(k);
   }
   stats_.seconds_fundamental += SecondsSince(t0);
@@ -320,15 +287,13 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   if (!guided.empty()) {
     std::vector<FeatureMatches> stage2;
     if (options_.restrict_search_to_band) {
-      stage2 = full_->MatchPairsGuided(guided, options_.EpipolarDistance());
+      stage2 = full_->Match(guided, guides_of_pairs);
     } else {
-      std::vector<ImagePair> guided_pairs(guided.size());
-      for (size_t g = 0; g < guided.size(); ++g) guided_pairs[g] = guided[g].pair;
-      stage2 = full_->MatchPairsExact(guided_pairs);
+      stage2 = full_->MatchExact(guided);
       for (size_t g = 0; g < guided.size(); ++g) stats_.stage2_exact_matches += stage2[g].size();
       ParallelFor(guided.size(), num_threads_, [&](size_t g) {
-        stage2[g] = KeepMatchesInEpipolarBand(stage2[g], guided[g].F.data(), *guided[g].points1, *guided[g].points2,
-                                              options_.EpipolarDistance());
+        stage2[g] = KeepMatchesInEpipolarBand(stage2[g], guides_of_pairs[g].F.data(), Find(guided[g].first).interleaved,
+                                              Find(guided[g].second).interleaved, options_.EpipolarDistance());
       });
     }
     for (size_t g = 0; g < guided.size(); ++g) {
@@ -344,7 +309,7 @@ std::vector<FeatureMatches> GuidedFeatureMatcher::MatchPairs(const std::vector<I
   t0 = Clock::now();
   if (!fallback.empty()) {
     std::vector<FeatureMatches> unguided =
-        options_.restrict_search_to_band ? full_->MatchPairs(fallback) : full_->MatchPairsExact(fallback);
+        options_.restrict_search_to_band ? full_->Match(fallback) : full_->MatchExact(fallback);
     for (size_t f = 0; f < fallback.size(); ++f) {
       stats_.fallback_matches += unguided[f].size();
       results[fallback_index[f]] = std::move(unguided[f]);
@@ -377,10 +342,6 @@ std::string DescribeGuidedMatching(const GuidedMatchingStats& g, const GuidedMat
        << " s";
   if (options.unguided_fallback) text << ", without the band " << g.seconds_fallback << " s";
   return text.str();
-}
-
-std::string GuidedFeatureMatcher::Name() const {
-  return "guided(" + full_->Name() + ", F on " + fundamental_->Name() + ")";
 }
 
 }  // namespace cashash

@@ -14,7 +14,7 @@
 //
 // Stage 2 by default takes the pair's exact matches (global nearest
 // neighbour, ratio test and cross-check over the whole image: the matches
-// exhaustive matching gives, FeatureMatcher::MatchPairsExact) and the band
+// exhaustive matching gives, ExactMatcher::MatchExact) and the band
 // only filters them. The paper instead restricts each query's candidates to
 // the band (restrict_search_to_band): then the ratio test only compares the
 // few features that lie near the line, and a match on repeated structure
@@ -35,22 +35,19 @@
 //
 // GuidedFeatureMatcher does all of this behind the FeatureMatcher interface,
 // so the pipeline, the scheduling, resuming and the database writer are the
-// exhaustive matcher's own. It needs each image's keypoints, which the
-// pipeline does not hand to matchers: KeypointRecordingSource, put between
-// the pipeline and its feature source, keeps them for it.
+// exhaustive matcher's own. It needs each image's keypoints: its traits say
+// uses_keypoints, so the pipeline adds its images with them.
 #pragma once
 
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
 
-#include "cashash/matchers/feature_matcher.h"
-#include "cashash/pipeline/matching_pipeline.h"
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "cashash/base/types.h"
 
@@ -103,8 +100,8 @@ struct GuidedMatchingOptions {
   int fallback_min_num_matches = 8;
   // The paper's stage 2: each query's candidates restricted to the band, the
   // ratio test among those. Off: exact matches filtered by the band (see the
-  // top of this file); needs a backend with SupportsEpipolarGuidance() when
-  // on, SupportsExactMatching() when off.
+  // top of this file); needs a backend with epipolar guidance (its traits)
+  // when on.
   bool restrict_search_to_band = false;
 
   // "" when valid, else a message naming the option.
@@ -126,7 +123,7 @@ float KeypointScale(const Keypoint& keypoint);
 // lower row. At least one row when n > 0.
 std::vector<uint32_t> SelectTopScaleFeatures(const Keypoints& keypoints, size_t num_rows, double fraction);
 
-// x, y of each of the first num_rows keypoints, interleaved (GuidedPair).
+// x, y of each of the first num_rows keypoints, interleaved (the band filter).
 std::vector<float> InterleavedPositions(const Keypoints& keypoints, size_t num_rows);
 
 // Estimates F of many pairs at once (stage 1).
@@ -163,32 +160,6 @@ GuidedStage1Outcome DecideGuidedStage1(size_t num_matches, const TwoViewModelEst
 FeatureMatches KeepMatchesInEpipolarBand(const FeatureMatches& matches, const double* F, const std::vector<float>& xy1,
                                          const std::vector<float>& xy2, double max_distance);
 
-// A FeatureSource that passes everything through and keeps the features of
-// each loaded image until Take (or Clear) for GuidedFeatureMatcher. Shared
-// loads are kept shared, not copied: the pipeline loads an image again for
-// every chunk that needs it, and copying its keypoints each time cost 3.9 s
-// of the matching thread on a 1,000-image street.
-class KeypointRecordingSource : public FeatureSource {
- public:
-  explicit KeypointRecordingSource(FeatureSource* inner) : inner_(inner) {}
-  // The source read through (may be set after construction, before use).
-  void SetInner(FeatureSource* inner) { inner_ = inner; }
-  ImageFeatures LoadFeatures(image_t image_id) override;
-  std::shared_ptr<const ImageFeatures> LoadSharedFeatures(image_t image_id) override;
-  const Camera& CameraOfImage(image_t image_id) const override { return inner_->CameraOfImage(image_id); }
-
-  // The keypoints of the last load of image_id, removed from the store;
-  // false when there are none.
-  bool Take(image_t image_id, Keypoints* keypoints);
-  // Drops what was not taken (images the matcher already holds).
-  void Clear();
-
- private:
-  FeatureSource* inner_;
-  std::mutex mutex_;
-  std::unordered_map<image_t, std::shared_ptr<const ImageFeatures>> loaded_;
-};
-
 struct GuidedMatchingStats {
   size_t pairs = 0;                 // pairs matched (stage 1)
   size_t pairs_enough_matches = 0;  // with >= min_num_matches stage-1 matches (F estimated)
@@ -213,32 +184,28 @@ std::string DescribeGuidedMatching(const GuidedMatchingStats& stats, const Guide
 
 class GuidedFeatureMatcher : public FeatureMatcher {
  public:
-  // full: matches all features in stage 2 (SupportsExactMatching(), or
-  // SupportsEpipolarGuidance() with restrict_search_to_band);
-  // top_scale: matches the stage-1 subsets (any backend, a separate
-  // instance); keypoints: the source the pipeline loads through. The seed
-  // is the run's RANSAC seed (pair seeds as in verification).
-  GuidedFeatureMatcher(std::unique_ptr<FeatureMatcher> full, std::unique_ptr<FeatureMatcher> top_scale,
-                       std::unique_ptr<BatchFundamentalEstimator> fundamental, KeypointRecordingSource* keypoints,
-                       const GuidedMatchingOptions& options, int max_num_matches, uint64_t random_seed,
-                       int num_threads);
+  // full: matches all features in stage 2, exactly or (with
+  // restrict_search_to_band) within the bands, which needs its traits'
+  // epipolar_guidance; top_scale: matches the stage-1 subsets (any backend,
+  // a separate instance). The seed is the run's RANSAC seed (pair seeds as
+  // in verification). Images must be added with their keypoints (traits:
+  // uses_keypoints).
+  GuidedFeatureMatcher(std::unique_ptr<MatchingBackend> full, std::unique_ptr<FeatureMatcher> top_scale,
+                       std::unique_ptr<BatchFundamentalEstimator> fundamental, const GuidedMatchingOptions& options,
+                       int max_num_matches, uint64_t random_seed, int num_threads);
 
-  void AddImage(image_t image_id, const FeatureDescriptors& descriptors) override;
-  void AddSharedImage(image_t image_id, std::shared_ptr<const FeatureDescriptors> descriptors) override;
+  void AddImage(const Image& image) override;
+  using FeatureMatcher::AddImage;
   void RemoveImage(image_t image_id) override;
-  std::vector<FeatureMatches> MatchPairs(const std::vector<ImagePair>& pairs) override;
-  // "guided(<full matcher>, F on <estimator>)"
-  std::string Name() const override;
+  // Guides are refused: this matcher makes its own.
+  std::vector<FeatureMatches> Match(const std::vector<ImagePair>& pairs,
+                                    const std::vector<EpipolarGuide>& guides = {}) override;
 
   const GuidedMatchingStats& stats() const { return stats_; }
-  // Stage-1 outcome of each pair of the last MatchPairs call.
+  // Stage-1 outcome of each pair of the last Match call.
   const std::vector<GuidedStage1Outcome>& last_outcomes() const { return last_outcomes_; }
 
  private:
-  // AddImage and AddSharedImage (`shared` set: passed on to the full matcher).
-  void AddGuidedImage(image_t image_id, const FeatureDescriptors& descriptors,
-                      const std::shared_ptr<const FeatureDescriptors>& shared);
-
   struct GuidedImage {
     std::vector<uint32_t> top_scale_rows;          // stage-1 row -> row
     std::vector<Eigen::Vector2d> positions;        // pixels of the matched rows
@@ -246,10 +213,9 @@ class GuidedFeatureMatcher : public FeatureMatcher {
   };
   const GuidedImage& Find(image_t image_id) const;
 
-  std::unique_ptr<FeatureMatcher> full_;
+  std::unique_ptr<MatchingBackend> full_;
   std::unique_ptr<FeatureMatcher> top_scale_;
   std::unique_ptr<BatchFundamentalEstimator> fundamental_;
-  KeypointRecordingSource* keypoints_;
   const GuidedMatchingOptions options_;
   const size_t max_num_matches_;
   const uint64_t random_seed_;

@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 
+#include "cashash/matchers/exact_matcher.h"
 #include "cashash/matching/matcher_choice.h"
 #include "cashash/matching/table_shape.h"
 
@@ -66,7 +67,7 @@ Camera GuessCamera(const Keypoints& keypoints, uint64_t width, uint64_t height) 
 PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDescriptors& descriptors1,
                                   const Keypoints& keypoints2, const FeatureDescriptors& descriptors2,
                                   const PairMatchingOptions& options, const Camera* camera1, const Camera* camera2,
-                                  FeatureMatcher* matcher) {
+                                  FeatureMatcher* matcher, const AfterPairMatching& after_matching) {
   const std::string problem = options.Check();
   if (!problem.empty()) throw std::invalid_argument(problem);
   CheckRows(keypoints1, descriptors1, "1");
@@ -92,7 +93,10 @@ PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDesc
   matcher->AddImage(0, descriptors1);
   matcher->AddImage(1, descriptors2);
   PairMatchingResult result;
-  result.matches = std::move(matcher->MatchPairs({ImagePair(0, 1)}).front());
+  const std::vector<ImagePair> pairs = {ImagePair(0, 1)};
+  std::vector<FeatureMatches> matches = matcher->Match(pairs);
+  if (after_matching) after_matching(pairs, &matches);
+  result.matches = std::move(matches.front());
   matcher->RemoveImage(0);
   matcher->RemoveImage(1);
 

@@ -3,6 +3,9 @@
 // any program that has its own features.
 #pragma once
 
+#include <functional>
+#include <vector>
+
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/geometry/two_view_geometry.h"
@@ -41,10 +44,14 @@ Camera GuessCamera(const Keypoints& keypoints, uint64_t width = 0, uint64_t heig
 // GPU one, or one reused over many pairs); its image ids 0 and 1 are
 // replaced. Null: a CPU matcher hashing with the mean of the two images
 // (MatcherType::kAuto decided by ChooseAutoMatcher: the cascade).
+// `after_matching`, where given, may change the pair's matches before they
+// are verified (a run's exact rematch, pipeline/exact_rematch_stage.h).
 // Throws std::invalid_argument for bad options or mismatched row counts.
+using AfterPairMatching = std::function<void(const std::vector<ImagePair>&, std::vector<FeatureMatches>*)>;
 PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDescriptors& descriptors1,
                                   const Keypoints& keypoints2, const FeatureDescriptors& descriptors2,
                                   const PairMatchingOptions& options, const Camera* camera1 = nullptr,
-                                  const Camera* camera2 = nullptr, FeatureMatcher* matcher = nullptr);
+                                  const Camera* camera2 = nullptr, FeatureMatcher* matcher = nullptr,
+                                  const AfterPairMatching& after_matching = nullptr);
 
 }  // namespace cashash

@@ -1,5 +1,6 @@
 #include "cashash/pipeline/chunk_verification.h"
 
+#include <stdexcept>
 #include <utility>
 
 #include "cashash/base/pair_id.h"
@@ -12,16 +13,21 @@ std::shared_ptr<const FeatureDescriptors> DescriptorsOf(const FeaturesPtr& featu
   return std::shared_ptr<const FeatureDescriptors>(features, &features->descriptors);
 }
 
-bool CompleteDeferred(MatchedChunk* item) {
-  if (!item->deferred) return false;
-  item->deferred->Complete([&](image_t image_id) { return DescriptorsOf(item->features.at(image_id)); },
-                           &item->matches);
-  item->deferred.reset();
+std::shared_ptr<const Keypoints> KeypointsOf(const FeaturesPtr& features) {
+  return std::shared_ptr<const Keypoints>(features, &features->keypoints);
+}
+
+bool CompleteRematch(ExactRematchStage* rematch, MatchedChunk* item) {
+  if (item->rematch.empty()) return false;
+  if (rematch == nullptr) throw std::logic_error("a chunk's exact rematch was left without its stage");
+  rematch->Complete(
+      &item->rematch, [&](image_t image_id) { return DescriptorsOf(item->features.at(image_id)); }, &item->matches);
   return true;
 }
 
 std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
-                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier) {
+                                        ExactRematchStage* rematch, std::vector<MatchedChunk>* items,
+                                        BatchVerifier* verifier) {
   std::vector<VerifiedChunk> out(items->size());
   for (size_t c = 0; c < items->size(); ++c) {
     MatchedChunk& item = (*items)[c];
@@ -29,7 +35,7 @@ std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureS
     out[c].chunk = item.chunk;
     out[c].started = item.started;
     out[c].rematch_started = Clock::now();
-    out[c].rematched = CompleteDeferred(&item);
+    out[c].rematched = CompleteRematch(rematch, &item);
     out[c].rematch_ended = Clock::now();
     const std::vector<ImagePair>& pairs = item.chunk->pairs;
     std::vector<PairResult>& results = *out[c].results;

@@ -18,8 +18,9 @@ namespace pipeline_internal {
 using Clock = std::chrono::steady_clock;
 using FeaturesPtr = std::shared_ptr<const ImageFeatures>;
 
-// An image's descriptors, sharing ownership of its features.
+// An image's descriptors and keypoints, sharing ownership of its features.
 std::shared_ptr<const FeatureDescriptors> DescriptorsOf(const FeaturesPtr& features);
+std::shared_ptr<const Keypoints> KeypointsOf(const FeaturesPtr& features);
 
 // What travels from the matching stage to the verification stage.
 struct MatchedChunk {
@@ -29,9 +30,9 @@ struct MatchedChunk {
   std::shared_ptr<const PairChunk> chunk;
   std::unordered_map<image_t, FeaturesPtr> features;
   std::vector<FeatureMatches> matches;
-  // What the matcher left to complete the matches (the exact rematch on the
-  // GPU): done on the verification thread before verifying.
-  std::unique_ptr<DeferredMatching> deferred;
+  // The exact rematch left to the verification thread (ExactRematchStage):
+  // done there before verifying.
+  PendingRematch rematch;
   Clock::time_point started;
 };
 
@@ -40,23 +41,25 @@ struct VerifiedChunk {
   std::shared_ptr<const PairChunk> chunk;
   std::shared_ptr<std::vector<PairResult>> results = std::make_shared<std::vector<PairResult>>();
   Clock::time_point started;
-  // For the trace: the chunk's deferred matching, if it had any, and when
-  // its verifier call started.
+  // For the trace: the chunk's rematch on the verification thread, if it
+  // had one, and when its verifier call started.
   bool rematched = false;
   Clock::time_point rematch_started, rematch_ended, verify_started;
 };
 
-// Completes what the matcher deferred for `item` (the GPU's exact rematch),
-// if anything; returns whether there was something.
-bool CompleteDeferred(MatchedChunk* item);
+// Completes the exact rematch left to the verification thread for `item`,
+// if any (`rematch` may be null where the run has none); returns whether
+// there was one.
+bool CompleteRematch(ExactRematchStage* rematch, MatchedChunk* item);
 
 // The verification of matched chunks in one call of the verifier: for each
-// chunk what the matcher deferred first, then results in the chunk's pair order, geometries left undefined when
+// chunk the rematch left to it first (`rematch` may be null), then results in the chunk's pair order, geometries left undefined when
 // verification is skipped. One call for several chunks because a GPU call
 // lasts as long as its slowest pair: chunks that wait together share that
 // tail instead of paying it in turn. Releases the chunks' features.
 std::vector<VerifiedChunk> VerifyChunks(const PipelineOptions& options, FeatureSource* source,
-                                        std::vector<MatchedChunk>* items, BatchVerifier* verifier);
+                                        ExactRematchStage* rematch, std::vector<MatchedChunk>* items,
+                                        BatchVerifier* verifier);
 
 }  // namespace pipeline_internal
 }  // namespace cashash

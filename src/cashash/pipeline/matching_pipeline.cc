@@ -16,8 +16,8 @@ namespace cashash {
 namespace {
 
 using pipeline_internal::Clock;
-using pipeline_internal::CompleteDeferred;
 using pipeline_internal::DescriptorsOf;
+using pipeline_internal::KeypointsOf;
 using pipeline_internal::FeaturesPtr;
 using pipeline_internal::MatchedChunk;
 using pipeline_internal::VerifiedChunk;
@@ -53,7 +53,7 @@ class FirstError {
 // error and the stats that its stages share, and the stages themselves, one
 // function each:
 //   Match   this thread: load what a chunk needs, match it;
-//   Verify  what the matcher deferred, then the batch verifier's calls, on
+//   Verify  the exact rematch left to it, then the batch verifier's calls, on
 //           as many threads as the verifier takes calls at once;
 //   Write   the single writer.
 // Execute keeps the object alive until every thread is joined, which is what
@@ -62,12 +62,13 @@ class FirstError {
 class PipelineRun {
  public:
   PipelineRun(const PipelineOptions& options, FeatureSource* source, FeatureMatcher* matcher, ResultSink* sink,
-              BatchVerifier* verifier, const std::function<void(const PipelineProgress&)>& progress,
-              const std::atomic<bool>* stop)
+              BatchVerifier* verifier, ExactRematchStage* rematch,
+              const std::function<void(const PipelineProgress&)>& progress, const std::atomic<bool>* stop)
       : options_(options),
         source_(source),
         matcher_(matcher),
         sink_(sink),
+        rematch_(rematch),
         progress_(progress),
         stop_(stop),
         chunks_in_queue_(std::max<size_t>(1, options.chunks_in_queue)),
@@ -129,6 +130,8 @@ class PipelineRun {
   // Stage 1, on the caller's thread: load what the chunk needs, match.
   void Match(const PairChunkSource& chunks) {
     BlockingQueue<MatchedChunk>& after_matching = to_verify_;
+    // Only a matcher that reads keypoints (guided matching) gets them.
+    const bool keypoints = matcher_->traits().uses_keypoints;
     try {
       std::unordered_map<image_t, FeaturesPtr> loaded;
       // Chunks are made one ahead: the next one's images stay loaded.
@@ -163,7 +166,8 @@ class PipelineRun {
           const Clock::time_point t_hash = Clock::now();
           load_seconds += std::chrono::duration<double>(t_hash - t_load).count();
           // The matcher may keep the descriptors (aliasing the features).
-          matcher_->AddSharedImage(image_id, DescriptorsOf(features));
+          matcher_->AddImage(MatcherImage{image_id, keypoints ? KeypointsOf(features) : nullptr,
+                                          DescriptorsOf(features)});
           hash_seconds += SecondsSince(t_hash);
           loaded.emplace(image_id, std::move(features));
         }
@@ -173,9 +177,8 @@ class PipelineRun {
         item.index = c;
         item.chunk = current;
         item.started = chunk_start;
-        ChunkMatches matched = matcher_->MatchPairsDeferred(chunk.pairs);
-        item.matches = std::move(matched.matches);
-        item.deferred = std::move(matched.deferred);
+        item.matches = matcher_->Match(chunk.pairs);
+        if (rematch_ != nullptr) item.rematch = rematch_->AfterMatching(chunk.pairs, &item.matches);
         const Clock::time_point t_matched = Clock::now();
         {
           std::lock_guard<std::mutex> lock(stats_mutex_);
@@ -214,7 +217,7 @@ class PipelineRun {
         AddSeconds(&PipelineStats::seconds_verification_wait_input, t_wait);
         if (items.empty()) break;
         const Clock::time_point t0 = Clock::now();
-        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, &items, verifier_);
+        std::vector<VerifiedChunk> out = VerifyChunks(options_, source_, rematch_, &items, verifier_);
         to_verify_.Release(items.size() - 1);
         const Clock::time_point t_verified = Clock::now();
         size_t call = 0;
@@ -309,6 +312,7 @@ class PipelineRun {
   FeatureSource* source_;
   FeatureMatcher* matcher_;
   ResultSink* sink_;
+  ExactRematchStage* rematch_;
   const std::function<void(const PipelineProgress&)>& progress_;
   const std::atomic<bool>* stop_;
   const Clock::time_point run_start_ = Clock::now();
@@ -347,8 +351,10 @@ void MatchingPipeline::SetStopFlag(const std::atomic<bool>* stop) { stop_ = stop
 
 void MatchingPipeline::SetBatchVerifier(BatchVerifier* verifier) { verifier_ = verifier; }
 
+void MatchingPipeline::SetExactRematch(ExactRematchStage* rematch) { rematch_ = rematch; }
+
 PipelineStats MatchingPipeline::Run(const PairChunkSource& chunks) {
-  PipelineRun run(options_, source_, matcher_, sink_, verifier_, progress_, stop_);
+  PipelineRun run(options_, source_, matcher_, sink_, verifier_, rematch_, progress_, stop_);
   return run.Execute(chunks);
 }
 

@@ -1,7 +1,9 @@
 // The matching pipeline: load features of a chunk of pairs, match them with a
-// FeatureMatcher backend, verify each pair geometrically, hand the results to
-// a writer. The stages (matching; verification, which first completes what
-// the matcher deferred; writing) run on their own threads with bounded queues, so
+// FeatureMatcher backend (and, where the run asks for it, rematch the pairs
+// that may verify exactly: exact_rematch_stage.h), verify each pair
+// geometrically, hand the results to a writer. The stages (matching;
+// verification, which first completes a rematch left to it; writing) run on
+// their own threads with bounded queues, so
 // the GPU matches chunk k+1 while chunk k is verified and the database
 // commits chunk k-1. The stages themselves are in matching_pipeline.cc,
 // what travels between them in chunk_verification.h.
@@ -14,6 +16,7 @@
 #include <vector>
 
 #include "cashash/pipeline/batch_verifier.h"
+#include "cashash/pipeline/exact_rematch_stage.h"
 #include "cashash/pipeline/pipeline_trace.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/pipeline/pair_chunk_source.h"
@@ -108,7 +111,7 @@ struct PipelineStats {
   double seconds_matching = 0;
   // Summed over the verification threads when chunks are verified
   // concurrently (verification_threads > 1), as are its waits below. It
-  // includes what the matcher deferred to them (the GPU's exact rematch).
+  // includes the exact rematch left to them (ExactRematchStage).
   double seconds_verification = 0;
   double seconds_writing = 0;
   // Waiting, apart from the busy times above: the matching thread for room
@@ -140,6 +143,10 @@ class MatchingPipeline {
   // Verifies each chunk with `verifier` (not owned; e.g. the GPU one)
   // instead of the default CPU thread pool over options.two_view.
   void SetBatchVerifier(BatchVerifier* verifier);
+  // Rematches each chunk's pairs that may verify exactly, where and as the
+  // stage's policy says (not owned; the stage's backend must be the one the
+  // matcher adds its images to). None: the matcher's matches are kept.
+  void SetExactRematch(ExactRematchStage* rematch);
 
   // Matches the chunks in order, making each when it is next (and the one
   // after it, whose images decide what stays loaded).
@@ -154,6 +161,7 @@ class MatchingPipeline {
   std::function<void(const PipelineProgress&)> progress_;
   const std::atomic<bool>* stop_ = nullptr;
   BatchVerifier* verifier_ = nullptr;
+  ExactRematchStage* rematch_ = nullptr;
 };
 
 }  // namespace cashash
