@@ -6,6 +6,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "cashash/matching/table_shape.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/run_resolution.h"
 #include "colmap_bridge/database.h"
@@ -214,12 +215,16 @@ void AddCasHashOptions(OptionTable* table, MatcherCommandOptions* o, std::string
   table->Add({"CasHash.bits_per_table"}, &o->cashash.bits_per_table,
              "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
   table->Add({"CasHash.tau"}, &o->cashash.tau,
-             "Largest 128-bit remap Hamming distance ranked; 0 = chosen: 32 while the exact rematch decides the pairs "
-             "that may verify, 43 where the cascade's own matches are kept (no rematch, guided matching)");
+             "Largest 128-bit remap Hamming distance ranked; 0 = chosen: " + std::to_string(kCascadeTauForScreening) +
+                 " while the exact rematch decides the pairs that may verify, " +
+                 std::to_string(kCascadeTauForPrecision) +
+                 " where the cascade's own matches are kept (no rematch, guided matching)");
   table->Add({"CasHash.top_k"}, &o->cashash.top_k, "Candidates per query whose exact distance is computed");
   table->Add({"CasHash.exact_rematch_min_matches"}, &o->cashash.exact_rematch_min_matches,
              "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
-             "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image",
+             "not given: " + std::to_string(kDefaultRematchMinMatches) + ", or " +
+                 std::to_string(kBucketScreeningRematchMinMatches) +
+                 " with the 3 screening tables chosen from 8192 features per image",
               std::to_string(kDefaultRematchMinMatches));
   table->Add({"CasHash.exact_rematch_max_matches"}, &o->cashash.exact_rematch_max_matches,
              "When > 0, only pairs with fewer cascade matches than this are matched again exactly; 0 = no upper "
