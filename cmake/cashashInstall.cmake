@@ -31,14 +31,57 @@ if(TARGET cashash)
   install(TARGETS cashash RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT devel)
 endif()
 
-install(DIRECTORY ${PROJECT_SOURCE_DIR}/src/cashash DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
-        COMPONENT devel FILES_MATCHING PATTERN "*.h")
-# Only the bridge headers the library API needs; the database internals stay
-# private.
-install(FILES ${PROJECT_SOURCE_DIR}/colmap_bridge/api/matching_api.h ${PROJECT_SOURCE_DIR}/colmap_bridge/api/command_options.h
-              ${PROJECT_SOURCE_DIR}/colmap_bridge/api/run_resolution.h
-              ${PROJECT_SOURCE_DIR}/colmap_bridge/api/run_gpu_resources.h
-        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/colmap_bridge/api COMPONENT devel)
+# The headers of the library API (README.md, "For C++") and every header of
+# this project they include, found by following their #include "..." lines
+# at configure time; the pipeline's and the database's internals that no
+# API header includes stay private. cashash_cuda/ headers are installed
+# below.
+set(CASHASH_API_HEADERS
+    colmap_bridge/api/matching_api.h colmap_bridge/api/command_options.h colmap_bridge/api/run_resolution.h
+    colmap_bridge/api/run_gpu_resources.h cashash/matching/pair_matching.h)
+
+# Sets `out` to `headers` and the project headers they include, transitively
+# (paths as included: cashash/..., colmap_bridge/..., cashash_cuda/...).
+function(cashash_included_headers out)
+  set(pending ${ARGN})
+  set(found)
+  while(pending)
+    list(POP_FRONT pending header)
+    if(header IN_LIST found)
+      continue()
+    endif()
+    set(path)
+    foreach(root ${PROJECT_SOURCE_DIR}/src ${PROJECT_SOURCE_DIR}/cuda ${PROJECT_SOURCE_DIR})
+      if(NOT path AND EXISTS ${root}/${header})
+        set(path ${root}/${header})
+      endif()
+    endforeach()
+    if(NOT path)
+      continue()  # a system or third-party header
+    endif()
+    list(APPEND found ${header})
+    set_property(DIRECTORY ${PROJECT_SOURCE_DIR} APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${path})
+    file(STRINGS ${path} include_lines REGEX "^[ \t]*#[ \t]*include[ \t]*\"")
+    foreach(line ${include_lines})
+      string(REGEX REPLACE "^[^\"]*\"([^\"]+)\".*$" "\\1" included "${line}")
+      list(APPEND pending ${included})
+    endforeach()
+  endwhile()
+  set(${out} ${found} PARENT_SCOPE)
+endfunction()
+
+cashash_included_headers(CASHASH_INSTALLED_HEADERS ${CASHASH_API_HEADERS})
+foreach(header ${CASHASH_INSTALLED_HEADERS})
+  if(header MATCHES "^cashash_cuda/")
+    continue()
+  endif()
+  get_filename_component(header_dir ${header} DIRECTORY)
+  set(header_root ${PROJECT_SOURCE_DIR})
+  if(header MATCHES "^cashash/")
+    set(header_root ${PROJECT_SOURCE_DIR}/src)
+  endif()
+  install(FILES ${header_root}/${header} DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/${header_dir} COMPONENT devel)
+endforeach()
 if(CASHASH_WITH_CUDA)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/cuda/cashash_cuda DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
           COMPONENT devel FILES_MATCHING PATTERN "*.h")

@@ -48,6 +48,7 @@ python3 -c "import matplotlib" 2>/dev/null || python_missing+=(matplotlib)  # ac
 python3 -c "import pybind11" 2>/dev/null || python_missing+=(pybind11)
 python3 -c "import scikit_build_core" 2>/dev/null || python_missing+=(scikit-build-core)
 python3 -c "import pytest" 2>/dev/null || python_missing+=(pytest)
+python3 -c "import lizard" 2>/dev/null || python_missing+=(lizard)  # CTest code_size_rules measures functions
 pycolmap_kind="${CASHASH_PYCOLMAP:-cpu}"
 if [[ "$pycolmap_kind" == auto ]]; then
   pycolmap_kind=cpu

@@ -400,49 +400,81 @@ int FeatureCountOfImage(const DatabaseGeneratorOptions& options, int image_index
   return low + static_cast<int>(rng.Below(static_cast<uint32_t>(options.num_features - low)));
 }
 
-std::string DatabaseGeneratorOptions::Check() const {
-  if (database_path.empty()) return "--database_path is required";
-  if (source_database_path.empty()) return "--source_database_path is required";
-  if (std::filesystem::path(database_path).lexically_normal() ==
-      std::filesystem::path(source_database_path).lexically_normal()) {
+namespace {
+
+// Each Check* below returns the first problem of one group of
+// DatabaseGeneratorOptions, "" when there is none.
+
+std::string CheckGeneratorPaths(const DatabaseGeneratorOptions& o) {
+  if (o.database_path.empty()) return "--database_path is required";
+  if (o.source_database_path.empty()) return "--source_database_path is required";
+  if (std::filesystem::path(o.database_path).lexically_normal() ==
+      std::filesystem::path(o.source_database_path).lexically_normal()) {
     return "--database_path must differ from --source_database_path (the source is only read)";
   }
-  if (num_images < 1 || num_images > 2147483646) return "--num_images must be between 1 and 2147483646";
-  if (num_features < 1 || num_features > (1 << 24)) return "--num_features must be between 1 and 16777216";
-  if (num_features_distribution != "equal" && num_features_distribution != "extraction") {
-    return "--num_features_distribution must be equal or extraction, got '" + num_features_distribution + "'";
+  return "";
+}
+
+std::string CheckGeneratorCounts(const DatabaseGeneratorOptions& o) {
+  if (o.num_images < 1 || o.num_images > 2147483646) return "--num_images must be between 1 and 2147483646";
+  if (o.num_features < 1 || o.num_features > (1 << 24)) return "--num_features must be between 1 and 16777216";
+  if (o.num_features_distribution != "equal" && o.num_features_distribution != "extraction") {
+    return "--num_features_distribution must be equal or extraction, got '" + o.num_features_distribution + "'";
   }
-  if (min_num_features < 0 || min_num_features > num_features) {
+  if (o.min_num_features < 0 || o.min_num_features > o.num_features) {
     return "--min_num_features must be between 0 (num_features / 8) and --num_features";
   }
-  if (!Finite(num_features_at_cap_share) || num_features_at_cap_share < 0 || num_features_at_cap_share > 1) {
+  if (!Finite(o.num_features_at_cap_share) || o.num_features_at_cap_share < 0 || o.num_features_at_cap_share > 1) {
     return "--num_features_at_cap_share must be between 0 and 1";
   }
-  if (num_points < 0) return "--num_points must be >= 0 (0 = as many as the images need)";
-  if (image_width < 16 || image_height < 16 || image_width > 100000 || image_height > 100000) {
+  if (o.num_points < 0) return "--num_points must be >= 0 (0 = as many as the images need)";
+  return "";
+}
+
+std::string CheckGeneratorCamera(const DatabaseGeneratorOptions& o) {
+  if (o.image_width < 16 || o.image_height < 16 || o.image_width > 100000 || o.image_height > 100000) {
     return "--image_width and --image_height must be between 16 and 100000";
   }
-  if (CameraModelId(camera_model) < 0) {
-    return "--camera_model must be SIMPLE_RADIAL, PINHOLE or SIMPLE_PINHOLE, got '" + camera_model + "'";
+  if (CameraModelId(o.camera_model) < 0) {
+    return "--camera_model must be SIMPLE_RADIAL, PINHOLE or SIMPLE_PINHOLE, got '" + o.camera_model + "'";
   }
-  if (!Finite(focal_length_factor) || focal_length_factor <= 0.1 || focal_length_factor > 100) {
+  if (!Finite(o.focal_length_factor) || o.focal_length_factor <= 0.1 || o.focal_length_factor > 100) {
     return "--focal_length_factor must be between 0.1 and 100";
   }
-  if (!Finite(distractor_ratio) || distractor_ratio < 0 || distractor_ratio > 1) {
+  return "";
+}
+
+std::string CheckGeneratorNoise(const DatabaseGeneratorOptions& o) {
+  if (!Finite(o.distractor_ratio) || o.distractor_ratio < 0 || o.distractor_ratio > 1) {
     return "--distractor_ratio must be between 0 and 1";
   }
-  if (!Finite(keypoint_noise) || keypoint_noise < 0 || keypoint_noise > 100) {
+  if (!Finite(o.keypoint_noise) || o.keypoint_noise < 0 || o.keypoint_noise > 100) {
     return "--keypoint_noise must be between 0 and 100 pixels";
   }
-  if (!Finite(descriptor_noise) || descriptor_noise < 0 || descriptor_noise > 255) {
+  if (!Finite(o.descriptor_noise) || o.descriptor_noise < 0 || o.descriptor_noise > 255) {
     return "--descriptor_noise must be between 0 and 255";
   }
-  if (images_per_transaction < 1) return "--images_per_transaction must be >= 1";
-  if (position_priors != "none" && position_priors != "cartesian" && position_priors != "gps") {
-    return "--position_priors must be none, cartesian or gps, got '" + position_priors + "'";
+  return "";
+}
+
+std::string CheckGeneratorRun(const DatabaseGeneratorOptions& o) {
+  if (o.images_per_transaction < 1) return "--images_per_transaction must be >= 1";
+  if (o.position_priors != "none" && o.position_priors != "cartesian" && o.position_priors != "gps") {
+    return "--position_priors must be none, cartesian or gps, got '" + o.position_priors + "'";
   }
-  if (num_threads == 0 || num_threads < -1) return "--num_threads must be -1 (all cores) or at least 1";
-  if (source_max_images < 1 || source_max_images > 1000) return "--source_max_images must be between 1 and 1000";
+  if (o.num_threads == 0 || o.num_threads < -1) return "--num_threads must be -1 (all cores) or at least 1";
+  if (o.source_max_images < 1 || o.source_max_images > 1000) return "--source_max_images must be between 1 and 1000";
+  return "";
+}
+
+}  // namespace
+
+std::string DatabaseGeneratorOptions::Check() const {
+  for (auto check : {CheckGeneratorPaths, CheckGeneratorCounts, CheckGeneratorCamera, CheckGeneratorNoise,
+                     CheckGeneratorRun}) {
+    std::string problem = check(*this);
+    if (!problem.empty()) return problem;
+  }
   return "";
 }
 

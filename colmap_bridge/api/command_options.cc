@@ -6,6 +6,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "cashash/matching/table_shape.h"
 #include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/run_resolution.h"
 #include "colmap_bridge/database.h"
@@ -119,10 +120,145 @@ void AddSpatialMatchingOptions(OptionTable* table, SpatialPairingOptions* o) {
   table->Add({"SpatialMatching.num_threads"}, &o->num_threads, "Threads of the neighbour search, -1 for all cores");
 }
 
+// The run as a whole: seed, resume, how rows are written.
+void AddRunOptions(OptionTable* table, MatcherCommandOptions* o) {
+  table->Add({"random_seed"}, &o->random_seed, "Seed of the hash projections and of RANSAC");
+  table->Add({"overwrite"}, &o->overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
+  table->Add({"write_empty_pairs"}, &o->write_empty_pairs,
+             "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
+             "them in table cashash_empty_pairs only, so that a rerun skips them)");
+  table->Add({"database_commit_seconds"}, &o->database_commit_seconds,
+             "Seconds a write transaction takes chunks before it commits (0: one transaction per chunk); a kill "
+             "loses the chunks not yet committed, which a rerun matches again");
+  table->Add({"database_synchronous"}, &o->database_synchronous,
+             "SQLite's synchronous setting for writing: FULL (safe), NORMAL (a power loss or OS crash may undo "
+             "the last commits; the file stays valid) or OFF (a power loss or OS crash may damage the database; "
+             "COLMAP's own setting)");
+}
+
+// COLMAP's FeatureMatching.* and SiftMatching.* options.
+void AddFeatureMatchingOptions(OptionTable* table, MatcherCommandOptions* o) {
+  table->Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o->sift.num_threads,
+             "CPU threads, -1 for all cores");
+  table->Add({"FeatureMatching.use_gpu", "SiftMatching.use_gpu"}, &o->use_gpu,
+             "Match on the GPU (falls back to the CPU with a warning where there is none)");
+  table->Add({"FeatureMatching.gpu_index", "SiftMatching.gpu_index"}, &o->gpu_index,
+             "CUDA device index, -1 for the first device; a list (0,1) matches on several devices, each block pair split among them");
+  table->Add({"FeatureMatching.max_num_matches", "SiftMatching.max_num_matches"}, &o->sift.max_num_matches,
+             "Features per image considered (first rows)");
+  table->Add({"FeatureMatching.guided_matching", "SiftMatching.guided_matching"}, &o->guided_matching,
+             "COLMAP's guided matching (not supported)");
+  table->Add({"FeatureMatching.skip_geometric_verification"}, &o->skip_geometric_verification,
+             "Write raw matches only, no two_view_geometries");
+  table->Add({"SiftMatching.max_ratio"}, &o->sift.max_ratio, "Lowe's ratio test on descriptor angles");
+  table->Add({"SiftMatching.max_distance"}, &o->sift.max_distance, "Largest descriptor angle (radians) accepted");
+  table->Add({"SiftMatching.cross_check"}, &o->sift.cross_check, "Keep mutual best matches only");
+}
+
+// COLMAP's TwoViewGeometry.* options and the verification's own.
+void AddTwoViewGeometryOptions(OptionTable* table, MatcherCommandOptions* o) {
+  table->Add({"TwoViewGeometry.min_num_inliers", "SiftMatching.min_num_inliers"}, &o->two_view.min_num_inliers,
+             "Fewest inliers of a verified pair");
+  table->Add({"TwoViewGeometry.max_error", "SiftMatching.max_error"}, &o->two_view.max_error,
+             "RANSAC threshold in pixels");
+  table->Add({"TwoViewGeometry.confidence", "SiftMatching.confidence"}, &o->two_view.confidence,
+             "RANSAC confidence");
+  table->Add({"TwoViewGeometry.min_num_trials"}, &o->two_view.min_num_trials, "RANSAC minimum trials");
+  table->Add({"TwoViewGeometry.max_num_trials", "SiftMatching.max_num_trials"}, &o->two_view.max_num_trials,
+             "RANSAC maximum trials");
+  table->Add({"TwoViewGeometry.min_inlier_ratio", "SiftMatching.min_inlier_ratio"}, &o->two_view.min_inlier_ratio,
+             "RANSAC minimum inlier ratio");
+  table->Add({"TwoViewGeometry.min_E_F_inlier_ratio"}, &o->two_view.min_E_F_inlier_ratio,
+             "E inliers / F inliers above which a calibrated pair keeps E");
+  table->Add({"TwoViewGeometry.max_H_inlier_ratio"}, &o->two_view.max_H_inlier_ratio,
+             "H inliers / F inliers above which a pair is planar or panoramic");
+  table->Add({"TwoViewGeometry.watermark_min_inlier_ratio"}, &o->two_view.watermark_min_inlier_ratio,
+             "Share of border inliers explained by a translation that marks a watermark");
+  table->Add({"TwoViewGeometry.watermark_border_size"}, &o->two_view.watermark_border_size,
+             "Border band for the watermark test, relative to the image diagonal");
+  table->Add({"TwoViewGeometry.detect_watermark"}, &o->two_view.detect_watermark, "Run the watermark test");
+  table->Add({"TwoViewGeometry.early_exit"}, &o->two_view.early_exit,
+             "Stop RANSAC early on pairs whose matches look like chance, and H and E once they cannot change the "
+             "decision (0 = COLMAP's full trial budget)");
+  table->Add({"TwoViewGeometry.early_exit_max_risk"}, &o->two_view.early_exit_max_risk,
+             "Largest chance, under the fitted chance model, that the full budget would have verified a stopped pair");
+  table->Add({"TwoViewGeometry.sprt"}, &o->two_view.sprt,
+             "Reject wrong RANSAC hypotheses by a sequential test before scoring them over all matches "
+             "(0 = score every hypothesis as COLMAP does)");
+  table->Add({"TwoViewGeometry.sprt_max_risk"}, &o->two_view.sprt_max_risk,
+             "Largest chance that the sequential test rejects a model which would have beaten the best so far");
+}
+
+// Block size and the memory caps the schedule is sized from; the trace.
+void AddScheduleOptions(OptionTable* table, MatcherCommandOptions* o) {
+  table->Add({"ExhaustiveMatching.block_size"}, &o->block_size,
+             "Images per block (default: from the memory caps, at most 50)", std::to_string(kDefaultBlockSize));
+  table->Add({"max_host_memory"}, &o->max_host_memory,
+             "Host memory for features, e.g. 16G or 4096 (MiB); default half the physical memory");
+  table->Add({"max_gpu_memory"}, &o->max_gpu_memory,
+             "GPU memory for matching, e.g. 8G or 4096 (MiB); default the device's free memory");
+  table->Add({"pipeline_trace_path"}, &o->pipeline_trace_path,
+             "Write each chunk's stage intervals to this CSV file (scripts/bench/pipeline_trace_summary.py reads "
+             "it); under MPI each rank writes PATH.rankN");
+}
+
+// CasHash.*: the matcher and its tables. The matcher is read as text into
+// `matcher_name`, converted once the command line is parsed.
+void AddCasHashOptions(OptionTable* table, MatcherCommandOptions* o, std::string* matcher_name) {
+  table->Add({"CasHash.matcher"}, matcher_name,
+             "auto (chosen from the data: on the GPU the cascade with the exact rematch, on the CPU the cascade "
+             "with the rematch of the pairs near the verification threshold) | cascade | bruteforce (exact reference)");
+  table->Add({"CasHash.num_tables"}, &o->cashash.num_tables,
+             "First-level hash tables; 0 = chosen with the bits from the features per image: while the exact "
+             "rematch decides 8 x 8 below 8192, 3 x 9 from there, 3 x 10 from 16384; where the cascade's matches "
+             "are kept 8 x 7 below 16384, 8 x 8 from there");
+  table->Add({"CasHash.bits_per_table"}, &o->cashash.bits_per_table,
+             "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
+  table->Add({"CasHash.tau"}, &o->cashash.tau,
+             "Largest 128-bit remap Hamming distance ranked; 0 = chosen: " + std::to_string(kCascadeTauForScreening) +
+                 " while the exact rematch decides the pairs that may verify, " +
+                 std::to_string(kCascadeTauForPrecision) +
+                 " where the cascade's own matches are kept (no rematch, guided matching)");
+  table->Add({"CasHash.top_k"}, &o->cashash.top_k, "Candidates per query whose exact distance is computed");
+  table->Add({"CasHash.exact_rematch_min_matches"}, &o->cashash.exact_rematch_min_matches,
+             "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
+             "not given: " + std::to_string(kDefaultRematchMinMatches) + ", or " +
+                 std::to_string(kBucketScreeningRematchMinMatches) +
+                 " with the 3 screening tables chosen from 8192 features per image",
+              std::to_string(kDefaultRematchMinMatches));
+  table->Add({"CasHash.exact_rematch_max_matches"}, &o->cashash.exact_rematch_max_matches,
+             "When > 0, only pairs with fewer cascade matches than this are matched again exactly; 0 = no upper "
+             "bound (CasHash.matcher auto on the CPU: 12 to 63 unless either rematch option is given)");
+}
+
+// GuidedMatching.*: Ga-CasHash.
+void AddGuidedMatchingOptions(OptionTable* table, GuidedMatchingOptions* o) {
+  table->Add({"GuidedMatching.enabled"}, &o->enabled,
+             "Ga-CasHash: match the top-scale features first, then exactly only the pairs that show overlap (within "
+             "the epipolar bands where F explains them)");
+  table->Add({"GuidedMatching.top_scale_fraction"}, &o->top_scale_fraction,
+             "Share of each image's features (largest scales) matched in stage 1");
+  table->Add({"GuidedMatching.min_num_matches"}, &o->min_num_matches,
+             "Fewest stage-1 matches for which F is estimated");
+  table->Add({"GuidedMatching.min_inlier_ratio"}, &o->min_inlier_ratio,
+             "Smallest share of stage-1 matches that are F inliers for a pair to be matched in stage 2");
+  table->Add({"GuidedMatching.max_epipolar_distance"}, &o->max_epipolar_distance,
+             "Half-width in pixels of the band around the stage-1 epipolar lines that stage-2 matches must lie in "
+             "(0: 16 for the filter of exact matches, 4 for the paper's search within the band)");
+  table->Add({"GuidedMatching.unguided_fallback"}, &o->unguided_fallback,
+             "Match pairs that stage 1 cannot guide but that have at least fallback_min_num_matches stage-1 "
+             "matches exactly, without the band (not in the paper)");
+  table->Add({"GuidedMatching.fallback_min_num_matches"}, &o->fallback_min_num_matches,
+             "Fewest stage-1 matches for which a pair that is not guided is matched without the band");
+  table->Add({"GuidedMatching.restrict_search_to_band"}, &o->restrict_search_to_band,
+             "The paper's stage 2: search candidates within the band only (accepts matches that are ambiguous in "
+             "the whole image); 0 filters exact matches by the band");
+}
+
 }  // namespace
 
-// One function because the option table reads best as one list in --help
-// order, every entry binding into the one options_description parsed below.
+// The option table reads as one list in --help order: each Add*Options adds
+// its group, all binding into the one options_description parsed below.
 ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, const char* const* argv,
                                         MatcherCommandOptions* options) {
   po::options_description description("cashash " + command + " options");
@@ -139,119 +275,14 @@ ParseOutcome ParseMatcherCommandOptions(const std::string& command, int argc, co
   }
   if (command == "sequential_matcher") AddSequentialMatchingOptions(&table, &o.sequential);
   if (command == "spatial_matcher") AddSpatialMatchingOptions(&table, &o.spatial);
-  table.Add({"random_seed"}, &o.random_seed, "Seed of the hash projections and of RANSAC");
-  table.Add({"overwrite"}, &o.overwrite, "Re-match pairs that already have results (default: resume, skipping them)");
-  table.Add({"write_empty_pairs"}, &o.write_empty_pairs,
-            "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
-            "them in table cashash_empty_pairs only, so that a rerun skips them)");
-  table.Add({"database_commit_seconds"}, &o.database_commit_seconds,
-            "Seconds a write transaction takes chunks before it commits (0: one transaction per chunk); a kill "
-            "loses the chunks not yet committed, which a rerun matches again");
-  table.Add({"database_synchronous"}, &o.database_synchronous,
-            "SQLite's synchronous setting for writing: FULL (safe), NORMAL (a power loss or OS crash may undo "
-            "the last commits; the file stays valid) or OFF (a power loss or OS crash may damage the database; "
-            "COLMAP's own setting)");
-
-  table.Add({"FeatureMatching.num_threads", "SiftMatching.num_threads"}, &o.sift.num_threads,
-            "CPU threads, -1 for all cores");
-  table.Add({"FeatureMatching.use_gpu", "SiftMatching.use_gpu"}, &o.use_gpu,
-            "Match on the GPU (falls back to the CPU with a warning where there is none)");
-  table.Add({"FeatureMatching.gpu_index", "SiftMatching.gpu_index"}, &o.gpu_index,
-            "CUDA device index, -1 for the first device; a list (0,1) matches on several devices, each block pair split among them");
-  table.Add({"FeatureMatching.max_num_matches", "SiftMatching.max_num_matches"}, &o.sift.max_num_matches,
-            "Features per image considered (first rows)");
-  table.Add({"FeatureMatching.guided_matching", "SiftMatching.guided_matching"}, &o.guided_matching,
-            "COLMAP's guided matching (not supported)");
-  table.Add({"FeatureMatching.skip_geometric_verification"}, &o.skip_geometric_verification,
-            "Write raw matches only, no two_view_geometries");
-  table.Add({"SiftMatching.max_ratio"}, &o.sift.max_ratio, "Lowe's ratio test on descriptor angles");
-  table.Add({"SiftMatching.max_distance"}, &o.sift.max_distance, "Largest descriptor angle (radians) accepted");
-  table.Add({"SiftMatching.cross_check"}, &o.sift.cross_check, "Keep mutual best matches only");
-
-  table.Add({"TwoViewGeometry.min_num_inliers", "SiftMatching.min_num_inliers"}, &o.two_view.min_num_inliers,
-            "Fewest inliers of a verified pair");
-  table.Add({"TwoViewGeometry.max_error", "SiftMatching.max_error"}, &o.two_view.max_error,
-            "RANSAC threshold in pixels");
-  table.Add({"TwoViewGeometry.confidence", "SiftMatching.confidence"}, &o.two_view.confidence,
-            "RANSAC confidence");
-  table.Add({"TwoViewGeometry.min_num_trials"}, &o.two_view.min_num_trials, "RANSAC minimum trials");
-  table.Add({"TwoViewGeometry.max_num_trials", "SiftMatching.max_num_trials"}, &o.two_view.max_num_trials,
-            "RANSAC maximum trials");
-  table.Add({"TwoViewGeometry.min_inlier_ratio", "SiftMatching.min_inlier_ratio"}, &o.two_view.min_inlier_ratio,
-            "RANSAC minimum inlier ratio");
-  table.Add({"TwoViewGeometry.min_E_F_inlier_ratio"}, &o.two_view.min_E_F_inlier_ratio,
-            "E inliers / F inliers above which a calibrated pair keeps E");
-  table.Add({"TwoViewGeometry.max_H_inlier_ratio"}, &o.two_view.max_H_inlier_ratio,
-            "H inliers / F inliers above which a pair is planar or panoramic");
-  table.Add({"TwoViewGeometry.watermark_min_inlier_ratio"}, &o.two_view.watermark_min_inlier_ratio,
-            "Share of border inliers explained by a translation that marks a watermark");
-  table.Add({"TwoViewGeometry.watermark_border_size"}, &o.two_view.watermark_border_size,
-            "Border band for the watermark test, relative to the image diagonal");
-  table.Add({"TwoViewGeometry.detect_watermark"}, &o.two_view.detect_watermark, "Run the watermark test");
-  table.Add({"TwoViewGeometry.early_exit"}, &o.two_view.early_exit,
-            "Stop RANSAC early on pairs whose matches look like chance, and H and E once they cannot change the "
-            "decision (0 = COLMAP's full trial budget)");
-  table.Add({"TwoViewGeometry.early_exit_max_risk"}, &o.two_view.early_exit_max_risk,
-            "Largest chance, under the fitted chance model, that the full budget would have verified a stopped pair");
-  table.Add({"TwoViewGeometry.sprt"}, &o.two_view.sprt,
-            "Reject wrong RANSAC hypotheses by a sequential test before scoring them over all matches "
-            "(0 = score every hypothesis as COLMAP does)");
-  table.Add({"TwoViewGeometry.sprt_max_risk"}, &o.two_view.sprt_max_risk,
-            "Largest chance that the sequential test rejects a model which would have beaten the best so far");
-
-  table.Add({"ExhaustiveMatching.block_size"}, &o.block_size,
-            "Images per block (default: from the memory caps, at most 50)", std::to_string(kDefaultBlockSize));
-  table.Add({"max_host_memory"}, &o.max_host_memory,
-            "Host memory for features, e.g. 16G or 4096 (MiB); default half the physical memory");
-  table.Add({"max_gpu_memory"}, &o.max_gpu_memory,
-            "GPU memory for matching, e.g. 8G or 4096 (MiB); default the device's free memory");
-  table.Add({"pipeline_trace_path"}, &o.pipeline_trace_path,
-            "Write each chunk's stage intervals to this CSV file (scripts/bench/pipeline_trace_summary.py reads "
-            "it); under MPI each rank writes PATH.rankN");
-
+  AddRunOptions(&table, &o);
+  AddFeatureMatchingOptions(&table, &o);
+  AddTwoViewGeometryOptions(&table, &o);
+  AddScheduleOptions(&table, &o);
   std::string matcher_name = MatcherTypeToString(o.cashash.matcher);
-  table.Add({"CasHash.matcher"}, &matcher_name,
-            "auto (chosen from the data: on the GPU the cascade with the exact rematch, on the CPU the cascade "
-            "with the rematch of the pairs near the verification threshold) | cascade | bruteforce (exact reference)");
-  table.Add({"CasHash.num_tables"}, &o.cashash.num_tables,
-            "First-level hash tables; 0 = chosen with the bits from the features per image: while the exact "
-            "rematch decides 8 x 8 below 8192, 3 x 9 from there, 3 x 10 from 16384; where the cascade's matches "
-            "are kept 8 x 7 below 16384, 8 x 8 from there");
-  table.Add({"CasHash.bits_per_table"}, &o.cashash.bits_per_table,
-            "Bits per first-level table; 0 = chosen from the features per image (see CasHash.num_tables)");
-  table.Add({"CasHash.tau"}, &o.cashash.tau,
-            "Largest 128-bit remap Hamming distance ranked; 0 = chosen: 32 while the exact rematch decides the pairs "
-            "that may verify, 43 where the cascade's own matches are kept (no rematch, guided matching)");
-  table.Add({"CasHash.top_k"}, &o.cashash.top_k, "Candidates per query whose exact distance is computed");
-  table.Add({"CasHash.exact_rematch_min_matches"}, &o.cashash.exact_rematch_min_matches,
-            "Pairs with at least this many cascade matches are matched again exactly (0 = keep the cascade's); "
-            "not given: 12, or 8 with the 3 screening tables chosen from 8192 features per image",
-            std::to_string(kDefaultRematchMinMatches));
-  table.Add({"CasHash.exact_rematch_max_matches"}, &o.cashash.exact_rematch_max_matches,
-            "When > 0, only pairs with fewer cascade matches than this are matched again exactly; 0 = no upper "
-            "bound (CasHash.matcher auto on the CPU: 12 to 63 unless either rematch option is given)");
-
+  AddCasHashOptions(&table, &o, &matcher_name);
   if (command == "guided_matcher") o.guided.enabled = true;
-  table.Add({"GuidedMatching.enabled"}, &o.guided.enabled,
-            "Ga-CasHash: match the top-scale features first, then exactly only the pairs that show overlap (within "
-            "the epipolar bands where F explains them)");
-  table.Add({"GuidedMatching.top_scale_fraction"}, &o.guided.top_scale_fraction,
-            "Share of each image's features (largest scales) matched in stage 1");
-  table.Add({"GuidedMatching.min_num_matches"}, &o.guided.min_num_matches,
-            "Fewest stage-1 matches for which F is estimated");
-  table.Add({"GuidedMatching.min_inlier_ratio"}, &o.guided.min_inlier_ratio,
-            "Smallest share of stage-1 matches that are F inliers for a pair to be matched in stage 2");
-  table.Add({"GuidedMatching.max_epipolar_distance"}, &o.guided.max_epipolar_distance,
-            "Half-width in pixels of the band around the stage-1 epipolar lines that stage-2 matches must lie in "
-            "(0: 16 for the filter of exact matches, 4 for the paper's search within the band)");
-  table.Add({"GuidedMatching.unguided_fallback"}, &o.guided.unguided_fallback,
-            "Match pairs that stage 1 cannot guide but that have at least fallback_min_num_matches stage-1 "
-            "matches exactly, without the band (not in the paper)");
-  table.Add({"GuidedMatching.fallback_min_num_matches"}, &o.guided.fallback_min_num_matches,
-            "Fewest stage-1 matches for which a pair that is not guided is matched without the band");
-  table.Add({"GuidedMatching.restrict_search_to_band"}, &o.guided.restrict_search_to_band,
-            "The paper's stage 2: search candidates within the band only (accepts matches that are ambiguous in "
-            "the whole image); 0 filters exact matches by the band");
+  AddGuidedMatchingOptions(&table, &o.guided);
 
   po::variables_map vm;
   try {

@@ -125,9 +125,9 @@ def match_pairs(database_path, pairs, options=None, progress=None, **kwargs):
     return _core.match_pairs(str(database_path), pairs, make_options(options, **kwargs), progress)
 
 
-def match_retrieval(database_path, num_images=100, options=None, progress=None, num_nearest_neighbors=5,
-                    max_num_features=-1, retrieval_num_tables=None, bits_per_word=0, transitive_rounds=0,
-                    vocab_tree_path="", **kwargs):
+def match_retrieval(database_path, num_images=None, options=None, progress=None, num_nearest_neighbors=None,
+                    max_num_features=None, retrieval_num_tables=None, bits_per_word=None, transitive_rounds=None,
+                    vocab_tree_path=None, **kwargs):
     """Like match_exhaustive, for the pairs retrieval chooses: each image with
     its num_images most similar images, similarity from visual words taken
     from the cascade's hash codes (no vocabulary tree; docs/retrieval.md).
@@ -137,19 +137,22 @@ def match_retrieval(database_path, num_images=100, options=None, progress=None, 
     the words (Retrieval.num_tables, Retrieval.bits_per_word; 0 bits =
     chosen from the features per image). transitive_rounds > 0 then matches
     the pairs the verified graph implies, as COLMAP's transitive_matcher.
-    vocab_tree_path is accepted and not used (a warning says so).
+    vocab_tree_path is accepted and not used (a warning says so). A keyword
+    left out keeps the value of ``options`` (by default RetrievalOptions'
+    and MatchingOptions', the command line's defaults).
     """
     opts = make_options(options, **kwargs)
     retrieval = opts.retrieval
-    retrieval.num_images = int(num_images)
-    retrieval.num_nearest_neighbors = int(num_nearest_neighbors)
-    retrieval.max_num_features = int(max_num_features)
-    if retrieval_num_tables is not None:
-        retrieval.num_tables = int(retrieval_num_tables)
-    retrieval.bits_per_word = int(bits_per_word)
+    given = {"num_images": num_images, "num_nearest_neighbors": num_nearest_neighbors,
+             "max_num_features": max_num_features, "num_tables": retrieval_num_tables, "bits_per_word": bits_per_word}
+    for name, value in given.items():
+        if value is not None:
+            setattr(retrieval, name, int(value))
     opts.retrieval = retrieval
-    opts.transitive_rounds = int(transitive_rounds)
-    opts.vocab_tree_path = str(vocab_tree_path)
+    if transitive_rounds is not None:
+        opts.transitive_rounds = int(transitive_rounds)
+    if vocab_tree_path is not None:
+        opts.vocab_tree_path = str(vocab_tree_path)
     return _core.match_retrieval(str(database_path), opts, progress)
 
 

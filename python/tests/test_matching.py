@@ -1,5 +1,6 @@
 """cashash's Python API: in-memory matching and matching a database."""
 
+import inspect
 import sqlite3
 
 import numpy as np
@@ -135,6 +136,14 @@ def test_match_retrieval(scene_database):
     assert again["pairs_requested"] == 3 and again["pairs_skipped"] == summary["pairs_requested"]
     with pytest.raises(ValueError, match="--VocabTreeMatching.num_images must be >= 1"):
         cashash.match_retrieval(scene_database, num_images=0)
+
+
+def test_match_retrieval_keeps_one_set_of_defaults():
+    # RetrievalOptions' defaults (the command line's) are the only ones: a
+    # keyword default of match_retrieval's own would drift from them.
+    for name, parameter in inspect.signature(cashash.match_retrieval).parameters.items():
+        if parameter.default is not inspect.Parameter.empty:
+            assert parameter.default is None, f"match_retrieval's {name} has a default of its own"
 
 
 def test_database_errors_carry_cli_messages(tmp_path, scene_database):

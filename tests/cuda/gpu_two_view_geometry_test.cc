@@ -25,6 +25,7 @@
 #include "cashash/pipeline/verification_pairs_file.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/geometry/two_view_geometry.h"
+#include "colmap_bridge/api/command_options.h"
 
 namespace cashash {
 namespace {
@@ -77,6 +78,19 @@ std::vector<Case> SyntheticCases() {
     }
   }
   return cases;
+}
+
+// A run's chunks in flight (MatcherCommandOptions, which the bridge builds
+// without CUDA) and a GpuVerifierConfig's are one default, and the run's
+// check (1 to 8) is the verifier's range.
+TEST(GpuVerifierConfig, DefaultsAreTheRunOptionsDefaults) {
+  EXPECT_EQ(colmap::MatcherCommandOptions().gpu_verifications_in_flight,
+            cuda::GpuVerifierConfig().verifications_in_flight);
+  colmap::MatcherCommandOptions options;
+  options.gpu_verifications_in_flight = cuda::kMaxGpuVerificationsInFlight;
+  EXPECT_EQ(colmap::CheckRunOptions(options), "");
+  options.gpu_verifications_in_flight = cuda::kMaxGpuVerificationsInFlight + 1;
+  EXPECT_NE(colmap::CheckRunOptions(options), "");
 }
 
 TEST(GpuTwoViewRansac, SyntheticPairsAgreeWithCpu) {

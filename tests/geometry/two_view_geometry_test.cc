@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 
 #include "cashash/geometry/camera_projection.h"
+#include "cashash/geometry/ransac.h"
 #include "ordered_draws.h"
 #include "synthetic_two_view.h"
 
@@ -42,6 +43,21 @@ bool IsSubsequence(const FeatureMatches& sub, const FeatureMatches& all) {
     if (j < sub.size() && sub[j] == m) ++j;
   }
   return j == sub.size();
+}
+
+// TwoViewGeometryOptions holds the RANSAC settings a user gives
+// (TwoViewGeometry.*) and RansacOptions those of one estimator run, as
+// COLMAP's TwoViewGeometryOptions and RANSACOptions; the verification copies
+// the first into the second. Their defaults are one set: COLMAP's
+// two-view ones.
+TEST(TwoViewGeometry, RansacDefaultsAreTheTwoViewDefaults) {
+  const TwoViewGeometryOptions two_view;
+  const RansacOptions ransac;
+  EXPECT_EQ(ransac.max_error, two_view.max_error);
+  EXPECT_EQ(ransac.confidence, two_view.confidence);
+  EXPECT_EQ(ransac.min_num_trials, two_view.min_num_trials);
+  EXPECT_EQ(ransac.max_num_trials, two_view.max_num_trials);
+  EXPECT_EQ(ransac.min_inlier_ratio, two_view.min_inlier_ratio);
 }
 
 TEST(TwoViewGeometry, GeneralSceneWithPriorsIsCalibrated) {

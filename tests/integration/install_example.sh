@@ -17,6 +17,14 @@ trap 'rm -rf "$WORK"' EXIT
 cmake --install "$BUILD" --prefix "$WORK/prefix" --component devel > "$WORK/install.log"
 test -f "$WORK/prefix/lib/cmake/cashash/cashashConfig.cmake"
 test -f "$WORK/prefix/include/colmap_bridge/api/matching_api.h"
+# Only the API headers and what they include: the pipeline's and the
+# database's internals stay private.
+for internal in cashash/pipeline/feature_cache.h cashash/pipeline/blocking_queue.h colmap_bridge/database.h; do
+  if [[ -e "$WORK/prefix/include/$internal" ]]; then
+    echo "FAIL: the internal header $internal is installed"
+    exit 1
+  fi
+done
 
 launcher=()
 if command -v ccache > /dev/null; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi

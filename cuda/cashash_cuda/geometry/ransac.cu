@@ -379,9 +379,194 @@ __device__ __forceinline__ TrialOutcome RunTrial(uint64_t seed, int trial, const
   return out;
 }
 
-// One function because each round's phases (per-thread sample and score in
-// registers, trial-order walk, stopping rule) share round state and block-wide
-// __syncthreads barriers; scoring and refits are already BlockScore/BlockLocalSolve.
+// Thread 0 clears the block's running state before a pair.
+template <int Threads>
+__device__ __forceinline__ void ResetPairState(BlockScratch<Threads>& s) {
+  if (threadIdx.x == 0) {
+    s.best_key = 0;
+    s.best_count = 0;
+    s.num_local_refits = 0;
+    s.window_support_sum = 0;
+    s.window_hypotheses = 0;
+    s.hypotheses = 0;
+    s.exit_early = 0;
+  }
+}
+
+// The output of a pair with fewer matches than a sample: no model, no trial.
+__device__ __forceinline__ void WriteNoModel(RansacPairOutput* output) {
+  if (threadIdx.x == 0) {
+    output->success = 0;
+    output->num_inliers = 0;
+    output->num_trials = 0;
+    output->num_local_refits = 0;
+    output->early_exit = 0;
+  }
+}
+
+// Where a pair's run may stop before its trial cap because no further trial
+// can change the two-view decision.
+struct DecisionLimits {
+  // H after F: fewest inliers that can change the decision and the trials
+  // after which such a model would have been found (the CPU's
+  // RansacOptions::relevant_inliers); 0: no such limit.
+  int relevant = 0;
+  int relevant_trials = 0;
+  // E after F and H: from `settled` inliers on, more trials cannot change
+  // the decision (the CPU's TwoViewEssentialSettledInliers); 0: none.
+  int settled = 0;
+};
+
+template <typename Model>
+__device__ __forceinline__ DecisionLimits DecisionLimitsOfPair(const RansacLaunch& launch,
+                                                               const RansacPairInput& input, int pair, int n) {
+  DecisionLimits limits;
+  limits.relevant_trials = launch.max_trials;
+  if (launch.relevance != nullptr) {
+    const RansacPairOutput& f = launch.relevance[pair];
+    const int num_f = f.success ? f.num_inliers : 0;
+    limits.relevant = RelevantInliers(launch.relevance_ratio, num_f, launch.relevance_min_inliers);
+    limits.relevant_trials = max(launch.min_trials, RequiredTrials(limits.relevant, n, launch.confidence,
+                                                                   launch.trials_multiplier, Model::kSampleSize));
+  }
+  if (launch.reference_F != nullptr && input.reference >= 0) {
+    const RansacPairOutput& f = launch.reference_F[input.reference];
+    const RansacPairOutput& h = launch.reference_H[input.reference];
+    limits.settled = EssentialSettledInliers(launch.reference_E_F_ratio, launch.reference_max_H_ratio,
+                                             launch.reference_min_inliers, f.success ? f.num_inliers : 0,
+                                             h.success ? h.num_inliers : 0, n);
+  }
+  return limits;
+}
+
+// Publishes this thread's trial for the walk: its best key and model, and
+// its hypotheses (and, in the window, its supports) for the early exit.
+template <typename Model, int Threads>
+__device__ __forceinline__ void PublishTrial(const TrialOutcome& mine, bool in_window,
+                                             const RansacEarlyExitOptions& early,
+                                             const double (&models)[Model::kMaxModels][9], BlockScratch<Threads>& s) {
+  s.keys[threadIdx.x] = mine.key;
+  if (early.min_num_inliers > 0) {
+    if (mine.hypotheses > 0) atomicAdd(&s.hypotheses, mine.hypotheses);
+    if (in_window && mine.hypotheses > 0) {
+      atomicAdd(&s.window_hypotheses, mine.hypotheses);
+      atomicAdd(&s.window_support_sum, static_cast<double>(mine.support_sum));
+    }
+  }
+  if (mine.model >= 0) {
+    for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[mine.model][k];
+  }
+}
+
+// Local optimisation of the best model, as the CPU path: refit while the
+// inlier set grows, each model of a refit compared in turn.
+template <typename Model, int Threads>
+__device__ __forceinline__ void LocallyOptimizeBest(const float4* points, int n, float threshold,
+                                                    BlockScratch<Threads>& s) {
+  for (int it = 0; it < kMaxLocalIterations; ++it) {
+    const int previous = s.best_count;
+    float f[9];
+    for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
+    BlockLocalSolve<Model, Threads>(f, points, n, threshold, s);
+    // Each model of the refit in turn, as the CPU loop compares them.
+    for (int l = 0; l < s.num_local; ++l) {
+      float lf[9];
+      for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_models[l][k]);
+      int count;
+      float sum;
+      BlockScore<Model, Threads>(lf, points, n, threshold, s, &count, &sum);
+      // Only thread 0 reads the best here (others would race with its write).
+      if (threadIdx.x == 0) {
+        const unsigned long long key = SupportKey(count, sum);
+        if (key > s.best_key) {
+          for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_models[l][k];
+          s.best_key = key;
+          s.best_count = count;
+        }
+      }
+    }
+    __syncthreads();
+    if (s.best_count <= previous) break;
+  }
+}
+
+// Walks the published trials of a round in trial order as the CPU loop
+// would: each trial that beats the best so far becomes the best and is
+// refined at once (refining only the round's winner would refine lucky
+// wide-band models that a least-squares refit cannot improve, and lose
+// inliers against the CPU). Updates the adaptive trial cap.
+template <typename Model, int Threads>
+__device__ __forceinline__ void WalkRound(const RansacLaunch& launch, const float4* points, int n, float threshold,
+                                          BlockScratch<Threads>& s, int* dyn_max_trials) {
+  unsigned long long best_key = s.best_key;
+  __syncthreads();  // everyone has read the best before thread 0 may change it
+  for (int t = 0; t < Threads; ++t) {
+    if (s.keys[t] <= best_key) continue;  // same decision in every thread
+    if (threadIdx.x == 0) {
+      for (int k = 0; k < 9; ++k) s.best_model[k] = s.models[t][k];
+      s.best_key = s.keys[t];
+      s.best_count = static_cast<int>(s.keys[t] >> 32);
+    }
+    __syncthreads();
+    if (s.best_count > Model::kSampleSize && s.best_count >= Model::kMinLocalSize) {
+      LocallyOptimizeBest<Model, Threads>(points, n, threshold, s);
+    }
+    *dyn_max_trials = RequiredTrials(s.best_count, n, launch.confidence, launch.trials_multiplier,
+                                     Model::kSampleSize);
+    best_key = s.best_key;
+    __syncthreads();  // everyone has read the best before thread 0 may change it
+  }
+}
+
+// COLMAP's stopping rule after `trials_done` trials (the cap, the adaptive
+// cap past min_num_trials), the decision limits and the early exit; the
+// last two set s.exit_early. Ends on a barrier, so every thread decides
+// alike.
+template <typename Model, int Threads>
+__device__ __forceinline__ bool RunEndsAfterRound(const RansacLaunch& launch, const DecisionLimits& limits, int n,
+                                                  int trials_done, int dyn_max_trials, BlockScratch<Threads>& s) {
+  const RansacEarlyExitOptions& early = launch.early_exit;
+  const bool irrelevant =
+      limits.relevant > 0 && s.best_count < limits.relevant && trials_done >= limits.relevant_trials;
+  const bool decided = limits.settled > 0 && s.best_count >= limits.settled && trials_done >= launch.min_trials;
+  const bool stop = trials_done >= launch.max_trials ||
+                    (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant || decided;
+  if ((irrelevant || decided) && threadIdx.x == 0) s.exit_early = 1;
+  if (!stop && threadIdx.x == 0 && RansacEarlyExitCheckpoint(early, trials_done) &&
+      RansacShouldExitEarly(early, n, Model::kSampleSize, s.window_support_sum, s.window_hypotheses,
+                            s.best_count, s.hypotheses, trials_done, launch.max_trials - trials_done)) {
+    s.exit_early = 1;
+  }
+  __syncthreads();
+  return stop || s.exit_early;
+}
+
+// The best model's inlier mask and the pair's output.
+template <typename Model, int Threads>
+__device__ __forceinline__ void WritePairResult(const RansacLaunch& launch, const RansacPairInput& input,
+                                                RansacPairOutput* output, const float4* points, int n,
+                                                float threshold, int trials_done, const BlockScratch<Threads>& s) {
+  const bool success = s.best_key != 0 && s.best_count >= Model::kSampleSize;
+  uint8_t* mask = launch.masks + input.offset;
+  float f[9];
+  for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
+  for (int i = threadIdx.x; i < n; i += Threads) {
+    mask[i] = success && Model::Residual(f, points[i]) <= threshold ? 1 : 0;
+  }
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < 9; ++k) output->model[k] = s.best_model[k];
+    output->success = success ? 1 : 0;
+    output->num_inliers = s.best_count;
+    output->num_trials = trials_done;
+    output->num_local_refits = s.num_local_refits;
+    output->early_exit = s.exit_early;
+  }
+}
+
+// One pair on one block, round by round: every thread runs a trial
+// (RunTrial), the block walks them in trial order (WalkRound), then the
+// stopping rule (RunEndsAfterRound). The steps are inlined helpers sharing
+// the round state and block-wide __syncthreads barriers.
 template <typename Model, int Threads>
 __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cached_points, BlockScratch<Threads>& s) {
   const RansacPairInput input = launch.pairs[pair];
@@ -394,52 +579,18 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
     for (int i = threadIdx.x; i < n; i += Threads) cached_points[i] = points[i];
     points = cached_points;
   }
-  if (threadIdx.x == 0) {
-    s.best_key = 0;
-    s.best_count = 0;
-    s.num_local_refits = 0;
-    s.window_support_sum = 0;
-    s.window_hypotheses = 0;
-    s.hypotheses = 0;
-    s.exit_early = 0;
-  }
+  ResetPairState(s);
   __syncthreads();
   RansacPairOutput* output = launch.outputs + pair;
   if (n < Model::kSampleSize) {
-    if (threadIdx.x == 0) {
-      output->success = 0;
-      output->num_inliers = 0;
-      output->num_trials = 0;
-      output->num_local_refits = 0;
-      output->early_exit = 0;
-    }
+    WriteNoModel(output);
     return;
   }
 
   int dyn_max_trials = launch.max_trials;
   int trials_done = 0;
   const RansacEarlyExitOptions& early = launch.early_exit;
-  // Fewest inliers that can change the decision (H after F) and the trials
-  // after which such a model would have been found: the CPU's
-  // RansacOptions::relevant_inliers.
-  int relevant = 0, relevant_trials = launch.max_trials;
-  if (launch.relevance != nullptr) {
-    const RansacPairOutput& f = launch.relevance[pair];
-    const int num_f = f.success ? f.num_inliers : 0;
-    relevant = RelevantInliers(launch.relevance_ratio, num_f, launch.relevance_min_inliers);
-    relevant_trials = max(launch.min_trials, RequiredTrials(relevant, n, launch.confidence, launch.trials_multiplier,
-                                                            Model::kSampleSize));
-  }
-  // E after F and H: from `settled` inliers on, more trials cannot change
-  // the decision (the CPU's TwoViewEssentialSettledInliers).
-  int settled = 0;
-  if (launch.reference_F != nullptr && input.reference >= 0) {
-    const RansacPairOutput& f = launch.reference_F[input.reference];
-    const RansacPairOutput& h = launch.reference_H[input.reference];
-    settled = EssentialSettledInliers(launch.reference_E_F_ratio, launch.reference_max_H_ratio,
-                                      launch.reference_min_inliers, f.success ? f.num_inliers : 0,
-                                      h.success ? h.num_inliers : 0, n);
-  }
+  const DecisionLimits limits = DecisionLimitsOfPair<Model>(launch, input, pair, n);
   const int sprt_step = SprtOrderStep(n);
   // The first round runs COLMAP's min_num_trials only where that is at most
   // half a round: a pair that its first good model settles (most verified
@@ -464,97 +615,14 @@ __device__ void LoRansacBlock(const RansacLaunch& launch, int pair, float4* cach
       mine = RunTrial<Model>(input.seed, trial, points, cached, cached_points, global_points, n, threshold, in_window,
                              must_reach, s.best_count, sprt, sprt_step, models);
     }
-    // Publish every trial's best model, then walk the round in trial order
-    // as the CPU loop would: each trial that beats the best so far becomes
-    // the best and is refined at once (refining only the round's winner
-    // would refine lucky wide-band models that a least-squares refit cannot
-    // improve, and lose inliers against the CPU).
-    s.keys[threadIdx.x] = mine.key;
-    if (early.min_num_inliers > 0) {
-      if (mine.hypotheses > 0) atomicAdd(&s.hypotheses, mine.hypotheses);
-      if (in_window && mine.hypotheses > 0) {
-        atomicAdd(&s.window_hypotheses, mine.hypotheses);
-        atomicAdd(&s.window_support_sum, static_cast<double>(mine.support_sum));
-      }
-    }
-    if (mine.model >= 0) {
-      for (int k = 0; k < 9; ++k) s.models[threadIdx.x][k] = models[mine.model][k];
-    }
+    PublishTrial<Model, Threads>(mine, in_window, early, models, s);
     __syncthreads();
-    unsigned long long best_key = s.best_key;
-    __syncthreads();  // everyone has read the best before thread 0 may change it
-    for (int t = 0; t < Threads; ++t) {
-      if (s.keys[t] <= best_key) continue;  // same decision in every thread
-      if (threadIdx.x == 0) {
-        for (int k = 0; k < 9; ++k) s.best_model[k] = s.models[t][k];
-        s.best_key = s.keys[t];
-        s.best_count = static_cast<int>(s.keys[t] >> 32);
-      }
-      __syncthreads();
-      // Local optimisation, as the CPU path: refit while the inlier set grows.
-      if (s.best_count > Model::kSampleSize && s.best_count >= Model::kMinLocalSize) {
-        for (int it = 0; it < kMaxLocalIterations; ++it) {
-          const int previous = s.best_count;
-          float f[9];
-          for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
-          BlockLocalSolve<Model, Threads>(f, points, n, threshold, s);
-          // Each model of the refit in turn, as the CPU loop compares them.
-          for (int l = 0; l < s.num_local; ++l) {
-            float lf[9];
-            for (int k = 0; k < 9; ++k) lf[k] = static_cast<float>(s.local_models[l][k]);
-            int count;
-            float sum;
-            BlockScore<Model, Threads>(lf, points, n, threshold, s, &count, &sum);
-            // Only thread 0 reads the best here (others would race with its write).
-            if (threadIdx.x == 0) {
-              const unsigned long long key = SupportKey(count, sum);
-              if (key > s.best_key) {
-                for (int k = 0; k < 9; ++k) s.best_model[k] = s.local_models[l][k];
-                s.best_key = key;
-                s.best_count = count;
-              }
-            }
-          }
-          __syncthreads();
-          if (s.best_count <= previous) break;
-        }
-      }
-      dyn_max_trials = RequiredTrials(s.best_count, n, launch.confidence, launch.trials_multiplier,
-                                      Model::kSampleSize);
-      best_key = s.best_key;
-      __syncthreads();  // everyone has read the best before thread 0 may change it
-    }
+    WalkRound<Model, Threads>(launch, points, n, threshold, s, &dyn_max_trials);
     trials_done = min(round_end, launch.max_trials);
     round_start = round_end;
-    const bool irrelevant = relevant > 0 && s.best_count < relevant && trials_done >= relevant_trials;
-    const bool decided = settled > 0 && s.best_count >= settled && trials_done >= launch.min_trials;
-    const bool stop = trials_done >= launch.max_trials ||
-                      (trials_done >= dyn_max_trials && trials_done >= launch.min_trials) || irrelevant || decided;
-    if ((irrelevant || decided) && threadIdx.x == 0) s.exit_early = 1;
-    if (!stop && threadIdx.x == 0 && RansacEarlyExitCheckpoint(early, trials_done) &&
-        RansacShouldExitEarly(early, n, Model::kSampleSize, s.window_support_sum, s.window_hypotheses,
-                              s.best_count, s.hypotheses, trials_done, launch.max_trials - trials_done)) {
-      s.exit_early = 1;
-    }
-    __syncthreads();
-    if (stop || s.exit_early) break;
+    if (RunEndsAfterRound<Model, Threads>(launch, limits, n, trials_done, dyn_max_trials, s)) break;
   }
-
-  const bool success = s.best_key != 0 && s.best_count >= Model::kSampleSize;
-  uint8_t* mask = launch.masks + input.offset;
-  float f[9];
-  for (int k = 0; k < 9; ++k) f[k] = static_cast<float>(s.best_model[k]);
-  for (int i = threadIdx.x; i < n; i += Threads) {
-    mask[i] = success && Model::Residual(f, points[i]) <= threshold ? 1 : 0;
-  }
-  if (threadIdx.x == 0) {
-    for (int k = 0; k < 9; ++k) output->model[k] = s.best_model[k];
-    output->success = success ? 1 : 0;
-    output->num_inliers = s.best_count;
-    output->num_trials = trials_done;
-    output->num_local_refits = s.num_local_refits;
-    output->early_exit = s.exit_early;
-  }
+  WritePairResult<Model, Threads>(launch, input, output, points, n, threshold, trials_done, s);
 }
 
 // F blocks first, then H blocks, in one grid: no tail between two launches.

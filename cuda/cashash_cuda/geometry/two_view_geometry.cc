@@ -45,6 +45,217 @@ Eigen::Matrix3d FromRowMajor(const double* v) {
   return m;
 }
 
+// One batch's slots. F's pairs take slots [0, num_pairs), H's the same pairs
+// in [num_pairs, 2 num_pairs), over one shared point array, largest pairs
+// first (LargestFirst, launch_order.h: blocks start roughly in order; big
+// ones last would leave a long tail): slot j holds pair order[j]. E's pairs
+// (their own points, in normalised camera coordinates) follow, again largest
+// first: slot 2 num_pairs + j holds pair order_E[j]. E's points follow F/H's
+// in the point array (offsets from the array's start); its masks follow F's
+// and H's.
+struct RansacBatchLayout {
+  size_t num_pairs = 0;
+  std::vector<size_t> order;
+  std::vector<size_t> order_E;
+  std::vector<RansacPairInput> inputs;  // one per slot
+  size_t total = 0;                     // F/H points
+  size_t total_E = 0;                   // E points
+  int max_count = 0;                    // most points of an F/H pair
+  int max_count_E = 0;                  // most points of an E pair
+
+  size_t num_E() const { return order_E.size(); }
+  size_t all_points() const { return total + total_E; }
+  size_t mask_bytes() const { return 2 * total + total_E; }
+};
+
+RansacBatchLayout LayOutBatch(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
+                              const std::vector<const EssentialPoints*>& essential,
+                              const TwoViewGeometryOptions& options) {
+  RansacBatchLayout layout;
+  const size_t num_pairs = pairs.size();
+  layout.num_pairs = num_pairs;
+  std::vector<size_t> matches_per_pair(num_pairs);
+  for (size_t k = 0; k < num_pairs; ++k) matches_per_pair[k] = pairs[k]->normalized.size();
+  layout.order = LargestFirst(matches_per_pair);
+  const std::vector<size_t>& order = layout.order;
+  std::vector<int> slot_E;  // F/H slot of each E pair
+  for (size_t j = 0; j < essential.size(); ++j) {
+    if (essential[order[j]] == nullptr) continue;
+    layout.order_E.push_back(order[j]);
+    slot_E.push_back(static_cast<int>(j));
+  }
+  const size_t num_E = layout.num_E();
+  std::vector<RansacPairInput>& inputs = layout.inputs;
+  inputs.resize(2 * num_pairs + num_E);
+  for (size_t j = 0; j < num_pairs; ++j) {
+    const size_t k = order[j];
+    const size_t n = pairs[k]->normalized.size();
+    if (layout.total + n > static_cast<size_t>(INT32_MAX)) {
+      throw std::runtime_error("GPU verification batch too large");
+    }
+    RansacPairInput& f = inputs[j];
+    f.offset = static_cast<int>(layout.total);
+    f.count = static_cast<int>(n);
+    f.squared_threshold = static_cast<float>(NormalizedSquaredThreshold(*pairs[k], options));
+    f.seed = DeriveSeed(seeds[k], kSeedF);
+    RansacPairInput& h = inputs[num_pairs + j];
+    h = f;
+    h.seed = DeriveSeed(seeds[k], kSeedH);
+    layout.total += n;
+    layout.max_count = std::max(layout.max_count, f.count);
+  }
+  for (size_t j = 0; j < num_E; ++j) {
+    const EssentialPoints& e = *essential[layout.order_E[j]];
+    const size_t n = e.world.size();
+    if (layout.total + layout.total_E + n > static_cast<size_t>(INT32_MAX)) {
+      throw std::runtime_error("GPU verification batch too large");
+    }
+    RansacPairInput& in = inputs[2 * num_pairs + j];
+    in.offset = static_cast<int>(layout.total + layout.total_E);
+    in.count = static_cast<int>(n);
+    // As LoRansac compares: float residuals against float(max_error^2).
+    in.squared_threshold = static_cast<float>(e.max_error * e.max_error);
+    in.seed = DeriveSeed(seeds[layout.order_E[j]], kSeedE);
+    in.reference = slot_E[j];
+    layout.total_E += n;
+    layout.max_count_E = std::max(layout.max_count_E, in.count);
+  }
+  return layout;
+}
+
+// Packing and unpacking run on all cores: at tens of thousands of pairs per
+// second they would otherwise cost as much as the kernels.
+void PackPoints(const RansacBatchLayout& layout, const std::vector<const TwoViewPoints*>& pairs,
+                const std::vector<const EssentialPoints*>& essential, float4* host_points) {
+  const size_t num_pairs = layout.num_pairs;
+  ParallelFor(num_pairs + layout.num_E(), -1, [&](size_t j) {
+    const PointPairs& p =
+        j < num_pairs ? pairs[layout.order[j]]->normalized : essential[layout.order_E[j - num_pairs]]->world;
+    float4* out = host_points + layout.inputs[j < num_pairs ? j : num_pairs + j].offset;
+    for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
+  });
+}
+
+// The kernels' launches over the device buffers of one batch.
+struct RansacLaunches {
+  RansacLaunch F, H, E;
+  bool E_after_F_and_H = false;
+};
+
+RansacLaunches MakeLaunches(const RansacBatchLayout& layout, const TwoViewGeometryOptions& options,
+                            float4* points, RansacPairInput* inputs, RansacPairOutput* outputs, uint8_t* masks) {
+  const size_t num_pairs = layout.num_pairs;
+  RansacOptions ransac;
+  ransac.confidence = options.confidence;
+  ransac.min_num_trials = options.min_num_trials;
+  ransac.max_num_trials = options.max_num_trials;
+  ransac.min_inlier_ratio = options.min_inlier_ratio;
+  RansacLaunches launches;
+  RansacLaunch& F_launch = launches.F;
+  F_launch.points = points;
+  F_launch.num_pairs = static_cast<int>(num_pairs);
+  F_launch.min_trials = options.min_num_trials;
+  F_launch.confidence = options.confidence;
+  F_launch.trials_multiplier = ransac.num_trials_multiplier;
+  F_launch.shared_points = std::min(layout.max_count, kRansacMaxSharedPoints);
+  F_launch.early_exit = TwoViewEarlyExitOptions(options);
+  F_launch.sprt_max_risk = TwoViewSprtMaxRisk(options);
+  RansacLaunch& H_launch = launches.H;
+  RansacLaunch& E_launch = launches.E;
+  H_launch = F_launch;
+  E_launch = F_launch;
+  F_launch.pairs = inputs;
+  F_launch.outputs = outputs;
+  F_launch.masks = masks;
+  F_launch.max_trials = RansacMaxTrials(ransac, 7);
+  H_launch.pairs = inputs + num_pairs;
+  H_launch.outputs = outputs + num_pairs;
+  H_launch.masks = masks + layout.total;
+  H_launch.max_trials = RansacMaxTrials(ransac, 4);
+  if (options.early_exit) {
+    // H only matters above a share of F's inliers: it runs after F and
+    // stops once no model that could change the decision exists.
+    H_launch.relevance = F_launch.outputs;
+    H_launch.relevance_ratio = TwoViewRelevantHomographyRatio(options);
+    H_launch.relevance_min_inliers = std::max(0, options.min_num_inliers);
+  }
+  // E's masks sit at 2 total + (offset - total): the kernel indexes masks by
+  // the pair's point offset, so its base is shifted back by `total`.
+  E_launch.num_pairs = static_cast<int>(layout.num_E());
+  E_launch.pairs = inputs + 2 * num_pairs;
+  E_launch.outputs = outputs + 2 * num_pairs;
+  E_launch.masks = masks + layout.total;
+  E_launch.max_trials = RansacMaxTrials(ransac, 5);
+  E_launch.shared_points = std::min(layout.max_count_E, kEssentialMaxSharedPoints);
+  launches.E_after_F_and_H = options.early_exit;
+  if (launches.E_after_F_and_H) {
+    // E reads F's and H's counts and stops once it cannot change the
+    // decision (TwoViewEssentialSettledInliers): many of its trials were on
+    // pairs whose configuration was settled long before the cap.
+    E_launch.reference_F = F_launch.outputs;
+    E_launch.reference_H = H_launch.outputs;
+    E_launch.reference_E_F_ratio = options.min_E_F_inlier_ratio;
+    E_launch.reference_max_H_ratio = options.max_H_inlier_ratio;
+    E_launch.reference_min_inliers = TwoViewEssentialSettledMinInliers(options);
+  }
+  return launches;
+}
+
+// One model's estimate from the kernel's output; the model as the kernel
+// left it (row-major, normalised coordinates).
+void ReadEstimate(const RansacPairOutput& out, const uint8_t* mask, int count, TwoViewModelEstimate* e) {
+  e->success = out.success != 0;
+  e->num_inliers = e->success ? out.num_inliers : 0;
+  e->num_trials = out.num_trials;
+  e->early_exit = out.early_exit != 0;
+  if (e->success) {
+    e->model = FromRowMajor(out.model);
+    e->inlier_mask.assign(mask, mask + count);
+  }
+}
+
+void UnpackEstimates(const RansacBatchLayout& layout, const std::vector<const TwoViewPoints*>& pairs,
+                     const RansacPairOutput* outputs, const uint8_t* masks, std::vector<TwoViewModelEstimate>* F,
+                     std::vector<TwoViewModelEstimate>* H, std::vector<TwoViewModelEstimate>* E) {
+  const size_t num_pairs = layout.num_pairs;
+  const std::vector<RansacPairInput>& inputs = layout.inputs;
+  ParallelFor(num_pairs + layout.num_E(), -1, [&](size_t j) {
+    if (j >= num_pairs) {
+      // Normalised camera coordinates, as the CPU's.
+      const size_t slot = 2 * num_pairs + (j - num_pairs);
+      ReadEstimate(outputs[slot], masks + layout.total + inputs[slot].offset, inputs[slot].count,
+                   &(*E)[layout.order_E[j - num_pairs]]);
+      return;
+    }
+    const size_t k = layout.order[j];
+    for (int model = 0; model < 2; ++model) {
+      TwoViewModelEstimate& e = model == 0 ? (*F)[k] : (*H)[k];
+      ReadEstimate(outputs[model * num_pairs + j], masks + model * layout.total + inputs[j].offset,
+                   inputs[j].count, &e);
+      if (!e.success) continue;
+      e.model = model == 0 ? FundamentalToPixels(e.model, pairs[k]->norm)
+                           : HomographyToPixels(e.model, pairs[k]->norm);
+    }
+  });
+}
+
+void AddBatchStats(const RansacBatchLayout& layout, const RansacPairOutput* outputs, GpuRansacStats* stats) {
+  const size_t num_pairs = layout.num_pairs;
+  for (size_t j = 0; j < 2 * num_pairs; ++j) {
+    (j < num_pairs ? stats->trials_F : stats->trials_H) += outputs[j].num_trials;
+    (j < num_pairs ? stats->local_refits_F : stats->local_refits_H) += outputs[j].num_local_refits;
+    (j < num_pairs ? stats->early_exits_F : stats->early_exits_H) += outputs[j].early_exit;
+  }
+  for (size_t j = 0; j < layout.num_E(); ++j) {
+    stats->trials_E += outputs[2 * num_pairs + j].num_trials;
+    stats->local_refits_E += outputs[2 * num_pairs + j].num_local_refits;
+    stats->early_exits_E += outputs[2 * num_pairs + j].early_exit;
+  }
+  stats->pairs += num_pairs;
+  stats->pairs_E += layout.num_E();
+  stats->points += layout.total;
+}
+
 }  // namespace
 
 struct GpuTwoViewRansac::Impl {
@@ -56,7 +267,45 @@ struct GpuTwoViewRansac::Impl {
   DeviceBuffer points, inputs, outputs, masks;
   PinnedBuffer host_points, host_outputs, host_masks;
   GpuRansacStats stats;
+
+  void ReserveBuffers(const RansacBatchLayout& layout);
+  void Launch(const RansacLaunches& launches, size_t num_E);
 };
+
+void GpuTwoViewRansac::Impl::ReserveBuffers(const RansacBatchLayout& layout) {
+  GpuResources* owner = resources.get();
+  Reserve(owner, &points, layout.all_points() * sizeof(float4), "RANSAC points");
+  Reserve(owner, &inputs, layout.inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
+  Reserve(owner, &outputs, layout.inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
+  Reserve(owner, &masks, layout.mask_bytes(), "RANSAC inlier masks");
+}
+
+// F and H on `stream`; E after them on the same stream where it reads their
+// counts, else on its own stream beside them.
+void GpuTwoViewRansac::Impl::Launch(const RansacLaunches& launches, size_t num_E) {
+  if (!launches.E_after_F_and_H && num_E > 0) {
+    // COLMAP's loop: E (the longest) starts first on its own stream; F and
+    // H run beside it.
+    CUDA_CHECK(cudaEventRecord(uploaded, stream));
+    CUDA_CHECK(cudaStreamWaitEvent(stream_E, uploaded, 0));
+    LaunchEssentialRansac(launches.E, stream_E);
+    CUDA_CHECK(cudaEventRecord(done_E, stream_E));
+  }
+  if (launches.H.relevance != nullptr) {
+    RansacLaunch no_H = launches.H, no_F = launches.F;
+    no_H.num_pairs = 0;
+    no_F.num_pairs = 0;
+    LaunchTwoViewRansac(launches.F, no_H, stream);
+    LaunchTwoViewRansac(no_F, launches.H, stream);
+  } else {
+    LaunchTwoViewRansac(launches.F, launches.H, stream);
+  }
+  if (launches.E_after_F_and_H) {
+    if (num_E > 0) LaunchEssentialRansac(launches.E, stream);
+  } else if (num_E > 0) {
+    CUDA_CHECK(cudaStreamWaitEvent(stream, done_E, 0));
+  }
+}
 
 GpuTwoViewRansac::GpuTwoViewRansac(const TwoViewGeometryOptions& options, int gpu_index,
                                    std::shared_ptr<GpuResources> resources)
@@ -92,8 +341,7 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   Estimate(pairs, seeds, {}, F, H, nullptr, while_running);
 }
 
-// One function because one batch's slot layout (order, order_E, offsets,
-// total) drives the packing, the F/H/E launches on two streams and the
+// One batch: its slot layout, the packing, the F/H/E launches and the
 // unpacking, around async copies and events that must run in this order.
 void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, const std::vector<uint64_t>& seeds,
                                 const std::vector<const EssentialPoints*>& essential,
@@ -115,162 +363,31 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
     return;
   }
 
-  // Inputs: F's pairs first, then H's, over one shared point array, largest
-  // pairs first (LargestFirst, launch_order.h: blocks start roughly in
-  // order; big ones last would leave a long tail). Slot j holds pair order[j]. E's pairs (their own points, in
-  // normalised camera coordinates) follow, again largest first: slot
-  // 2 num_pairs + j holds pair order_E[j].
-  std::vector<size_t> matches_per_pair(num_pairs);
-  for (size_t k = 0; k < num_pairs; ++k) matches_per_pair[k] = pairs[k]->normalized.size();
-  const std::vector<size_t> order = LargestFirst(matches_per_pair);
-  std::vector<size_t> order_E;
-  std::vector<int> slot_E;  // F/H slot of each E pair
-  for (size_t j = 0; j < essential.size(); ++j) {
-    if (essential[order[j]] == nullptr) continue;
-    order_E.push_back(order[j]);
-    slot_E.push_back(static_cast<int>(j));
-  }
-  const size_t num_E = order_E.size();
-  std::vector<RansacPairInput> inputs(2 * num_pairs + num_E);
-  size_t total = 0;
-  int max_count = 0;
-  for (size_t j = 0; j < num_pairs; ++j) {
-    const size_t k = order[j];
-    const size_t n = pairs[k]->normalized.size();
-    if (total + n > static_cast<size_t>(INT32_MAX)) throw std::runtime_error("GPU verification batch too large");
-    RansacPairInput& f = inputs[j];
-    f.offset = static_cast<int>(total);
-    f.count = static_cast<int>(n);
-    f.squared_threshold = static_cast<float>(NormalizedSquaredThreshold(*pairs[k], d.options));
-    f.seed = DeriveSeed(seeds[k], kSeedF);
-    RansacPairInput& h = inputs[num_pairs + j];
-    h = f;
-    h.seed = DeriveSeed(seeds[k], kSeedH);
-    total += n;
-    max_count = std::max(max_count, f.count);
-  }
-  // E's points follow F/H's in the point array (offsets from the array's
-  // start); its masks follow F's and H's.
-  size_t total_E = 0;
-  int max_count_E = 0;
-  for (size_t j = 0; j < num_E; ++j) {
-    const EssentialPoints& e = *essential[order_E[j]];
-    const size_t n = e.world.size();
-    if (total + total_E + n > static_cast<size_t>(INT32_MAX)) {
-      throw std::runtime_error("GPU verification batch too large");
-    }
-    RansacPairInput& in = inputs[2 * num_pairs + j];
-    in.offset = static_cast<int>(total + total_E);
-    in.count = static_cast<int>(n);
-    // As LoRansac compares: float residuals against float(max_error^2).
-    in.squared_threshold = static_cast<float>(e.max_error * e.max_error);
-    in.seed = DeriveSeed(seeds[order_E[j]], kSeedE);
-    in.reference = slot_E[j];
-    total_E += n;
-    max_count_E = std::max(max_count_E, in.count);
-  }
-  const size_t all_points = total + total_E;
-  // Packing and unpacking run on all cores: at tens of thousands of pairs
-  // per second they would otherwise cost as much as the kernels.
+  const RansacBatchLayout layout = LayOutBatch(pairs, seeds, essential, d.options);
+  const size_t all_points = layout.all_points();
   GpuResources* owner = d.resources.get();
   Reserve(owner, &d.host_points, all_points * sizeof(float4), "RANSAC host staging");
   float4* host_points = d.host_points.host<float4>();
-  ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
-    const PointPairs& p = j < num_pairs ? pairs[order[j]]->normalized : essential[order_E[j - num_pairs]]->world;
-    float4* out = host_points + inputs[j < num_pairs ? j : num_pairs + j].offset;
-    for (size_t i = 0; i < p.size(); ++i) out[i] = make_float4(p.fx1[i], p.fy1[i], p.fx2[i], p.fy2[i]);
-  });
-
-  Reserve(owner, &d.points, all_points * sizeof(float4), "RANSAC points");
-  Reserve(owner, &d.inputs, inputs.size() * sizeof(RansacPairInput), "RANSAC pair inputs");
-  Reserve(owner, &d.outputs, inputs.size() * sizeof(RansacPairOutput), "RANSAC pair outputs");
-  Reserve(owner, &d.masks, 2 * total + total_E, "RANSAC inlier masks");
+  PackPoints(layout, pairs, essential, host_points);
+  d.ReserveBuffers(layout);
 
   CUDA_CHECK(cudaEventRecord(d.start, d.stream));
   CUDA_CHECK(cudaMemcpyAsync(d.points.as<float4>(), host_points, all_points * sizeof(float4),
                              cudaMemcpyHostToDevice, d.stream));
-  CUDA_CHECK(cudaMemcpyAsync(d.inputs.as<RansacPairInput>(), inputs.data(), inputs.size() * sizeof(RansacPairInput),
-                             cudaMemcpyHostToDevice, d.stream));
-  RansacOptions ransac;
-  ransac.confidence = d.options.confidence;
-  ransac.min_num_trials = d.options.min_num_trials;
-  ransac.max_num_trials = d.options.max_num_trials;
-  ransac.min_inlier_ratio = d.options.min_inlier_ratio;
-  RansacLaunch F_launch;
-  F_launch.points = d.points.as<float4>();
-  F_launch.num_pairs = static_cast<int>(num_pairs);
-  F_launch.min_trials = d.options.min_num_trials;
-  F_launch.confidence = d.options.confidence;
-  F_launch.trials_multiplier = ransac.num_trials_multiplier;
-  F_launch.shared_points = std::min(max_count, kRansacMaxSharedPoints);
-  F_launch.early_exit = TwoViewEarlyExitOptions(d.options);
-  F_launch.sprt_max_risk = TwoViewSprtMaxRisk(d.options);
-  RansacLaunch H_launch = F_launch;
-  RansacLaunch E_launch = F_launch;
-  F_launch.pairs = d.inputs.as<RansacPairInput>();
-  F_launch.outputs = d.outputs.as<RansacPairOutput>();
-  F_launch.masks = d.masks.as<uint8_t>();
-  F_launch.max_trials = RansacMaxTrials(ransac, 7);
-  H_launch.pairs = d.inputs.as<RansacPairInput>() + num_pairs;
-  H_launch.outputs = d.outputs.as<RansacPairOutput>() + num_pairs;
-  H_launch.masks = d.masks.as<uint8_t>() + total;
-  H_launch.max_trials = RansacMaxTrials(ransac, 4);
-  if (d.options.early_exit) {
-    // H only matters above a share of F's inliers: it runs after F and
-    // stops once no model that could change the decision exists.
-    H_launch.relevance = F_launch.outputs;
-    H_launch.relevance_ratio = TwoViewRelevantHomographyRatio(d.options);
-    H_launch.relevance_min_inliers = std::max(0, d.options.min_num_inliers);
-  }
-  // E's masks sit at 2 total + (offset - total): the kernel indexes masks by
-  // the pair's point offset, so its base is shifted back by `total`.
-  E_launch.num_pairs = static_cast<int>(num_E);
-  E_launch.pairs = d.inputs.as<RansacPairInput>() + 2 * num_pairs;
-  E_launch.outputs = d.outputs.as<RansacPairOutput>() + 2 * num_pairs;
-  E_launch.masks = d.masks.as<uint8_t>() + total;
-  E_launch.max_trials = RansacMaxTrials(ransac, 5);
-  E_launch.shared_points = std::min(max_count_E, kEssentialMaxSharedPoints);
-  const bool E_after_F_and_H = d.options.early_exit;
-  if (E_after_F_and_H) {
-    // E reads F's and H's counts and stops once it cannot change the
-    // decision (TwoViewEssentialSettledInliers): many of its trials were on
-    // pairs whose configuration was settled long before the cap.
-    E_launch.reference_F = F_launch.outputs;
-    E_launch.reference_H = H_launch.outputs;
-    E_launch.reference_E_F_ratio = d.options.min_E_F_inlier_ratio;
-    E_launch.reference_max_H_ratio = d.options.max_H_inlier_ratio;
-    E_launch.reference_min_inliers = TwoViewEssentialSettledMinInliers(d.options);
-  } else if (num_E > 0) {
-    // COLMAP's loop: E (the longest) starts first on its own stream; F and
-    // H run beside it.
-    CUDA_CHECK(cudaEventRecord(d.uploaded, d.stream));
-    CUDA_CHECK(cudaStreamWaitEvent(d.stream_E, d.uploaded, 0));
-    LaunchEssentialRansac(E_launch, d.stream_E);
-    CUDA_CHECK(cudaEventRecord(d.done_E, d.stream_E));
-  }
-  if (H_launch.relevance != nullptr) {
-    RansacLaunch no_H = H_launch, no_F = F_launch;
-    no_H.num_pairs = 0;
-    no_F.num_pairs = 0;
-    LaunchTwoViewRansac(F_launch, no_H, d.stream);
-    LaunchTwoViewRansac(no_F, H_launch, d.stream);
-  } else {
-    LaunchTwoViewRansac(F_launch, H_launch, d.stream);
-  }
-  if (E_after_F_and_H) {
-    if (num_E > 0) LaunchEssentialRansac(E_launch, d.stream);
-  } else if (num_E > 0) {
-    CUDA_CHECK(cudaStreamWaitEvent(d.stream, d.done_E, 0));
-  }
+  CUDA_CHECK(cudaMemcpyAsync(d.inputs.as<RansacPairInput>(), layout.inputs.data(),
+                             layout.inputs.size() * sizeof(RansacPairInput), cudaMemcpyHostToDevice, d.stream));
+  d.Launch(MakeLaunches(layout, d.options, d.points.as<float4>(), d.inputs.as<RansacPairInput>(),
+                        d.outputs.as<RansacPairOutput>(), d.masks.as<uint8_t>()),
+           layout.num_E());
 
-  const size_t num_outputs = inputs.size();
+  const size_t num_outputs = layout.inputs.size();
   Reserve(owner, &d.host_outputs, num_outputs * sizeof(RansacPairOutput), "RANSAC host outputs");
-  Reserve(owner, &d.host_masks, 2 * total + total_E, "RANSAC host masks");
+  Reserve(owner, &d.host_masks, layout.mask_bytes(), "RANSAC host masks");
   const RansacPairOutput* outputs = d.host_outputs.host<RansacPairOutput>();
   const uint8_t* masks = d.host_masks.host<uint8_t>();
   CUDA_CHECK(cudaMemcpyAsync(d.host_outputs.host<RansacPairOutput>(), d.outputs.as<RansacPairOutput>(),
                              num_outputs * sizeof(RansacPairOutput), cudaMemcpyDeviceToHost, d.stream));
-  CUDA_CHECK(cudaMemcpyAsync(d.host_masks.host<uint8_t>(), d.masks.as<uint8_t>(), 2 * total + total_E,
+  CUDA_CHECK(cudaMemcpyAsync(d.host_masks.host<uint8_t>(), d.masks.as<uint8_t>(), layout.mask_bytes(),
                              cudaMemcpyDeviceToHost, d.stream));
   CUDA_CHECK(cudaEventRecord(d.stop, d.stream));
   // Pinned copies are asynchronous: the host works while the kernels run.
@@ -279,51 +396,8 @@ void GpuTwoViewRansac::Estimate(const std::vector<const TwoViewPoints*>& pairs, 
   float gpu_ms = 0;
   CUDA_CHECK(cudaEventElapsedTime(&gpu_ms, d.start, d.stop));
 
-  ParallelFor(num_pairs + num_E, -1, [&](size_t j) {
-    if (j >= num_pairs) {
-      const size_t slot = 2 * num_pairs + (j - num_pairs);
-      const RansacPairOutput& out = outputs[slot];
-      TwoViewModelEstimate& e = (*E)[order_E[j - num_pairs]];
-      e.success = out.success != 0;
-      e.num_inliers = e.success ? out.num_inliers : 0;
-      e.num_trials = out.num_trials;
-      e.early_exit = out.early_exit != 0;
-      if (e.success) {
-        e.model = FromRowMajor(out.model);  // normalised camera coordinates, as the CPU's
-        const uint8_t* mask = masks + total + inputs[slot].offset;
-        e.inlier_mask.assign(mask, mask + inputs[slot].count);
-      }
-      return;
-    }
-    const size_t k = order[j];
-    for (int model = 0; model < 2; ++model) {
-      const RansacPairOutput& out = outputs[model * num_pairs + j];
-      TwoViewModelEstimate& e = model == 0 ? (*F)[k] : (*H)[k];
-      e.success = out.success != 0;
-      e.num_inliers = e.success ? out.num_inliers : 0;
-      e.num_trials = out.num_trials;
-      e.early_exit = out.early_exit != 0;
-      if (e.success) {
-        const Eigen::Matrix3d m = FromRowMajor(out.model);
-        e.model = model == 0 ? FundamentalToPixels(m, pairs[k]->norm) : HomographyToPixels(m, pairs[k]->norm);
-        const uint8_t* mask = masks + model * total + inputs[j].offset;
-        e.inlier_mask.assign(mask, mask + inputs[j].count);
-      }
-    }
-  });
-  for (size_t j = 0; j < 2 * num_pairs; ++j) {
-    (j < num_pairs ? d.stats.trials_F : d.stats.trials_H) += outputs[j].num_trials;
-    (j < num_pairs ? d.stats.local_refits_F : d.stats.local_refits_H) += outputs[j].num_local_refits;
-    (j < num_pairs ? d.stats.early_exits_F : d.stats.early_exits_H) += outputs[j].early_exit;
-  }
-  for (size_t j = 0; j < num_E; ++j) {
-    d.stats.trials_E += outputs[2 * num_pairs + j].num_trials;
-    d.stats.local_refits_E += outputs[2 * num_pairs + j].num_local_refits;
-    d.stats.early_exits_E += outputs[2 * num_pairs + j].early_exit;
-  }
-  d.stats.pairs += num_pairs;
-  d.stats.pairs_E += num_E;
-  d.stats.points += total;
+  UnpackEstimates(layout, pairs, outputs, masks, F, H, E);
+  AddBatchStats(layout, outputs, &d.stats);
   d.stats.seconds_gpu += gpu_ms / 1000.0;
   d.stats.seconds_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }

@@ -91,29 +91,12 @@ __device__ __forceinline__ void FoldStrip(const int (&acc)[4][4], int key_scale,
   }
 }
 
-// One function because the warp's A fragments (a[4][4][4]) and best-two slots
-// must stay in registers across the whole double-buffered sweep over b; the
-// fully unrolled mma and fold loops index those arrays with constants only.
-__global__ void __launch_bounds__(kThreads, kMinBlocksPerSm)
-    BestTwoKernel(const BestTwoProblem* __restrict__ problems, const int2* __restrict__ items, int key_scale) {
-  __shared__ __align__(128) uint8_t tiles[2][kTileBytes];
-
-  const int2 item = items[blockIdx.x];
-  const BestTwoProblem p = problems[item.x];
-  // A reverse search is launched for its capacity; the rows past the count
-  // the gather wrote leave at once (the whole block, before any barrier).
-  const int n_a = p.live_rows != nullptr ? min(p.n_a, *p.live_rows) : p.n_a;
-  if (item.y * kBlockRows >= n_a) return;
-  const int lane = threadIdx.x & 31;
-  const int warp = threadIdx.x >> 5;
-  const int g = lane >> 2;  // mma group: fragment row
-  const int t = lane & 3;   // thread in group: fragment column pair
-  const int warp_row0 = item.y * kBlockRows + warp * kWarpRows;
-
-  // A fragments of the warp's 64 rows, all of K: [m tile][k step][register].
-  // Register r holds row g (+8 for r odd) and bytes 4t..4t+3 (+16 for r >= 2)
-  // of the k step, the m16n8k32 row-major layout.
-  uint32_t a[4][4][4];
+// A fragments of the warp's 64 rows from warp_row0, all of K: [m tile][k
+// step][register]. Register r holds row g (+8 for r odd) and bytes
+// 4t..4t+3 (+16 for r >= 2) of the k step, the m16n8k32 row-major layout.
+// Rows from n_a on are zero.
+__device__ __forceinline__ void LoadFragmentsA(const BestTwoProblem& p, int n_a, int warp_row0, int g, int t,
+                                               uint32_t (&a)[4][4][4]) {
 #pragma unroll
   for (int i = 0; i < 4; ++i) {
     const int row_lo = warp_row0 + 16 * i + g;
@@ -130,36 +113,129 @@ __global__ void __launch_bounds__(kThreads, kMinBlocksPerSm)
       a[i][s][3] = hi_ok ? __ldg(hi + 8 * s + 4 + t) : 0u;
     }
   }
+}
 
-  // Rows of b past n_b are zero-filled: their dot 0 never beats a real column
-  // (which has a lower index) and equals the default second best.
-  auto load_tile = [&](int tile, int stage) {
-    const int col0 = tile * kTileCols;
-    const uint32_t base = SharedAddress(&tiles[stage][0]);
+// Starts the asynchronous copy of b's rows tile * kTileCols .. + kTileCols - 1
+// into shared stage `stage`. Rows of b past n_b are zero-filled: their dot 0
+// never beats a real column (which has a lower index) and equals the default
+// second best.
+__device__ __forceinline__ void LoadTileB(uint8_t (&tiles)[2][kTileBytes], const BestTwoProblem& p, int tile,
+                                          int stage) {
+  const int col0 = tile * kTileCols;
+  const uint32_t base = SharedAddress(&tiles[stage][0]);
 #pragma unroll
-    for (int q = 0; q < kTileCols * kRowBytes / 16 / kThreads; ++q) {
-      const int chunk = threadIdx.x + q * kThreads;
-      const int row = chunk >> 3;
-      const int part = chunk & 7;
-      const bool valid = col0 + row < p.n_b;
-      const uint8_t* src = valid ? p.b + static_cast<size_t>(col0 + row) * kRowBytes + part * 16 : p.b;
-      CopyAsync16(base + row * kSmemStride + part * 16, src, valid);
+  for (int q = 0; q < kTileCols * kRowBytes / 16 / kThreads; ++q) {
+    const int chunk = threadIdx.x + q * kThreads;
+    const int row = chunk >> 3;
+    const int part = chunk & 7;
+    const bool valid = col0 + row < p.n_b;
+    const uint8_t* src = valid ? p.b + static_cast<size_t>(col0 + row) * kRowBytes + part * 16 : p.b;
+    CopyAsync16(base + row * kSmemStride + part * 16, src, valid);
+  }
+}
+
+// The products of one shared tile, 8 columns per strip, folded into the
+// windows. `stage` is this lane's ldmatrix address in the tile.
+__device__ __forceinline__ void SweepTile(uint32_t stage, const uint32_t (&a)[4][4][4], const int (&bias)[8],
+                                          int key_scale, int t, PackedBestTwo (&window)[8]) {
+#pragma unroll(kStripUnroll)
+  for (int n = 0; n < kTileCols / 8; ++n) {
+    uint32_t b[8];
+    {
+      uint32_t r[4];
+      LoadMatrixX4(stage + n * 8 * kSmemStride, r);
+      b[0] = r[0]; b[1] = r[1]; b[2] = r[2]; b[3] = r[3];
+      LoadMatrixX4(stage + n * 8 * kSmemStride + 64, r);
+      b[4] = r[0]; b[5] = r[1]; b[6] = r[2]; b[7] = r[3];
     }
-  };
+    int acc[4][4];
+#pragma unroll
+    for (int i = 0; i < 4; ++i) {
+      acc[i][0] = acc[i][1] = bias[2 * i];
+      acc[i][2] = acc[i][3] = bias[2 * i + 1];
+    }
+#pragma unroll
+    for (int s = 0; s < 4; ++s) {
+#pragma unroll
+      for (int i = 0; i < 4; ++i) MmaU8(acc[i], a[i][s], b[2 * s], b[2 * s + 1]);
+    }
+    // Accumulator j of tile i: row 16i + g (+8 for j >= 2), column
+    // n*8 + 2t + (j & 1), holding dot - second - 1. key = that * 256 +
+    // (255 - column in tile); the scale comes in as a kernel argument so
+    // the multiply stays an IMAD (FMA pipe) instead of a shift on the
+    // min/max (ALU) pipe.
+    const int position_key = PackedBestTwo::kPositions - 1 - (n * 8 + 2 * t);
+    FoldStrip(acc, key_scale, position_key, window);
+  }
+}
+
+// Adds one tile's windows (keys relative to the tile's seconds) to the
+// running best two of each row slot, and empties them.
+__device__ __forceinline__ void MergeWindows(const int (&bias)[8], int col0, PackedBestTwo (&window)[8],
+                                             IndexedBestTwo (&best)[8]) {
+#pragma unroll
+  for (int slot = 0; slot < 8; ++slot) {
+    if (!window[slot].Empty()) {  // pushes come two at a time, so the second is set too
+      best[slot].Merge(window[slot].BestScore() - bias[slot], col0 + window[slot].BestPosition(),
+                       window[slot].SecondScore() - bias[slot]);
+    }
+    window[slot].Reset();
+  }
+}
+
+// Each row's best two over the four lanes that share it, written by the
+// group's first lane.
+__device__ __forceinline__ void WriteBestTwo(const BestTwoProblem& p, int n_a, int warp_row0, int g, int t,
+                                             IndexedBestTwo (&best)[8]) {
+#pragma unroll
+  for (int slot = 0; slot < 8; ++slot) {
+    best[slot].WarpGroupMerge<4>();
+    const int row = warp_row0 + 16 * (slot >> 1) + g + 8 * (slot & 1);
+    if (t == 0 && row < n_a) {
+      const bool found = best[slot].best > 0;
+      p.best_dot[row] = found ? best[slot].best : 0;
+      p.best_idx[row] = found ? best[slot].index : -1;
+      p.second_dot[row] = best[slot].second;
+    }
+  }
+}
+
+// The warp's A fragments (a[4][4][4]) and best-two slots stay in registers
+// across the whole double-buffered sweep over b: the helpers are inlined
+// and their fully unrolled mma and fold loops index those arrays with
+// constants only.
+__global__ void __launch_bounds__(kThreads, kMinBlocksPerSm)
+    BestTwoKernel(const BestTwoProblem* __restrict__ problems, const int2* __restrict__ items, int key_scale) {
+  __shared__ __align__(128) uint8_t tiles[2][kTileBytes];
+
+  const int2 item = items[blockIdx.x];
+  const BestTwoProblem p = problems[item.x];
+  // A reverse search is launched for its capacity; the rows past the count
+  // the gather wrote leave at once (the whole block, before any barrier).
+  const int n_a = p.live_rows != nullptr ? min(p.n_a, *p.live_rows) : p.n_a;
+  if (item.y * kBlockRows >= n_a) return;
+  const int lane = threadIdx.x & 31;
+  const int warp = threadIdx.x >> 5;
+  const int g = lane >> 2;  // mma group: fragment row
+  const int t = lane & 3;   // thread in group: fragment column pair
+  const int warp_row0 = item.y * kBlockRows + warp * kWarpRows;
+
+  uint32_t a[4][4][4];
+  LoadFragmentsA(p, n_a, warp_row0, g, t, a);
 
   // Slot 2i + h: row 16i + g + 8h of the warp.
   PackedBestTwo window[8];
   IndexedBestTwo best[8];
 
   const int num_tiles = (p.n_b + kTileCols - 1) / kTileCols;
-  if (num_tiles > 0) load_tile(0, 0);
+  if (num_tiles > 0) LoadTileB(tiles, p, 0, 0);
   CopyAsyncCommit();
   // ldmatrix x4: lanes 8m..8m+7 address rows 0..7 of matrix m, which is the
   // 16-byte column block m of the 8 b rows (k steps 2 per x4).
   const uint32_t lane_offset = (lane & 7) * kSmemStride + (lane >> 3) * 16;
 
   for (int tile = 0; tile < num_tiles; ++tile) {
-    if (tile + 1 < num_tiles) load_tile(tile + 1, (tile + 1) & 1);
+    if (tile + 1 < num_tiles) LoadTileB(tiles, p, tile + 1, (tile + 1) & 1);
     CopyAsyncCommit();
     CopyAsyncWait<1>();
     __syncthreads();
@@ -177,60 +253,11 @@ __global__ void __launch_bounds__(kThreads, kMinBlocksPerSm)
     // adds back.
     int bias[8];
     RowSecondBias(best, bias);
-
-    const uint32_t stage = SharedAddress(&tiles[tile & 1][0]) + lane_offset;
-#pragma unroll(kStripUnroll)
-    for (int n = 0; n < kTileCols / 8; ++n) {
-      uint32_t b[8];
-      {
-        uint32_t r[4];
-        LoadMatrixX4(stage + n * 8 * kSmemStride, r);
-        b[0] = r[0]; b[1] = r[1]; b[2] = r[2]; b[3] = r[3];
-        LoadMatrixX4(stage + n * 8 * kSmemStride + 64, r);
-        b[4] = r[0]; b[5] = r[1]; b[6] = r[2]; b[7] = r[3];
-      }
-      int acc[4][4];
-#pragma unroll
-      for (int i = 0; i < 4; ++i) {
-        acc[i][0] = acc[i][1] = bias[2 * i];
-        acc[i][2] = acc[i][3] = bias[2 * i + 1];
-      }
-#pragma unroll
-      for (int s = 0; s < 4; ++s) {
-#pragma unroll
-        for (int i = 0; i < 4; ++i) MmaU8(acc[i], a[i][s], b[2 * s], b[2 * s + 1]);
-      }
-      // Accumulator j of tile i: row 16i + g (+8 for j >= 2), column
-      // n*8 + 2t + (j & 1), holding dot - second - 1. key = that * 256 +
-      // (255 - column in tile); the scale comes in as a kernel argument so
-      // the multiply stays an IMAD (FMA pipe) instead of a shift on the
-      // min/max (ALU) pipe.
-      const int position_key = PackedBestTwo::kPositions - 1 - (n * 8 + 2 * t);
-      FoldStrip(acc, key_scale, position_key, window);
-    }
-    const int col0 = tile * kTileCols;
-#pragma unroll
-    for (int slot = 0; slot < 8; ++slot) {
-      if (!window[slot].Empty()) {  // pushes come two at a time, so the second is set too
-        best[slot].Merge(window[slot].BestScore() - bias[slot], col0 + window[slot].BestPosition(),
-                         window[slot].SecondScore() - bias[slot]);
-      }
-      window[slot].Reset();
-    }
+    SweepTile(SharedAddress(&tiles[tile & 1][0]) + lane_offset, a, bias, key_scale, t, window);
+    MergeWindows(bias, tile * kTileCols, window, best);
     __syncthreads();  // the stage is refilled by the next iteration's load
   }
-
-#pragma unroll
-  for (int slot = 0; slot < 8; ++slot) {
-    best[slot].WarpGroupMerge<4>();
-    const int row = warp_row0 + 16 * (slot >> 1) + g + 8 * (slot & 1);
-    if (t == 0 && row < n_a) {
-      const bool found = best[slot].best > 0;
-      p.best_dot[row] = found ? best[slot].best : 0;
-      p.best_idx[row] = found ? best[slot].index : -1;
-      p.second_dot[row] = best[slot].second;
-    }
-  }
+  WriteBestTwo(p, n_a, warp_row0, g, t, best);
 }
 
 __device__ __forceinline__ bool AcceptOnDevice(int dot, int second, int index, const float* __restrict__ angle,

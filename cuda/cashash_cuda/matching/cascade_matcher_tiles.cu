@@ -95,10 +95,167 @@ __device__ __forceinline__ BucketView ViewBucket(const PairTask* tasks, const Ma
   return v;
 }
 
-// A's rows a0 .. a0 + 31 (those before a_end) against all of B's bucket. One
-// function because the warp's TileScratch in shared memory and its A
-// fragments and row limits in registers stay live across the whole B sweep,
-// and the queue passes are ordered by __syncwarp on those same arrays.
+// Stages A's rows a0 .. a0 + 31 of the bucket in the warp's scratch (rows
+// past a_end get an empty code and pop 255, so no column is within tau).
+__device__ __forceinline__ void StageRowsA(TileScratch& s, const BucketView& v, uint32_t a0, unsigned lane) {
+  const bool valid = a0 + lane < v.a_end;
+  const uint4* entry = reinterpret_cast<const uint4*>(v.entries_a + min(a0 + lane, v.a_end - 1));
+  const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+  const uint4 meta = __ldg(entry + 1);
+  s.code_a[lane] = code;
+  s.signature_a[lane] = uint64_t(meta.y) << 32 | meta.x;
+  s.index_a[lane] = meta.z;
+  s.pop_a[lane] = valid ? Popc128(code) : 255u;
+}
+
+// Stages B's entries b0 .. b0 + 31 of the bucket, as StageRowsA. The
+// previous chunk's queue passes read the staged entries until the
+// __syncwarp between the loads and the stores.
+__device__ __forceinline__ void StageColumnsB(TileScratch& s, const BucketView& v, uint32_t b0, unsigned lane) {
+  const bool valid = b0 + lane < v.b_end;
+  const uint4* entry = reinterpret_cast<const uint4*>(v.entries_b + min(b0 + lane, v.b_end - 1));
+  const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
+  const uint4 meta = __ldg(entry + 1);
+  __syncwarp();  // the previous chunk's queue passes are done with these
+  s.code_b[lane] = code;
+  s.signature_b[lane] = uint64_t(meta.y) << 32 | meta.x;
+  s.index_b[lane] = meta.z;
+  s.pop_b[lane] = valid ? Popc128(code) : 255u;
+}
+
+// This lane's A fragments (rows mi * 16 + g + 8h, word t) and the
+// thresholds of its four rows: within tau <=> 2 c - pop_b >= pop_a - tau.
+__device__ __forceinline__ void LoadFragmentsA(const TileScratch& s, unsigned g, unsigned t, int tau,
+                                               uint32_t (&frag_a)[4], int (&row_limit)[4]) {
+  const uint32_t* words_a = reinterpret_cast<const uint32_t*>(s.code_a);
+#pragma unroll
+  for (int k = 0; k < 4; ++k) {
+    const unsigned row = (k >> 1) * 16 + g + (k & 1) * 8;
+    frag_a[k] = words_a[row * 4 + t];
+    row_limit[k] = static_cast<int>(s.pop_a[row]) - tau;
+  }
+}
+
+// The tau mask of row `lane` of the staged tile: bit c set when (row, column
+// c) is within tau. Eight single-bit tensor-core products give the
+// distances of this lane's rows and columns 2t, 2t + 1 of each n-tile; the
+// shuffles gather whole rows.
+__device__ __forceinline__ uint32_t TauRowMask(const TileScratch& s, const uint32_t (&frag_a)[4],
+                                               const int (&row_limit)[4], unsigned g, unsigned t, unsigned lane) {
+  const uint32_t* words_b = reinterpret_cast<const uint32_t*>(s.code_b);
+  uint32_t mask[4] = {0, 0, 0, 0};
+#pragma unroll
+  for (int ni = 0; ni < 4; ++ni) {
+    const uint32_t frag_b = words_b[(ni * 8 + g) * 4 + t];
+    const int pop0 = static_cast<int>(s.pop_b[ni * 8 + 2 * t]);
+    const int pop1 = static_cast<int>(s.pop_b[ni * 8 + 2 * t + 1]);
+#pragma unroll
+    for (int mi = 0; mi < 2; ++mi) {
+      int d[4];
+      BitAndPopcMma16x8x128(frag_a[mi * 2], frag_a[mi * 2 + 1], frag_b, d);
+      const uint32_t bit0 = 1u << (ni * 8), bit1 = 2u << (ni * 8);
+      mask[mi * 2] |= (2 * d[0] - pop0 >= row_limit[mi * 2] ? bit0 : 0u) |
+                      (2 * d[1] - pop1 >= row_limit[mi * 2] ? bit1 : 0u);
+      mask[mi * 2 + 1] |= (2 * d[2] - pop0 >= row_limit[mi * 2 + 1] ? bit0 : 0u) |
+                          (2 * d[3] - pop1 >= row_limit[mi * 2 + 1] ? bit1 : 0u);
+    }
+  }
+  // Whole rows: the four lanes of a group hold disjoint columns.
+#pragma unroll
+  for (int k = 0; k < 4; ++k) {
+    mask[k] <<= 2 * t;
+    mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 1);
+    mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 2);
+  }
+  // Lane r takes row r = 8k + g' from group g' (k = r / 8).
+  const unsigned source = (lane & 7u) << 2;
+  const uint32_t m0 = __shfl_sync(kFullWarpMask, mask[0], source);
+  const uint32_t m1 = __shfl_sync(kFullWarpMask, mask[1], source);
+  const uint32_t m2 = __shfl_sync(kFullWarpMask, mask[2], source);
+  const uint32_t m3 = __shfl_sync(kFullWarpMask, mask[3], source);
+  const unsigned k = lane >> 3;
+  return k == 0 ? m0 : k == 1 ? m1 : k == 2 ? m2 : m3;
+}
+
+// Queue positions in row order: this lane's row's survivors take positions
+// first .. first + popc(row_mask) - 1 of `total`.
+__device__ __forceinline__ void QueuePositions(uint32_t row_mask, unsigned lane, uint32_t* first_out,
+                                               uint32_t* total_out) {
+  const uint32_t count = __popc(row_mask);
+  uint32_t first = count;
+#pragma unroll
+  for (int d = 1; d < 32; d <<= 1) {
+    const uint32_t o = __shfl_up_sync(kFullWarpMask, first, d);
+    if (lane >= static_cast<unsigned>(d)) first += o;
+  }
+  *total_out = __shfl_sync(kFullWarpMask, first, 31);
+  *first_out = first - count;
+}
+
+// Queues this lane's row's survivors whose positions fall in the round
+// [round, round + in_round), as row | col << 5.
+__device__ __forceinline__ void QueueRound(TileScratch& s, uint32_t row_mask, uint32_t first, uint32_t round,
+                                           uint32_t in_round, unsigned lane) {
+  uint32_t position = first, m = row_mask;
+  while (m != 0 && position < round + in_round) {
+    const uint32_t col = __ffs(m) - 1;
+    m &= m - 1;
+    if (position >= round) s.queue[position - round] = lane | col << 5;
+    ++position;
+  }
+}
+
+// Duplicate test, distance and ranks of the queued survivors, 32 per step:
+// each entry becomes row | col << 5 | rank in row << 10 | rank in col << 15
+// | distance << 20, or kDropped.
+__device__ __forceinline__ void TestQueued(TileScratch& s, const BucketView& v, const MatchParams& params,
+                                           uint32_t in_round, unsigned lane) {
+  for (uint32_t p = lane; p < in_round; p += 32) {
+    const uint32_t e = s.queue[p];
+    const uint32_t row = e & 31u, col = (e >> 5) & 31u;
+    const uint64_t x_sig = ((s.signature_a[row] ^ s.signature_b[col]) & v.below) | v.high_from_t;
+    uint32_t out = kDropped;
+    if (((x_sig - params.field_low_bits) & ~x_sig & params.field_high_bits) == 0) {
+      const uint4 x = s.code_a[row], y = s.code_b[col];
+      const uint32_t distance = __popc(x.x ^ y.x) + __popc(x.y ^ y.y) + __popc(x.z ^ y.z) + __popc(x.w ^ y.w);
+      const uint32_t rank_a = atomicAdd(&s.kept_a[row], 1u);
+      const uint32_t rank_b = atomicAdd(&s.kept_b[col], 1u);
+      out = row | col << 5 | rank_a << 10 | rank_b << 15 | distance << 20;
+    }
+    s.queue[p] = out;
+  }
+}
+
+// One list reservation per row and per column of the round: kept_a and
+// kept_b turn from counts into the first reserved slot.
+__device__ __forceinline__ void ReserveListSlots(TileScratch& s, const BucketView& v, const CandidateLists& lists,
+                                                 unsigned lane) {
+  const uint32_t kept_a = s.kept_a[lane], kept_b = s.kept_b[lane];
+  if (kept_a > 0) s.kept_a[lane] = atomicAdd(lists.counts + v.rows_a + s.index_a[lane], kept_a);
+  if (kept_b > 0) s.kept_b[lane] = atomicAdd(lists.counts + v.rows_b + s.index_b[lane], kept_b);
+}
+
+// Appends each kept survivor to its A row's and its B column's list (what
+// falls past a list's capacity is left out).
+__device__ __forceinline__ void AppendQueued(const TileScratch& s, const BucketView& v, const CandidateLists& lists,
+                                             uint32_t capacity, uint32_t in_round, unsigned lane) {
+  for (uint32_t p = lane; p < in_round; p += 32) {
+    const uint32_t e = s.queue[p];
+    if (e == kDropped) continue;
+    const uint32_t row = e & 31u, col = (e >> 5) & 31u;
+    const uint32_t rank_a = (e >> 10) & 31u, rank_b = (e >> 15) & 31u, distance = e >> 20;
+    const uint32_t index_a = s.index_a[row], index_b = s.index_b[col];
+    const uint32_t slot_a = s.kept_a[row] + rank_a, slot_b = s.kept_b[col] + rank_b;
+    if (slot_a < capacity) lists.keys[(v.rows_a + index_a) * capacity + slot_a] = distance << 24 | index_b;
+    if (slot_b < capacity) lists.keys[(v.rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
+  }
+}
+
+// A's rows a0 .. a0 + 31 (those before a_end) against all of B's bucket:
+// per chunk of 32 B entries, the tau masks, then rounds of queued survivors
+// (test, reserve, append). The steps are inlined helpers, so the warp's A
+// fragments and row limits stay in registers across the whole B sweep; the
+// __syncwarp calls here order the steps' use of the shared scratch.
 // s.kept_a and s.kept_b are zero on entry and on return.
 __device__ __forceinline__ void TileChunk(TileScratch& s, const BucketView& v, uint32_t a0, const MatchParams& params,
                                           const CandidateLists& lists) {
@@ -107,134 +264,27 @@ __device__ __forceinline__ void TileChunk(TileScratch& s, const BucketView& v, u
   const uint32_t capacity = static_cast<uint32_t>(lists.capacity);
   const int tau = min(params.tau, 128);
   __syncwarp();
-  {
-    const bool valid = a0 + lane < v.a_end;
-    const uint4* entry = reinterpret_cast<const uint4*>(v.entries_a + min(a0 + lane, v.a_end - 1));
-    const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
-    const uint4 meta = __ldg(entry + 1);
-    s.code_a[lane] = code;
-    s.signature_a[lane] = uint64_t(meta.y) << 32 | meta.x;
-    s.index_a[lane] = meta.z;
-    s.pop_a[lane] = valid ? Popc128(code) : 255u;
-  }
+  StageRowsA(s, v, a0, lane);
   __syncwarp();
-  // This lane's A fragments (rows mi * 16 + g + 8h, word t) and the
-  // thresholds of its four rows: within tau <=> 2 c - pop_b >= pop_a - tau.
-  const uint32_t* words_a = reinterpret_cast<const uint32_t*>(s.code_a);
   uint32_t frag_a[4];
   int row_limit[4];
-#pragma unroll
-  for (int k = 0; k < 4; ++k) {
-    const unsigned row = (k >> 1) * 16 + g + (k & 1) * 8;
-    frag_a[k] = words_a[row * 4 + t];
-    row_limit[k] = static_cast<int>(s.pop_a[row]) - tau;
-  }
+  LoadFragmentsA(s, g, t, tau, frag_a, row_limit);
 
   for (uint32_t b0 = v.b_begin; b0 < v.b_end; b0 += 32) {
-    {
-      const bool valid = b0 + lane < v.b_end;
-      const uint4* entry = reinterpret_cast<const uint4*>(v.entries_b + min(b0 + lane, v.b_end - 1));
-      const uint4 code = valid ? __ldg(entry) : make_uint4(0, 0, 0, 0);
-      const uint4 meta = __ldg(entry + 1);
-      __syncwarp();  // the previous chunk's queue passes are done with these
-      s.code_b[lane] = code;
-      s.signature_b[lane] = uint64_t(meta.y) << 32 | meta.x;
-      s.index_b[lane] = meta.z;
-      s.pop_b[lane] = valid ? Popc128(code) : 255u;
-    }
+    StageColumnsB(s, v, b0, lane);
     __syncwarp();
-
-    // Tau masks: bit c of mask[k] set when (row k of this lane, column c)
-    // is within tau, for this lane's columns 2t, 2t + 1 of each n-tile
-    // (shifted into place below).
-    const uint32_t* words_b = reinterpret_cast<const uint32_t*>(s.code_b);
-    uint32_t mask[4] = {0, 0, 0, 0};
-#pragma unroll
-    for (int ni = 0; ni < 4; ++ni) {
-      const uint32_t frag_b = words_b[(ni * 8 + g) * 4 + t];
-      const int pop0 = static_cast<int>(s.pop_b[ni * 8 + 2 * t]);
-      const int pop1 = static_cast<int>(s.pop_b[ni * 8 + 2 * t + 1]);
-#pragma unroll
-      for (int mi = 0; mi < 2; ++mi) {
-        int d[4];
-        BitAndPopcMma16x8x128(frag_a[mi * 2], frag_a[mi * 2 + 1], frag_b, d);
-        const uint32_t bit0 = 1u << (ni * 8), bit1 = 2u << (ni * 8);
-        mask[mi * 2] |= (2 * d[0] - pop0 >= row_limit[mi * 2] ? bit0 : 0u) |
-                        (2 * d[1] - pop1 >= row_limit[mi * 2] ? bit1 : 0u);
-        mask[mi * 2 + 1] |= (2 * d[2] - pop0 >= row_limit[mi * 2 + 1] ? bit0 : 0u) |
-                            (2 * d[3] - pop1 >= row_limit[mi * 2 + 1] ? bit1 : 0u);
-      }
-    }
-    // Whole rows: the four lanes of a group hold disjoint columns.
-#pragma unroll
-    for (int k = 0; k < 4; ++k) {
-      mask[k] <<= 2 * t;
-      mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 1);
-      mask[k] |= __shfl_xor_sync(kFullWarpMask, mask[k], 2);
-    }
-    // Lane r takes row r = 8k + g' from group g' (k = r / 8).
-    const unsigned source = (lane & 7u) << 2;
-    const uint32_t m0 = __shfl_sync(kFullWarpMask, mask[0], source);
-    const uint32_t m1 = __shfl_sync(kFullWarpMask, mask[1], source);
-    const uint32_t m2 = __shfl_sync(kFullWarpMask, mask[2], source);
-    const uint32_t m3 = __shfl_sync(kFullWarpMask, mask[3], source);
-    const unsigned k = lane >> 3;
-    const uint32_t row_mask = k == 0 ? m0 : k == 1 ? m1 : k == 2 ? m2 : m3;
-
-    // Queue positions in row order.
-    const uint32_t count = __popc(row_mask);
-    uint32_t first = count;
-#pragma unroll
-    for (int d = 1; d < 32; d <<= 1) {
-      const uint32_t o = __shfl_up_sync(kFullWarpMask, first, d);
-      if (lane >= static_cast<unsigned>(d)) first += o;
-    }
-    const uint32_t total = __shfl_sync(kFullWarpMask, first, 31);
-    first -= count;
-
+    const uint32_t row_mask = TauRowMask(s, frag_a, row_limit, g, t, lane);
+    uint32_t first, total;
+    QueuePositions(row_mask, lane, &first, &total);
     for (uint32_t round = 0; round < total; round += kQueueCapacity) {
       const uint32_t in_round = min(total - round, static_cast<uint32_t>(kQueueCapacity));
-      {
-        uint32_t position = first, m = row_mask;
-        while (m != 0 && position < round + in_round) {
-          const uint32_t col = __ffs(m) - 1;
-          m &= m - 1;
-          if (position >= round) s.queue[position - round] = lane | col << 5;
-          ++position;
-        }
-      }
+      QueueRound(s, row_mask, first, round, in_round, lane);
       __syncwarp();
-      // Duplicate test, distance and ranks, 32 survivors per step.
-      for (uint32_t p = lane; p < in_round; p += 32) {
-        const uint32_t e = s.queue[p];
-        const uint32_t row = e & 31u, col = (e >> 5) & 31u;
-        const uint64_t x_sig = ((s.signature_a[row] ^ s.signature_b[col]) & v.below) | v.high_from_t;
-        uint32_t out = kDropped;
-        if (((x_sig - params.field_low_bits) & ~x_sig & params.field_high_bits) == 0) {
-          const uint4 x = s.code_a[row], y = s.code_b[col];
-          const uint32_t distance = __popc(x.x ^ y.x) + __popc(x.y ^ y.y) + __popc(x.z ^ y.z) + __popc(x.w ^ y.w);
-          const uint32_t rank_a = atomicAdd(&s.kept_a[row], 1u);
-          const uint32_t rank_b = atomicAdd(&s.kept_b[col], 1u);
-          out = row | col << 5 | rank_a << 10 | rank_b << 15 | distance << 20;
-        }
-        s.queue[p] = out;
-      }
+      TestQueued(s, v, params, in_round, lane);
       __syncwarp();
-      // One list reservation per row and per column of the round.
-      const uint32_t kept_a = s.kept_a[lane], kept_b = s.kept_b[lane];
-      if (kept_a > 0) s.kept_a[lane] = atomicAdd(lists.counts + v.rows_a + s.index_a[lane], kept_a);
-      if (kept_b > 0) s.kept_b[lane] = atomicAdd(lists.counts + v.rows_b + s.index_b[lane], kept_b);
+      ReserveListSlots(s, v, lists, lane);
       __syncwarp();
-      for (uint32_t p = lane; p < in_round; p += 32) {
-        const uint32_t e = s.queue[p];
-        if (e == kDropped) continue;
-        const uint32_t row = e & 31u, col = (e >> 5) & 31u;
-        const uint32_t rank_a = (e >> 10) & 31u, rank_b = (e >> 15) & 31u, distance = e >> 20;
-        const uint32_t index_a = s.index_a[row], index_b = s.index_b[col];
-        const uint32_t slot_a = s.kept_a[row] + rank_a, slot_b = s.kept_b[col] + rank_b;
-        if (slot_a < capacity) lists.keys[(v.rows_a + index_a) * capacity + slot_a] = distance << 24 | index_b;
-        if (slot_b < capacity) lists.keys[(v.rows_b + index_b) * capacity + slot_b] = distance << 24 | index_a;
-      }
+      AppendQueued(s, v, lists, capacity, in_round, lane);
       __syncwarp();
       s.kept_a[lane] = 0;
       s.kept_b[lane] = 0;
