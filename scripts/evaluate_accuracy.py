@@ -296,7 +296,15 @@ def main():
     report.write(args, results, losses, by_angle, sweep_results, camera_results, use_gpu, EPS, gpu_info)
     print("report written to %s, plots in %s" % (args.report, args.out))
     if args.doc:
-        command = " ".join(["scripts/evaluate_accuracy.py"] + sys.argv[1:])
+        # Where the data lies on this machine is no part of the command a
+        # reader repeats: it defaults to ../shared/data beside the checkout.
+        shown, skip = [], False
+        for arg in sys.argv[1:]:
+            if skip or arg == "--data-dir" or arg.startswith("--data-dir="):
+                skip = arg == "--data-dir"
+                continue
+            shown.append(arg)
+        command = " ".join(["scripts/evaluate_accuracy.py"] + shown)
         accuracy_page.write(args, command, results, losses, by_angle, camera_results, gpu_info)
         print("page written to %s, plots in %s" % (args.doc, args.doc_img_dir))
 
