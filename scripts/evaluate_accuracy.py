@@ -271,7 +271,8 @@ def main():
     bench = os.path.join(os.path.abspath(args.build_dir), "scripts", "matcher_recall_bench")
     if args.export_gpu_inputs:
         dbs = homography_features(args)
-        size = gpu_column.export_inputs({n: f for n, (f, _) in dbs.items()}, args.export_gpu_inputs)
+        size = gpu_column.export_inputs({n: f for n, (f, _) in dbs.items()}, args.export_gpu_inputs, args.cascade,
+                                        cascade_flags(args.cascade))
         print("%d feature databases and run.sh in %s (%.1f MB). On the GPU machine: %s/run.sh <cashash binary>; "
               "then pass --gpu-results with the folder." % (len(dbs), args.export_gpu_inputs, size / 1e6,
                                                             args.export_gpu_inputs))
