@@ -4,7 +4,7 @@
   scripts/evaluate_accuracy.py --build-dir build [--data-dir ../shared/data]
       [--out DIR/accuracy] [--report DIR/ACCURACY.md] [--work-dir /tmp/cashash_accuracy]
       [--skip-colmap-matcher] [--colmap-matcher-scenes fountain-P11] [--skip-cameras]
-      [--skip-sweeps] [--reuse] [--gpu-results DIR]
+      [--skip-sweeps] [--reuse] [--gpu-results DIR] [--doc docs/ACCURACY.md --doc-img-dir docs/img]
   scripts/evaluate_accuracy.py --export-gpu-inputs DIR   (for a GPU machine without COLMAP or data)
 
 1. Homographies (Oxford graf, boat, bikes, leuven; HPatches v_graffiti):
@@ -17,7 +17,8 @@
 3. Cameras (fountain-P11, herzjesu-P25): COLMAP mapper after each matcher,
    similarity alignment to the ground-truth centres, position and rotation
    errors.
-Writes the Markdown report and PNG plots. Intermediate databases and logs
+Writes the Markdown report and PNG plots; with --doc also the users' page
+(docs/ACCURACY.md) with its plots in --doc-img-dir, from the same results. Intermediate databases and logs
 stay in --work-dir; --reuse picks up finished steps from there.
 """
 import argparse
@@ -29,7 +30,7 @@ import sys
 sys.dont_write_bytecode = True
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from eval import cameras, gpu_column, homography, loss_analysis, report, sweeps, tools  # noqa: E402
+from eval import accuracy_page, cameras, gpu_column, homography, loss_analysis, report, sweeps, tools  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EPS = [3, 6]
@@ -53,6 +54,9 @@ def parse_args():
     parser.add_argument("--out", default="/tmp/cashash_accuracy/report/accuracy", help="folder of the PNG plots")
     parser.add_argument("--report", default="/tmp/cashash_accuracy/report/ACCURACY.md")
     parser.add_argument("--work-dir", default="/tmp/cashash_accuracy")
+    parser.add_argument("--doc", help="also write the users' page of the figures here (docs/ACCURACY.md)")
+    parser.add_argument("--doc-img-dir", default=os.path.join(REPO, "docs", "img"),
+                        help="folder of the users' page's plots (linked relative to --doc)")
     parser.add_argument("--feature-db-dir", default="/tmp/dbs",
                         help="COLMAP feature databases <scene>.db of the camera scenes (copied, never written); "
                              "missing ones are extracted with COLMAP's CPU SIFT")
@@ -101,9 +105,11 @@ def scene_feature_db(args, scene, log):
 
 
 def cascade_flags(setting):
+    """The cascade's own matches at this setting: without the exact rematch,
+    which would give the pairs it reaches brute force's matches."""
     tables, bits, tau, top_k = setting.split(",")
     return ["--CasHash.num_tables", tables, "--CasHash.bits_per_table", bits, "--CasHash.tau", tau,
-            "--CasHash.top_k", top_k]
+            "--CasHash.top_k", top_k, "--CasHash.exact_rematch_min_matches", "0"]
 
 
 def homography_matchers(binary, use_gpu, setting):
@@ -265,7 +271,8 @@ def main():
     bench = os.path.join(os.path.abspath(args.build_dir), "scripts", "matcher_recall_bench")
     if args.export_gpu_inputs:
         dbs = homography_features(args)
-        size = gpu_column.export_inputs({n: f for n, (f, _) in dbs.items()}, args.export_gpu_inputs)
+        size = gpu_column.export_inputs({n: f for n, (f, _) in dbs.items()}, args.export_gpu_inputs, args.cascade,
+                                        cascade_flags(args.cascade))
         print("%d feature databases and run.sh in %s (%.1f MB). On the GPU machine: %s/run.sh <cashash binary>; "
               "then pass --gpu-results with the folder." % (len(dbs), args.export_gpu_inputs, size / 1e6,
                                                             args.export_gpu_inputs))
@@ -289,6 +296,18 @@ def main():
         "losses": losses, "kept_by_angle": by_angle, "cameras": camera_results, "gpu": gpu_info})
     report.write(args, results, losses, by_angle, sweep_results, camera_results, use_gpu, EPS, gpu_info)
     print("report written to %s, plots in %s" % (args.report, args.out))
+    if args.doc:
+        # Where the data lies on this machine is no part of the command a
+        # reader repeats: it defaults to ../shared/data beside the checkout.
+        shown, skip = [], False
+        for arg in sys.argv[1:]:
+            if skip or arg == "--data-dir" or arg.startswith("--data-dir="):
+                skip = arg == "--data-dir"
+                continue
+            shown.append(arg)
+        command = " ".join(["scripts/evaluate_accuracy.py"] + shown)
+        accuracy_page.write(args, command, results, losses, by_angle, camera_results, gpu_info)
+        print("page written to %s, plots in %s" % (args.doc, args.doc_img_dir))
 
 
 if __name__ == "__main__":

@@ -2,9 +2,11 @@
 # What a user waits for: `cashash exhaustive_matcher` from start to finish
 # (matching, verification, writing) in several configurations, and COLMAP's
 # own exhaustive matcher (pycolmap, GPU when it has CUDA) on the same
-# database, each on its own copy, in one run on one machine. Prints one
-# Markdown table: process wall time, pairs/s by the run's summary line, the
-# stage busy and waiting times, raw matches, verified pairs, inlier matches.
+# database, each on its own copy, in one run on one machine. Writes one
+# Markdown table, OUT_DIR/table.md (process wall time, pairs/s by the run's
+# summary line, the stage busy and waiting times, raw matches, verified
+# pairs, inlier matches), and its plot, OUT_DIR/end_to_end.png (pairs/s of
+# the whole command, scripts/bench/plot_end_to_end.py), and prints the table.
 #
 # Usage: end_to_end_bench.sh CASHASH DB OUT_DIR
 # Environment (defaults in brackets):
@@ -131,6 +133,7 @@ c.commit()" "$copy"
   python3 "$(dirname "$0")/colmap_exhaustive_timed.py" "$copy" "$COLMAP_TIME_LIMIT" >> "$TABLE" 2> "$OUT/colmap.log"
   rm -f "$copy" "$copy-wal" "$copy-shm"
 fi
+python3 "$(dirname "$0")/plot_end_to_end.py" "$TABLE" --png "$OUT/end_to_end.png"
 cat "$TABLE"
 [ -f "$OUT/notes.txt" ] && cat "$OUT/notes.txt"
 exit 0

@@ -23,7 +23,10 @@
 #   databases (kept, reused when present), OUT [WORK/logs]: one log and one
 #   time file per run.
 # Prints a table: build, images, processes, peak RSS (MiB, the largest
-# process), seconds to the first committed chunk, pairs committed.
+# process), seconds to the first committed chunk, pairs committed; writes
+# the same rows to OUT/host_memory.csv, and from them
+# (scripts/bench/plot_host_memory.py) the Markdown table OUT/host_memory.md
+# and its plot OUT/host_memory.png (peak resident memory against images).
 set -u -o pipefail
 
 SOURCE_DB="$1"; shift
@@ -80,8 +83,13 @@ run_one() {
   peak_kib=$(cat "$OUT/$tag".time* 2> /dev/null | awk '/Maximum resident set size/ { if ($NF > m) m = $NF } END { print m + 0 }')
   first=$(awk '/Matching block/ { print $1; exit }' "$OUT/$tag.log")
   pairs=$(grep -oE '\([0-9]+/[0-9]+ pairs' "$OUT/$tag.log" | tail -1 | tr -d '(' | sed 's/ pairs//')
-  printf '%-10s %7s %5s %10.0f %12s %22s\n' "$label" "$(basename "$db" .db | sed 's/street_//')" "$ranks" \
-    "$(awk -v k="$peak_kib" 'BEGIN { print k / 1024 }')" "${first:--}" "${pairs:--}"
+  local images="${db##*/street_}"
+  images="${images%%x*}"
+  local peak_mib
+  peak_mib=$(awk -v k="$peak_kib" 'BEGIN { printf "%.0f", k / 1024 }')
+  printf '%-10s %7s %5s %10s %12s %22s\n' "$label" "$(basename "$db" .db | sed 's/street_//')" "$ranks" \
+    "$peak_mib" "${first:--}" "${pairs:--}"
+  echo "$label,$binary,$images,$ranks,$peak_mib,${first:-},${pairs%%/*}" >> "$CSV"
 }
 
 # --- Databases ---------------------------------------------------------------
@@ -95,6 +103,13 @@ for n in $SIZES; do
 done
 
 # --- Runs ----------------------------------------------------------------------
+CSV="$OUT/host_memory.csv"
+{
+  echo "# host_memory_scale.sh $(date -u +%Y-%m-%dT%H:%M:%SZ), $(nproc) cores," \
+    "$(awk '/MemTotal/ { printf "%.1f GiB", $2 / 1048576 }' /proc/meminfo); ${NUM_FEATURES} features an image," \
+    "SIGINT after ${RUN_S} s, --FeatureMatching.use_gpu $USE_GPU ${OPTIONS[*]}"
+  echo "build,binary,images,processes,peak_mib,first_chunk_s,pairs_committed"
+} > "$CSV"
 echo "# host_memory_scale.sh $(date -u +%Y-%m-%dT%H:%M:%SZ), $(nproc) cores," \
   "$(awk '/MemTotal/ { printf "%.1f GiB", $2 / 1048576 }' /proc/meminfo); ${NUM_FEATURES} features an image," \
   "SIGINT after ${RUN_S} s, --FeatureMatching.use_gpu $USE_GPU ${OPTIONS[*]}"
@@ -111,3 +126,4 @@ for binary in "${BUILDS[@]}"; do
 done
 rm -f "$WORK/run.db" "$WORK/run.db-wal" "$WORK/run.db-shm"
 echo "builds: $(b=0; for x in "${BUILDS[@]}"; do printf 'build%d=%s ' "$b" "$x"; b=$((b + 1)); done)"
+python3 "$(dirname "$0")/plot_host_memory.py" "$CSV" --png "$OUT/host_memory.png" --table "$OUT/host_memory.md"

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Table and plot of a scripts/bench/scale_curve.sh run.
 
-    plot_scale_curve.py scale_curve.csv [--png scale_curve.png]
+    plot_scale_curve.py scale_curve.csv [--png scale_curve.png] [--table scale_curve.md]
 
-Prints a Markdown table (one row per street: the whole command's time and
+Prints (and with --table writes) a Markdown table (one row per street: the whole command's time and
 pairs/s beside COLMAP's rate over its fixed time) and a projection to
 20,000 and 50,000 images at the largest street's whole-command rate;
 draws pairs/s and wall time against images for both matchers (COLMAP's
@@ -22,6 +22,16 @@ def number(value):
         return float(value)
     except (TypeError, ValueError):
         return None
+
+
+def duration(seconds):
+    if seconds < 120:
+        return "%.0f s" % seconds
+    if seconds < 2 * 3600:
+        return "%.1f min" % (seconds / 60)
+    if seconds < 3 * 86400:
+        return "%.1f h" % (seconds / 3600)
+    return "%.1f days" % (seconds / 86400)
 
 
 def read_rows(path):
@@ -48,7 +58,7 @@ def table(rows):
         rate = pairs / wall if wall else None
         colmap = number(r["colmap_pairs_per_s"])
         ratio = "%.0fx" % (rate / colmap) if rate and colmap else ""
-        projected = "%.1f h" % (pairs_of(n) / colmap / 3600) if colmap else ""
+        projected = duration(pairs_of(n) / colmap) if colmap else ""
         out.append("| %s %s | %s | %s | %s | %s | %s / %s / %s | %s | %s | %s | %s | %s | %s |" % (
             r["kind"], "{:,}".format(n), "{:,}".format(int(number(r["mean_features"]) or 0)),
             "{:,}".format(int(pairs)), "%.1f" % wall if wall else "", "{:,.0f}".format(rate) if rate else "",
@@ -66,9 +76,9 @@ def projection(rows):
         last = max(mine, key=lambda r: int(r["images"]))
         rate = number(last["pairs"]) / number(last["wall_s"])
         for n in (20000, 50000):
-            out.append("- %s, %s images: %s pairs at %s pairs/s (the %s-image rate): %.1f min" % (
+            out.append("- %s, %s images: %s pairs at %s pairs/s (the %s-image rate): %s" % (
                 kind, "{:,}".format(n), "{:,}".format(pairs_of(n)), "{:,.0f}".format(rate),
-                "{:,}".format(int(last["images"])), pairs_of(n) / rate / 60))
+                "{:,}".format(int(last["images"])), duration(pairs_of(n) / rate)))
     return "\n".join(out)
 
 
@@ -76,6 +86,7 @@ def plot(rows, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     colours = {"equal": "tab:blue", "extraction": "tab:orange"}
     for kind in sorted({r["kind"] for r in rows}):
@@ -104,7 +115,14 @@ def plot(rows, path):
     right.set_xlabel("images")
     right.set_ylabel("seconds for every pair")
     right.set_title("Time to match and verify every pair")
+    sizes = sorted({int(r["images"]) for r in rows})
     for axis in (left, right):
+        axis.set_xticks(sizes)
+        axis.set_xticklabels(["{:,}".format(n) for n in sizes])
+        axis.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
+        axis.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: "{:,.0f}".format(v) if v >= 1
+                                                                        else "{:g}".format(v)))
+        axis.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         axis.grid(True, which="both", alpha=0.3)
         axis.legend(fontsize=8)
     fig.tight_layout()
@@ -115,11 +133,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("csv")
     parser.add_argument("--png", default=None)
+    parser.add_argument("--table", default=None, help="also write the table and the projection here")
     args = parser.parse_args()
     rows = read_rows(args.csv)
-    print(table(rows))
-    print()
-    print(projection(rows))
+    with open(args.csv) as f:
+        notes = [line[2:].strip() for line in f if line.startswith("# ")]
+    text = "\n".join(notes) + "\n\n" + table(rows) + "\n\n" + projection(rows) + "\n"
+    print(text)
+    if args.table:
+        with open(args.table, "w") as f:
+            f.write(text)
     if args.png:
         plot(rows, args.png)
         print("\nWritten: %s" % args.png)

@@ -1,17 +1,21 @@
 #!/usr/bin/env python3
 """Plot and tabulate a scripts/bench/scale_run.sh run.
 
-    plot_scale_run.py RUN_DIR [--png RUN_DIR/scale_run.png] [--paper-rome16k-s 1.565e5]
+    plot_scale_run.py RUN_DIR [--png RUN_DIR/scale_run.png] [--table RUN_DIR/scale_run.md]
+        [--paper-rome16k-s 1.565e5]
 
 Reads RUN_DIR/samples.csv and RUN_DIR/summary.txt (and the phase logs for
 the run's closing lines); writes the PNG (pairs/s over time, pairs
-committed, resident and GPU memory) and prints a Markdown section: what was
+committed, resident and GPU memory) and the Markdown section, which it
+also prints: what was
 measured per phase, the share of busy time per stage, and the
 extrapolation to 20,000 images and to Rome16K (15,178 images) at the
 measured rates.
 """
 import argparse
+import contextlib
 import csv
+import io
 import os
 import re
 import sys
@@ -99,6 +103,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run_dir")
     ap.add_argument("--png", help="output plot (default RUN_DIR/scale_run.png)")
+    ap.add_argument("--table", help="output Markdown (default RUN_DIR/scale_run.md)")
     ap.add_argument("--paper-rome16k-s", type=float, default=1.565e5,
                     help="CasHashGPU's Rome16K matching time in the GPU cascade hashing paper")
     ap.add_argument("--window", type=float, default=10.0, help="seconds per pairs/s point")
@@ -152,7 +157,19 @@ def main():
     fig.tight_layout()
     fig.savefig(png, dpi=110)
 
-    print(f"Plot: {png}\n")
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        tabulate(args, samples, phases, labels, num_images)
+    table = args.table or os.path.join(args.run_dir, "scale_run.md")
+    with open(table, "w") as f:
+        f.write(text.getvalue())
+    print(text.getvalue())
+    print(f"Written: {png}, {table}")
+    return 0
+
+
+def tabulate(args, samples, phases, labels, num_images):
+    """Prints the Markdown section: per phase, the sampled peaks, the extrapolation."""
     print("| phase | wall s | pairs committed | pairs/s (steady) | pairs/s (summary) | "
           "loading | hashing | matching | verification | writing | memory |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
@@ -191,7 +208,6 @@ def main():
         print(f"| {name} | {pairs_of(n):,} | {cells[0]} | {cells[1]} |")
     print(f"\nPaper (CasHashGPU, Rome16K): {args.paper_rome16k_s:.4g} s = {fmt_duration(args.paper_rome16k_s)}, "
           f"{pairs_of(ROME16K_IMAGES) / args.paper_rome16k_s:,.0f} pairs/s.")
-    return 0
 
 
 if __name__ == "__main__":

@@ -13,7 +13,8 @@
 #   2. runs the whole command, `cashash retrieval_matcher`, on a copy that
 #      holds only those N images, timed by /usr/bin/time; retrieval's part
 #      is the sum of the command's own "Retrieval time:" line.
-# Prints one line per size.
+# Prints one line per size, and writes the table WORK_DIR/retrieval_scale.md
+# and its plot WORK_DIR/retrieval_scale.png (scripts/bench/plot_retrieval_scale.py).
 set -euo pipefail
 BUILD="$1"; SOURCE="$2"; WORK="$3"
 SIZES="${4:-2500 5000 10000 20000}"; FEATURES="${5:-4096}"; K="${6:-50}"
@@ -25,6 +26,8 @@ if [[ ! -f "$STREET" ]]; then
   /usr/bin/time -f "generate_database: %e s" "$CASHASH" generate_database --database_path "$STREET" \
     --source_database_path "$SOURCE" --num_images "$largest" --num_features "$FEATURES" > "$WORK/generate.log"
 fi
+TABLE="$WORK/retrieval_scale.md"
+{
 echo "| images | retrieval_bench wall s | retrieval_bench CPU s | pairs | command: retrieval s | command: wall s | retrieval share |"
 echo "|---:|---|---|---:|---:|---:|---:|"
 for n in $SIZES; do
@@ -44,3 +47,5 @@ for n in $SIZES; do
   echo "| $n | $walls | $cpus | $pairs | $retrieval_s | $command_s | $share |"
   rm -f "$db" "$db"-*
 done
+} | tee "$TABLE"
+python3 "$(dirname "$0")/plot_retrieval_scale.py" "$TABLE" --png "$WORK/retrieval_scale.png"

@@ -19,8 +19,9 @@
 #   WORK [/tmp/cashash_scale_curve]: where the databases go (about 1.2 MiB
 #       per image of 8,192 features, twice with COLMAP's copy)
 #   EXTRA: more options for every cashash run
-# Writes OUT_DIR/scale_curve.csv, OUT_DIR/scale_curve.png, OUT_DIR/logs/,
-# and prints the table (scripts/bench/plot_scale_curve.py).
+# Writes OUT_DIR/scale_curve.csv, the table OUT_DIR/scale_curve.md and its
+# plot OUT_DIR/scale_curve.png (scripts/bench/plot_scale_curve.py), and
+# OUT_DIR/logs/; prints the table.
 set -u -o pipefail
 
 CASHASH="$1"; SOURCE_DB="$2"; OUT="$3"
@@ -100,4 +101,4 @@ for kind in $KINDS; do
   done
 done
 
-python3 "$HERE/plot_scale_curve.py" "$CSV" --png "$OUT/scale_curve.png"
+python3 "$HERE/plot_scale_curve.py" "$CSV" --png "$OUT/scale_curve.png" --table "$OUT/scale_curve.md"

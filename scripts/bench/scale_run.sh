@@ -20,8 +20,9 @@
 #       phase A, so that the blocks in flight after SIGINT (up to three being
 #       verified) finish in time; phase B uses the derived size (50).
 # Writes to OUT_DIR: samples.csv (t_s, phase, pairs_done, pairs_total,
-# rss_mib, gpu_used_mib), generate.log, phase_A.log, phase_B.log, summary.txt.
-# scripts/bench/plot_scale_run.py OUT_DIR turns them into a plot and a table.
+# rss_mib, gpu_used_mib), generate.log, phase_A.log, phase_B.log, summary.txt,
+# and from them (scripts/bench/plot_scale_run.py) the table scale_run.md and
+# its plot scale_run.png.
 set -u -o pipefail
 
 CASHASH="$1"; SOURCE_DB="$2"; OUT_DIR="$3"; shift 3
@@ -150,3 +151,4 @@ case "$PHASES" in *B*) run_phase B "$TOTAL_S" --FeatureMatching.skip_geometric_v
 } >> "$SUMMARY"
 [ "$KEEP_DB" = 1 ] || rm -f "$DB" "$DB-wal" "$DB-shm"
 cat "$SUMMARY"
+python3 "$(dirname "$0")/plot_scale_run.py" "$OUT_DIR"

@@ -5,14 +5,14 @@ evaluation splits in two:
 
   export_inputs: the SIFT feature databases of the homography sequences
   (features only, no matches) and a run.sh that matches each of them in
-  place with `cashash exhaustive_matcher --FeatureMatching.use_gpu 1` at
-  the binary's default options;
+  place with `cashash exhaustive_matcher --FeatureMatching.use_gpu 1` and
+  the CPU cascade's setting (its --CasHash flags, the rematch off);
   read_results: after run.sh, the matched databases are evaluated like any
   other matcher, and compared row by row with the CPU cascade.
 
 run.sh also stores what the evaluation must check before it trusts the
-numbers: the binary's option defaults (they must equal the CPU cascade's
-setting), the GPU it saw and, per sequence, the matcher that finished the
+numbers: the setting it passed (setting.txt; it must equal the CPU
+cascade's), the binary's option defaults, the GPU it saw and, per sequence, the matcher that finished the
 run (a GPU run that fell back to the CPU says so in its summary line).
 """
 import os
@@ -25,7 +25,8 @@ from eval import homography, tools
 RUN_SCRIPT = """#!/usr/bin/env bash
 # Matches every <sequence>.db of this folder with the GPU cascade, in place.
 #   ./run.sh <path to the cashash binary>
-# Writes <sequence>.log, options.txt (the binary's defaults) and device.txt.
+# Writes <sequence>.log, options.txt (the binary's defaults), setting.txt (the
+# cascade setting passed) and device.txt.
 # Then bring the whole folder back and run
 #   scripts/evaluate_accuracy.py --gpu-results <this folder> ...
 set -euo pipefail
@@ -33,6 +34,7 @@ binary=$(realpath "${1:?usage: run.sh <cashash binary>}")
 cd "$(dirname "$0")"
 nvidia-smi -L > device.txt 2>/dev/null || echo "no nvidia-smi on this machine" > device.txt
 "$binary" exhaustive_matcher --help > options.txt 2>&1
+echo "%(setting)s" > setting.txt
 for database in %(databases)s; do
   name=${database%%.db}
   echo "== $name"
@@ -40,7 +42,7 @@ for database in %(databases)s; do
   # --CasHash.matcher cascade: this column is the GPU cascade against the CPU
   # cascade's (the default, auto, may pick brute force for some pairs).
   "$binary" exhaustive_matcher --database_path "$database" --FeatureMatching.use_gpu 1 \\
-      --CasHash.matcher cascade --overwrite 1 > "$name.log" 2>&1 || { tail -20 "$name.log"; exit 1; }
+      --CasHash.matcher cascade %(flags)s --overwrite 1 > "$name.log" 2>&1 || { tail -20 "$name.log"; exit 1; }
   grep -E "^(Summary|Time|Warning|WARNING)" "$name.log" || true
 done
 echo "done: bring back $(pwd)"
@@ -50,8 +52,9 @@ echo "done: bring back $(pwd)"
 SETTING_OPTIONS = ["CasHash.num_tables", "CasHash.bits_per_table", "CasHash.tau", "CasHash.top_k"]
 
 
-def export_inputs(feature_dbs, out_dir):
-    """feature_dbs: {sequence: features.db}. Copies each (without match rows,
+def export_inputs(feature_dbs, out_dir, setting, flags):
+    """feature_dbs: {sequence: features.db}; setting: 'tables,bits,tau,top_k'
+    and flags: the cascade options that give it. Copies each (without match rows,
     compacted) to out_dir/<sequence>.db and writes out_dir/run.sh. Returns the
     folder's size in bytes."""
     os.makedirs(out_dir, exist_ok=True)
@@ -71,13 +74,19 @@ def export_inputs(feature_dbs, out_dir):
         conn.close()
     script = os.path.join(out_dir, "run.sh")
     with open(script, "w") as f:
-        f.write(RUN_SCRIPT % {"databases": " ".join(name + ".db" for name in feature_dbs)})
+        f.write(RUN_SCRIPT % {"databases": " ".join(name + ".db" for name in feature_dbs), "setting": setting,
+                              "flags": " ".join(flags)})
     os.chmod(script, os.stat(script).st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
     return sum(os.path.getsize(os.path.join(out_dir, f)) for f in os.listdir(out_dir))
 
 
 def binary_defaults(results_dir):
-    """'tables,bits,tau,top_k' as the GPU machine's binary printed them, or None."""
+    """'tables,bits,tau,top_k' the GPU run used: the setting run.sh passed, or
+    (a run.sh that passed none) the binary's defaults as it printed them; None
+    if neither is there."""
+    passed = os.path.join(results_dir, "setting.txt")
+    if os.path.exists(passed):
+        return open(passed).read().strip()
     path = os.path.join(results_dir, "options.txt")
     if not os.path.exists(path):
         return None

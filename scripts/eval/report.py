@@ -143,7 +143,7 @@ def gpu_paragraph(results, gpu_info, cascade_setting):
     on_gpu = all(m.startswith("gpu-cascade") for m in ran_on.values())
     lines = ["The GPU cascade rows come from `--gpu-results`: `--export-gpu-inputs DIR` wrote the feature databases "
              "of the sequences and `run.sh`, which matched each with `cashash exhaustive_matcher "
-             "--FeatureMatching.use_gpu 1` at the binary's defaults on the GPU machine (%s). Matcher that finished "
+             "--FeatureMatching.use_gpu 1` and the CPU cascade's --CasHash setting on the GPU machine (%s). Matcher that finished "
              "each run: %s." % (gpu_info["device"] or "device not recorded",
                                 ", ".join("%s %s" % (n, m) for n, m in ran_on.items()))]
     if not on_gpu:
@@ -151,10 +151,10 @@ def gpu_paragraph(results, gpu_info, cascade_setting):
                       "these rows only check the export, run.sh and the read-back path.")
     defaults = gpu_info["defaults"]
     if defaults != cascade_setting:
-        lines[-1] += (" **Setting mismatch**: the binary's defaults (tables, bits, tau, top_k) are %s, the CPU "
+        lines[-1] += (" **Setting mismatch**: the GPU run's setting (tables, bits, tau, top_k) is %s, the CPU "
                       "cascade ran with %s, so the rows below need not agree." % (defaults, cascade_setting))
     else:
-        lines[-1] += " The binary's defaults (tables, bits, tau, top_k = %s) equal the CPU cascade's setting." % defaults
+        lines[-1] += " The GPU run's setting (tables, bits, tau, top_k = %s) equals the CPU cascade's." % defaults
     lines += ["", "Agreement with the CPU cascade (identical (idx1, idx2) rows of the raw matches):", "",
               "| sequence | CPU matches | GPU matches | identical rows | pairs with identical lists | "
               "GPU matching s (15 pairs) |", "|---|---|---|---|---|---|"]

@@ -15,27 +15,22 @@
 #include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/sqlite_statement.h"
 #include "generated_database_support.h"
+#include "pair_id_sets.h"
 #include "synthetic/database_generator.h"
 
 namespace cashash {
 namespace colmap {
 namespace {
 
+using testing_support::WithinSteps;
+
+// Images 1..kImages, ids in name order.
 constexpr int kImages = 16;
 
 std::set<pair_t> StoredPairs(const std::string& path) {
   const Database db(path, /*read_only=*/true);
   const std::unordered_set<pair_t> ids = db.ReadCompletedPairIds();
   return std::set<pair_t>(ids.begin(), ids.end());
-}
-
-// Pairs of images 1..kImages (ids in name order) at most `steps` apart.
-std::set<pair_t> WithinSteps(int steps) {
-  std::set<pair_t> ids;
-  for (int i = 1; i <= kImages; ++i) {
-    for (int j = i + 1; j <= kImages && j - i <= steps; ++j) ids.insert(ImagePairToPairId(i, j));
-  }
-  return ids;
 }
 
 // Answers every query with the images of the far end of the street.
@@ -85,12 +80,12 @@ TEST_F(GeneratedStreet, SequentialWritesTheOverlapPairsAndResumes) {
   options_.sequential.overlap = 3;
   options_.sequential.quadratic_overlap = false;
   const MatchingSummary first = MatchSequential(path_, options_, callbacks_);
-  EXPECT_EQ(first.pairs_requested, WithinSteps(3).size());
-  EXPECT_EQ(first.pipeline.pairs_done, WithinSteps(3).size());
+  EXPECT_EQ(first.pairs_requested, WithinSteps(kImages, 3).size());
+  EXPECT_EQ(first.pipeline.pairs_done, WithinSteps(kImages, 3).size());
   EXPECT_GT(first.pipeline.verified_pairs, 0u);
-  EXPECT_EQ(StoredPairs(path_), WithinSteps(3));
+  EXPECT_EQ(StoredPairs(path_), WithinSteps(kImages, 3));
   const MatchingSummary second = MatchSequential(path_, options_, callbacks_);
-  EXPECT_EQ(second.pairs_skipped, WithinSteps(3).size());
+  EXPECT_EQ(second.pairs_skipped, WithinSteps(kImages, 3).size());
   EXPECT_EQ(second.pipeline.pairs_done, 0u);
   EXPECT_TRUE(warnings_.empty()) << testing::PrintToString(warnings_);
 }
@@ -105,7 +100,7 @@ TEST_F(GeneratedStreet, LoopDetectionAsksTheRetrievalAndAddsItsPairs) {
   MatchSequential(path_, options_, callbacks_, &retrieval);
   EXPECT_EQ(retrieval.queried, (std::vector<image_t>{1, 6, 11, 16}));
   EXPECT_EQ(retrieval.asked_for, 2);
-  std::set<pair_t> expected = WithinSteps(1);
+  std::set<pair_t> expected = WithinSteps(kImages, 1);
   for (image_t query : {1, 6, 11}) {
     expected.insert(ImagePairToPairId(query, kImages));
     expected.insert(ImagePairToPairId(query, kImages - 1));
@@ -127,7 +122,7 @@ TEST_F(GeneratedStreet, LoopDetectionRetrievesOverlappingImagesBeyondTheOverlap)
   options_.sequential.num_threads = 1;
   const MatchingSummary summary = MatchSequential(path_, options_, callbacks_);
   const std::set<pair_t> stored = StoredPairs(path_);
-  const std::set<pair_t> overlap = WithinSteps(2);
+  const std::set<pair_t> overlap = WithinSteps(kImages, 2);
   EXPECT_TRUE(std::includes(stored.begin(), stored.end(), overlap.begin(), overlap.end()));
   EXPECT_GT(stored.size(), overlap.size());
   EXPECT_EQ(summary.pairs_requested, stored.size());
@@ -149,8 +144,8 @@ TEST_F(GeneratedStreet, SpatialMatchesNeighboursWithinMaxDistance) {
   // street): two steps are within 2.5, three are not.
   options_.spatial.max_distance = 2.5;
   const MatchingSummary summary = MatchSpatial(path_, options_, callbacks_);
-  EXPECT_EQ(summary.pairs_requested, WithinSteps(2).size());
-  EXPECT_EQ(StoredPairs(path_), WithinSteps(2));
+  EXPECT_EQ(summary.pairs_requested, WithinSteps(kImages, 2).size());
+  EXPECT_EQ(StoredPairs(path_), WithinSteps(kImages, 2));
   EXPECT_TRUE(warnings_.empty()) << testing::PrintToString(warnings_);
 }
 
@@ -165,7 +160,7 @@ TEST_F(GeneratedStreet, SpatialNamesImagesWithoutPriorAndFailsWithoutAny) {
   ASSERT_EQ(warnings_.size(), 1u);
   EXPECT_NE(warnings_[0].find("synthetic_000004.jpg"), std::string::npos) << warnings_[0];
   EXPECT_NE(warnings_[0].find("1 of the 16 images has no position prior"), std::string::npos) << warnings_[0];
-  std::set<pair_t> expected = WithinSteps(1);
+  std::set<pair_t> expected = WithinSteps(kImages, 1);
   expected.erase(ImagePairToPairId(3, 4));
   expected.erase(ImagePairToPairId(4, 5));
   EXPECT_EQ(StoredPairs(path_), expected);

@@ -3,33 +3,20 @@
 // skips them; the record's encoding round-trips and rejects damage.
 #include <gtest/gtest.h>
 
-#include <sqlite3.h>
-
 #include "cashash/base/pair_id.h"
 #include "colmap_bridge/database.h"
 #include "synthetic/database_generator.h"
 #include "colmap_bridge/database_pipeline_io.h"
 #include "colmap_bridge/api/matching_api.h"
 #include "colmap_bridge/pair_id_runs.h"
+#include "database_queries.h"
 #include "generated_database_support.h"
 
 namespace cashash {
 namespace {
 
 using colmap::Database;
-
-int64_t CountRows(const std::string& path, const std::string& sql) {
-  sqlite3* db = nullptr;
-  sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
-  sqlite3_stmt* s = nullptr;
-  int64_t value = -1;
-  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
-    value = sqlite3_column_int64(s, 0);
-  }
-  sqlite3_finalize(s);
-  sqlite3_close(db);
-  return value;
-}
+using testing_support::QueryInt;
 
 // Pairs of image 1 with its near neighbours (matches) and with far images
 // (no match: the street scene shares no point, descriptors are unrelated).
@@ -65,19 +52,19 @@ class WriteEmptyPairsTest : public ::testing::Test {
 TEST_F(WriteEmptyPairsTest, OnWritesEveryPairAsColmapDoes) {
   const colmap::MatchingSummary summary = colmap::MatchPairs(path_, NearAndFarPairs(), options_);
   EXPECT_EQ(summary.pipeline.pairs_done, 8u);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 8);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches WHERE rows = 0"), 6);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM sqlite_master WHERE name = 'cashash_empty_pairs'"), 0);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches"), 8);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches WHERE rows = 0"), 6);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM sqlite_master WHERE name = 'cashash_empty_pairs'"), 0);
 }
 
 TEST_F(WriteEmptyPairsTest, OffWritesPairsWithMatchesOnlyAndResumeSkipsTheOthers) {
   options_.write_empty_pairs = false;
   colmap::MatchPairs(path_, NearAndFarPairs(), options_);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 2);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 2);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches WHERE rows = 0"), 0);
-  EXPECT_EQ(CountRows(path_, "SELECT SUM(num_pairs) FROM cashash_empty_pairs"), 6);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches"), 2);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM two_view_geometries"), 2);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches WHERE rows = 0"), 0);
+  EXPECT_EQ(QueryInt(path_, "SELECT SUM(num_pairs) FROM cashash_empty_pairs"), 6);
   {
     Database db(path_, true);
     EXPECT_EQ(db.ReadCompletedPairIds().size(), 8u);
@@ -91,7 +78,7 @@ TEST_F(WriteEmptyPairsTest, OffWritesPairsWithMatchesOnlyAndResumeSkipsTheOthers
   // the listed pairs, empty ones now with rows.
   options_.overwrite = true;
   colmap::MatchPairs(path_, NearAndFarPairs(), options_);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 8);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches"), 8);
 }
 
 TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty) {
@@ -102,7 +89,7 @@ TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty)
     result.matches = {{0, 0}, {1, 1}};
     sink.WriteChunk({result});
   }
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 1);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches"), 1);
   colmap::DatabaseResultSink sink(path_, colmap::DatabaseResultSink::Options{true, false, true});
   PairResult empty;
   empty.pair = {25, 1};
@@ -110,8 +97,8 @@ TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty)
   sink.Flush();
   EXPECT_EQ(sink.rows_written(), 0u);
   EXPECT_EQ(sink.empty_pairs_recorded(), 1u);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 0);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches"), 0);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
   Database db(path_, true);
   EXPECT_EQ(db.ReadCompletedPairIds().count(ImagePairToPairId(1, 25)), 1u);
 }
@@ -122,18 +109,18 @@ TEST_F(WriteEmptyPairsTest, OverwriteWithoutEmptyRowsDeletesRowsOfPairsNowEmpty)
 // next verifying run matches and verifies those pairs again.
 TEST_F(WriteEmptyPairsTest, OverwriteWithoutVerificationDropsTheOldGeometries) {
   colmap::MatchPairs(path_, NearAndFarPairs(), options_);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
   colmap::MatcherCommandOptions rewrite = options_;
   rewrite.overwrite = true;
   rewrite.skip_geometric_verification = true;
   const colmap::MatchingSummary rewritten = colmap::MatchPairs(path_, NearAndFarPairs(), rewrite);
   EXPECT_EQ(rewritten.pipeline.pairs_done, 8u);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM matches"), 8);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM matches"), 8);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM two_view_geometries"), 0);
   const colmap::MatchingSummary resumed = colmap::MatchPairs(path_, NearAndFarPairs(), options_);
   EXPECT_EQ(resumed.pairs_skipped, 0u);
   EXPECT_EQ(resumed.pipeline.pairs_done, 8u);
-  EXPECT_EQ(CountRows(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
+  EXPECT_EQ(QueryInt(path_, "SELECT COUNT(*) FROM two_view_geometries"), 8);
 }
 
 TEST(PairIdRunsTest, RoundTripsRunsAndRejectsDamage) {

@@ -13,6 +13,7 @@
 #include "colmap_bridge/colmap38_schema.h"
 #include "colmap_bridge/database.h"
 #include "colmap_bridge/database_pipeline_io.h"
+#include "database_queries.h"
 #include "generated_database_support.h"
 
 namespace cashash {
@@ -20,37 +21,8 @@ namespace {
 
 using colmap::Database;
 using colmap::DatabaseResultSink;
-
-int64_t QueryInt(const std::string& path, const std::string& sql) {
-  sqlite3* db = nullptr;
-  sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
-  sqlite3_stmt* s = nullptr;
-  int64_t value = -1;
-  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
-    value = sqlite3_column_int64(s, 0);
-  }
-  sqlite3_finalize(s);
-  sqlite3_close(db);
-  return value;
-}
-
-// Rows of `table` in one database and not in the other, both ways.
-int64_t RowsDiffering(const std::string& a, const std::string& b, const std::string& table) {
-  sqlite3* db = nullptr;
-  sqlite3_open_v2(a.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
-  sqlite3_exec(db, ("ATTACH DATABASE '" + b + "' AS other").c_str(), nullptr, nullptr, nullptr);
-  sqlite3_stmt* s = nullptr;
-  const std::string sql = "SELECT (SELECT count(*) FROM (SELECT * FROM main." + table + " EXCEPT SELECT * FROM other." +
-                          table + ")) + (SELECT count(*) FROM (SELECT * FROM other." + table +
-                          " EXCEPT SELECT * FROM main." + table + "))";
-  int64_t value = -1;
-  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
-    value = sqlite3_column_int64(s, 0);
-  }
-  sqlite3_finalize(s);
-  sqlite3_close(db);
-  return value;
-}
+using testing_support::QueryInt;
+using testing_support::RowsDiffering;
 
 // `count` pairs of image `first` with the images after it; every third pair
 // in the order opposite to storage, every fourth without matches, the others

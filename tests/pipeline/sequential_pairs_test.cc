@@ -8,20 +8,12 @@
 #include <gtest/gtest.h>
 
 #include "cashash/base/pair_id.h"
+#include "pair_id_sets.h"
 
 namespace cashash {
 namespace {
 
-std::set<pair_t> PairIds(const std::vector<ImagePair>& pairs) {
-  std::set<pair_t> ids;
-  for (const ImagePair& pair : pairs) {
-    EXPECT_NE(pair.first, pair.second);
-    EXPECT_TRUE(ids.insert(ImagePairToPairId(pair.first, pair.second)).second) << "pair given twice";
-  }
-  return ids;
-}
-
-std::set<pair_t> PairIds(std::initializer_list<ImagePair> pairs) { return PairIds(std::vector<ImagePair>(pairs)); }
+using testing_support::PairIds;
 
 // n images named frame_000..., with ids that do not follow the names.
 std::vector<SequenceImage> Sequence(int n) {

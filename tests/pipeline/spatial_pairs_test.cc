@@ -12,18 +12,13 @@
 #include <gtest/gtest.h>
 
 #include "cashash/base/pair_id.h"
+#include "pair_id_sets.h"
 
 namespace cashash {
 namespace {
 
-std::set<pair_t> PairIds(const std::vector<ImagePair>& pairs) {
-  std::set<pair_t> ids;
-  for (const ImagePair& pair : pairs) {
-    EXPECT_NE(pair.first, pair.second);
-    EXPECT_TRUE(ids.insert(ImagePairToPairId(pair.first, pair.second)).second) << "pair given twice";
-  }
-  return ids;
-}
+using testing_support::PairIds;
+using testing_support::WithinSteps;
 
 PositionPrior Cartesian(image_t image_id, double x, double y = 0, double z = 0) {
   PositionPrior prior;
@@ -39,14 +34,6 @@ std::vector<PositionPrior> Line(int n) {
   std::vector<PositionPrior> priors;
   for (int i = 0; i < n; ++i) priors.push_back(Cartesian(static_cast<image_t>(i + 1), i + 0.01 * ((i * 7) % 5)));
   return priors;
-}
-
-std::set<pair_t> WithinSteps(int n, int steps) {
-  std::set<pair_t> ids;
-  for (int i = 1; i <= n; ++i) {
-    for (int j = i + 1; j <= n && j - i <= steps; ++j) ids.insert(ImagePairToPairId(i, j));
-  }
-  return ids;
 }
 
 TEST(SpatialPairs, DefaultsAreColmaps) {
