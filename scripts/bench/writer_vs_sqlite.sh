@@ -19,7 +19,8 @@
 # of wall and of CPU time. Run `uptime` beside it: on a loaded machine both
 # wall times stretch, the writer's more (it shares the process's cores).
 # Round columns: round, binary, writing wall s, SQLite wall s, rows, rows as
-# binary 0, writing CPU s, SQLite CPU s.
+# binary 0, writing CPU s, SQLite CPU s, the run's pipeline s (Summary), so
+# that a change that helps the writer by slowing the run shows.
 #
 # Usage: writer_vs_sqlite.sh DATABASE WORK_DIR ROUNDS CASHASH [CASHASH_BEFORE ...] [-- EXTRA_MATCHER_ARGS]
 # e.g.   writer_vs_sqlite.sh s1k32.db /tmp/w 5 build/colmap_bridge/cashash /path/to/main/build/colmap_bridge/cashash
@@ -80,6 +81,7 @@ for round in $(seq "$ROUNDS"); do
       >"$WORK/run_$b.log" 2>&1 || { cat "$WORK/run_$b.log"; exit 1; }
     writing="$(sed -n 's/^Time: .*writing \([0-9.]*\) s.*/\1/p' "$WORK/run_$b.log")"
     writing_cpu="$(sed -n 's/^Time: .*writing [0-9.]* s (\([0-9.]*\) s CPU).*/\1/p' "$WORK/run_$b.log")"
+    run_s="$(sed -n 's/^Summary: [0-9]* pairs in \([0-9.]*\) s.*/\1/p' "$WORK/run_$b.log")"
     rows="$(sqlite3 "$run_db" "SELECT (SELECT count(*) FROM matches) + (SELECT count(*) FROM two_view_geometries)")"
     copy_db="$WORK/insert_select.db"
     rm -f "$copy_db" "$copy_db-wal" "$copy_db-shm"
@@ -87,8 +89,8 @@ for round in $(seq "$ROUNDS"); do
     read -r sqlite_s sqlite_cpu <<<"$(sqlite_insert_select "$run_db" "$copy_db")"
     rows_check="same"
     if ((b > 0)); then rows_check="$(same_rows "$run_db" "$WORK/run_0.db")"; fi
-    printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$round" "$b" "$writing" "$sqlite_s" "$rows" "$rows_check" \
-      "${writing_cpu:--}" "$sqlite_cpu" | tee -a "$RESULTS"
+    printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$round" "$b" "$writing" "$sqlite_s" "$rows" "$rows_check" \
+      "${writing_cpu:--}" "$sqlite_cpu" "$run_s" | tee -a "$RESULTS"
   done
 done
 
@@ -96,8 +98,8 @@ python3 - "$RESULTS" "${BINARIES[@]}" <<'EOF'
 import statistics, sys
 rows = [line.split("\t") for line in open(sys.argv[1]).read().splitlines()]
 binaries = sys.argv[2:]
-print("\n| binary | rounds | rows | writing s (median, min-max) | INSERT ... SELECT s (median) | writing / SQLite, wall | writing CPU s | INSERT ... SELECT CPU s | writing / SQLite, CPU | rows as binary 0 |")
-print("|---|---|---|---|---|---|---|---|---|---|")
+print("\n| binary | rounds | rows | writing s (median, min-max) | INSERT ... SELECT s (median) | writing / SQLite, wall | writing CPU s | INSERT ... SELECT CPU s | writing / SQLite, CPU | run s (median) | rows as binary 0 |")
+print("|---|---|---|---|---|---|---|---|---|---|---|")
 for b, name in enumerate(binaries):
     mine = [r for r in rows if int(r[1]) == b]
     w = [float(r[2]) for r in mine]
@@ -112,5 +114,6 @@ for b, name in enumerate(binaries):
         cpu = f"- | {statistics.median(sc):.2f} | -"
     same = all(r[5] == "same" for r in mine)
     print(f"| {b}: {name} | {len(mine)} | {mine[0][4]} | {statistics.median(w):.2f} ({min(w):.2f}-{max(w):.2f}) | "
-          f"{statistics.median(s):.2f} | {statistics.median(ratio):.2f} | {cpu} | {'yes' if same else 'NO'} |")
+          f"{statistics.median(s):.2f} | {statistics.median(ratio):.2f} | {cpu} | "
+          f"{statistics.median(float(r[8]) for r in mine):.1f} | {'yes' if same else 'NO'} |")
 EOF
