@@ -698,6 +698,8 @@ void Database::Commit() {
   impl_->in_transaction = false;
 }
 
+void Database::ReleaseCachedPages() { sqlite3_db_release_memory(impl_->db); }
+
 void Database::Rollback() {
   if (!impl_->in_transaction) {
     throw DatabaseError("no transaction to roll back on " + impl_->path);

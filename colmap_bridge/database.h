@@ -169,6 +169,10 @@ class Database {
   void BeginTransaction();
   void Commit();
   void Rollback();
+  // Gives back the pages this connection's cache holds unchanged (all of
+  // them between transactions); the next statements read what they need
+  // again.
+  void ReleaseCachedPages();
 
   // True when the file keeps SQLite's write-ahead log (COLMAP's databases do).
   bool UsesWriteAheadLog() const;

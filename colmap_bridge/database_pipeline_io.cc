@@ -213,6 +213,12 @@ void DatabaseResultSink::Commit() {
     database_.Rollback();
     throw;
   }
+  // The cache is room for one transaction's changed pages. Kept after the
+  // commit, the pages would fill it with what was written (cache_mib of
+  // host memory, for a run of any size), while the next transaction writes
+  // mostly other pages (the chunks' key ranges move on with the block
+  // rows) and reads the few it shares again at little cost.
+  database_.ReleaseCachedPages();
   ++commits_;
   rows_written_ += pending_rows_;
   empty_pairs_recorded_ += pending_empty_pairs_;

@@ -98,7 +98,7 @@ class DatabaseResultSink : public ResultSink {
     // the uncommitted chunks are matched again by the next run.
     double commit_seconds = 1.0;
     // DatabaseOptions::cache_mib of the writer's connection: room for a
-    // transaction's changed pages.
+    // transaction's changed pages, given back after each commit.
     int cache_mib = 256;
     // DatabaseOptions::disk_sync of the writer's connection (see DiskSync
     // for what each setting risks).

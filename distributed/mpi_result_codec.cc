@@ -174,7 +174,7 @@ std::vector<uint8_t> EncodeRankReport(const RankReport& report) {
     w.Put<uint64_t>(value);
   }
   for (double value : {s.seconds_total, s.seconds_loading, s.seconds_hashing, s.seconds_matching,
-                       s.seconds_verification, s.seconds_writing}) {
+                       s.seconds_verification, s.seconds_writing, s.seconds_writing_cpu}) {
     w.Put<double>(value);
   }
   w.Put<uint8_t>(s.stopped ? 1 : 0);
@@ -191,7 +191,7 @@ RankReport DecodeRankReport(const std::vector<uint8_t>& bytes) {
     *value = r.Get<uint64_t>();
   }
   for (double* value : {&s.seconds_total, &s.seconds_loading, &s.seconds_hashing, &s.seconds_matching,
-                        &s.seconds_verification, &s.seconds_writing}) {
+                        &s.seconds_verification, &s.seconds_writing, &s.seconds_writing_cpu}) {
     *value = r.Get<double>();
   }
   s.stopped = r.Get<uint8_t>() != 0;

@@ -70,6 +70,7 @@ void MergeStats(const PipelineStats& other, PipelineStats* stats) {
   stats->seconds_matching = std::max(stats->seconds_matching, other.seconds_matching);
   stats->seconds_verification = std::max(stats->seconds_verification, other.seconds_verification);
   stats->seconds_writing = std::max(stats->seconds_writing, other.seconds_writing);
+  stats->seconds_writing_cpu = std::max(stats->seconds_writing_cpu, other.seconds_writing_cpu);
   stats->seconds_matching_wait_queue = std::max(stats->seconds_matching_wait_queue, other.seconds_matching_wait_queue);
   stats->seconds_verification_wait_input =
       std::max(stats->seconds_verification_wait_input, other.seconds_verification_wait_input);

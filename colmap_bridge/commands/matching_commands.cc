@@ -95,7 +95,9 @@ int ReportSummary(const MatchingSummary& summary) {
   if (stats.verification_threads > 1) {
     std::cout << " (summed over up to " << stats.verification_threads << " calls at once)";
   }
-  std::cout << ", writing " << stats.seconds_writing << " s" << std::endl;
+  // The writer's wall time holds its waits for a core and for the disk;
+  // its CPU time is what writing itself cost.
+  std::cout << ", writing " << stats.seconds_writing << " s (" << stats.seconds_writing_cpu << " s CPU)" << std::endl;
   // What the user waited for beyond the pipeline: the summary's rate leaves
   // it out.
   const double process_seconds = SecondsSinceProcessStart();

@@ -80,7 +80,12 @@ run_one() {
       stamp "$t0" > "$OUT/$tag.log"
   fi
   local peak_kib first pairs
-  peak_kib=$(cat "$OUT/$tag".time* 2> /dev/null | awk '/Maximum resident set size/ { if ($NF > m) m = $NF } END { print m + 0 }')
+  # The largest of /usr/bin/time's peaks and of the run's own "Memory: peak
+  # resident" line (rank 0's under MPI): mpirun may end a rank's timer
+  # before it writes its file once another rank has finished.
+  peak_kib=$( (cat "$OUT/$tag".time* 2> /dev/null | awk '/Maximum resident set size/ { print $NF }'
+    sed -n 's/.*Memory: peak resident \([0-9.]*\) \([MG]\)iB.*/\1 \2/p' "$OUT/$tag.log" |
+      awk '{ print $1 * ($2 == "G" ? 1048576 : 1024) }') | awk '{ if ($1 > m) m = $1 } END { print m + 0 }')
   first=$(awk '/Matching block/ { print $1; exit }' "$OUT/$tag.log")
   pairs=$(grep -oE '\([0-9]+/[0-9]+ pairs' "$OUT/$tag.log" | tail -1 | tr -d '(' | sed 's/ pairs//')
   local images="${db##*/street_}"

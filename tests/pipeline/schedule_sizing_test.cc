@@ -68,6 +68,31 @@ TEST(ScheduleSizing, GpuRunKeepsEveryImageWhenTheDeviceHoldsThem) {
   EXPECT_LT(cpu.matcher_keep_bytes, sizes.matcher_keep_bytes / 2);
 }
 
+TEST(ScheduleSizing, GroupsAndTheCpuMatchersKeepDoNotGrowWithTheCollection) {
+  // Few features an image and the default cap (half of a 24 GiB machine):
+  // every image would fit in one group, but groups stop at kMaxGroupImages,
+  // and the CPU matcher keeps no more images than the cache's groups hold,
+  // so 20,000 images hold what 8,000 do (and 5,000 a little less: all
+  // their images fit in three groups).
+  ScheduleLimits limits;
+  limits.max_host_bytes = 12 * kGiB;
+  const ScheduleSizes small = ChooseScheduleSizes(std::vector<size_t>(8000, 8), limits);
+  const ScheduleSizes large = ChooseScheduleSizes(std::vector<size_t>(20000, 8), limits);
+  for (const ScheduleSizes* sizes : {&small, &large}) {
+    EXPECT_EQ(sizes->block_size, 50);
+    EXPECT_EQ(static_cast<size_t>(sizes->blocks_per_group * sizes->block_size), kMaxGroupImages);
+  }
+  EXPECT_EQ(large.matcher_keep_bytes, small.matcher_keep_bytes);
+  EXPECT_EQ(large.predicted_host_bytes, small.predicted_host_bytes);
+  // At most the cache's three groups, and more than the two a group pair uses.
+  EXPECT_LE(large.matcher_keep_bytes, kCacheGroups * kMaxGroupImages * large.matcher_bytes_per_image);
+  EXPECT_GT(large.matcher_keep_bytes, 2 * kMaxGroupImages * large.matcher_bytes_per_image);
+  // A collection smaller than a group is one group, every image kept.
+  const ScheduleSizes one = ChooseScheduleSizes(std::vector<size_t>(1000, 8), limits);
+  EXPECT_EQ(one.blocks_per_group, 20);
+  EXPECT_GE(one.matcher_keep_bytes, 1000 * one.matcher_bytes_per_image * 8 / 10);
+}
+
 TEST(ScheduleSizing, HostCapMakesGroupsSmaller) {
   const std::vector<size_t> features(3000, 12000);  // 1.8 MB of features per image
   ScheduleLimits limits;

@@ -75,7 +75,6 @@ GroupFeatureCache::GroupFeatureCache(FeatureSource* source, const std::vector<Pa
 GroupFeatureCache::GroupFeatureCache(FeatureSource* source, const PairChunkSource& chunks)
     : source_(source), loader_threads_(std::max(1, source->MaxConcurrentLoads())), steps_(Steps(chunks)) {
   for (size_t s = 0; s < steps_.size(); ++s) {
-    step_sets_.emplace_back(steps_[s].begin(), steps_[s].end());
     for (image_t id : steps_[s]) steps_of_image_[id].push_back(static_cast<int>(s));
   }
   stats_.steps = steps_.size();
@@ -89,6 +88,11 @@ GroupFeatureCache::~GroupFeatureCache() {
   }
   changed_.notify_all();
   if (loader_.joinable()) loader_.join();
+}
+
+bool GroupFeatureCache::InStep(image_t image_id, int step) const {
+  const auto it = steps_of_image_.find(image_id);
+  return it != steps_of_image_.end() && std::binary_search(it->second.begin(), it->second.end(), step);
 }
 
 int GroupFeatureCache::StepHolding(image_t image_id, int from) const {
@@ -111,9 +115,8 @@ void GroupFeatureCache::LoaderLoop() {
     // Keep steps s - 1 and s (the pipeline is on one of them), whether the
     // loader runs ahead of the pipeline or behind it, so that what is read
     // again does not depend on timing.
-    const std::unordered_set<image_t>* previous = s > 0 ? &step_sets_[s - 1] : nullptr;
     for (auto it = held_.begin(); it != held_.end();) {
-      if ((previous && previous->count(it->first)) || step_sets_[s].count(it->first)) {
+      if ((s > 0 && InStep(it->first, s - 1)) || InStep(it->first, s)) {
         ++it;
       } else {
         held_bytes_ -= FeatureBytes(*it->second);
@@ -204,7 +207,7 @@ std::shared_ptr<const ImageFeatures> GroupFeatureCache::LoadSharedFeatures(image
       lock.unlock();
       return std::make_shared<const ImageFeatures>(LoadDirectly(image_id));
     }
-    if (!step_sets_[current_step_].count(image_id)) {
+    if (!InStep(image_id, current_step_)) {
       const int step = StepHolding(image_id, current_step_ + 1);
       if (step < 0) {
         lock.unlock();

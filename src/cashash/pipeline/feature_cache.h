@@ -22,7 +22,6 @@
 #include <mutex>
 #include <thread>
 #include <unordered_map>
-#include <unordered_set>
 #include <vector>
 
 #include "cashash/pipeline/matching_pipeline.h"
@@ -78,13 +77,17 @@ class GroupFeatureCache : public FeatureSource {
   ImageFeatures LoadDirectly(image_t image_id);
   // Smallest step >= from that holds the image, or -1.
   int StepHolding(image_t image_id, int from) const;
+  bool InStep(image_t image_id, int step) const;
 
   FeatureSource* source_;
   std::mutex source_mutex_;  // serialises a source that allows one load at a time
   int loader_threads_ = 1;   // the source's MaxConcurrentLoads
   std::vector<std::vector<image_t>> steps_;
-  std::vector<std::unordered_set<image_t>> step_sets_;
-  std::unordered_map<image_t, std::vector<int>> steps_of_image_;  // ascending
+  // The steps of each image, ascending: also what tells whether a step holds
+  // an image, so that the plan costs a few bytes per image and step (a set
+  // per step cost about ten times that, and a run has about
+  // groups^2 / 2 steps).
+  std::unordered_map<image_t, std::vector<int>> steps_of_image_;
 
   mutable std::mutex mutex_;
   std::condition_variable changed_;

@@ -8,6 +8,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "cashash/base/thread_cpu_clock.h"
 #include "cashash/pipeline/blocking_queue.h"
 #include "cashash/pipeline/chunk_verification.h"
 #include "cashash/pipeline/in_order_turnstile.h"
@@ -110,6 +111,16 @@ class PipelineRun {
     const double seconds = SecondsSince(start);
     std::lock_guard<std::mutex> lock(stats_mutex_);
     stats_.*field += seconds;
+  }
+
+  // The writer's wall and CPU time since `start` and `cpu_start` (its
+  // ThreadCpuSeconds then).
+  void AddWriting(Clock::time_point start, double cpu_start) {
+    const double seconds = SecondsSince(start);
+    const double cpu = ThreadCpuSeconds() - cpu_start;
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    stats_.seconds_writing += seconds;
+    stats_.seconds_writing_cpu += cpu;
   }
 
   // Records one stage's interval of one chunk when the run is traced.
@@ -267,19 +278,21 @@ class PipelineRun {
         AddSeconds(&PipelineStats::seconds_writing_wait_input, t_wait);
         if (idle) {
           const Clock::time_point t_flush = Clock::now();
+          const double cpu_flush = ThreadCpuSeconds();
           sink_->Flush();
-          AddSeconds(&PipelineStats::seconds_writing, t_flush);
+          AddWriting(t_flush, cpu_flush);
           continue;
         }
         if (!item) break;
         const Clock::time_point t0 = Clock::now();
+        const double cpu0 = ThreadCpuSeconds();
         const std::vector<PairResult>& results = *item->results;
         sink_->WriteChunk(results);
         Trace("write", item->index, 0, -1, t0, Clock::now(), results.size());
+        AddWriting(t0, cpu0);
         PipelineProgress progress;
         {
           std::lock_guard<std::mutex> lock(stats_mutex_);
-          stats_.seconds_writing += SecondsSince(t0);
           stats_.pairs_done += results.size();
           for (const PairResult& r : results) {
             stats_.raw_matches += r.matches.size();
@@ -299,8 +312,9 @@ class PipelineRun {
       // Finished, stopped, or another stage failed: what was written is
       // whole chunks, kept as it would have been with a commit per chunk.
       const Clock::time_point t_flush = Clock::now();
+      const double cpu_flush = ThreadCpuSeconds();
       sink_->Flush();
-      AddSeconds(&PipelineStats::seconds_writing, t_flush);
+      AddWriting(t_flush, cpu_flush);
     } catch (...) {
       error_.Set(std::current_exception());
       to_verify_.Close();

@@ -114,6 +114,10 @@ struct PipelineStats {
   // includes the exact rematch left to them (ExactRematchStage).
   double seconds_verification = 0;
   double seconds_writing = 0;
+  // The writer thread's CPU time within seconds_writing: the rest is time
+  // it waited for a core (the other stages' threads share them) or for the
+  // disk (a commit's sync).
+  double seconds_writing_cpu = 0;
   // Waiting, apart from the busy times above: the matching thread for room
   // in the queue to verification (verification is slower), verification for
   // a matched chunk (matching is slower) and for room in the queue to the

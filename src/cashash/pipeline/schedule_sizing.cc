@@ -140,6 +140,7 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   } else {
     per_group = std::max<size_t>(1, cache_bytes / (kCacheGroups * bs * sizes.host_bytes_per_image));
   }
+  per_group = std::min(per_group, std::max<size_t>(1, kMaxGroupImages / bs));
   sizes.block_size = static_cast<int>(bs);
   sizes.blocks_per_group = static_cast<int>(std::min(per_group, num_blocks));
   sizes.predicted_host_bytes =
@@ -163,7 +164,12 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
     const size_t gpu_left = gpu_for_images - std::min(gpu_for_images, in_use);
     keep_images = std::min(host_left / host_copy, gpu_left / sizes.matcher_bytes_per_image);
   } else {
-    keep_images = host_left / sizes.matcher_bytes_per_image;
+    // An image beyond the cache's groups comes back only with its group, after
+    // a whole group pair of matching; hashing it again then costs little
+    // beside that, and keeping it would cost host memory for every image of
+    // the collection.
+    const size_t cache_images = images(kCacheGroups * static_cast<size_t>(sizes.blocks_per_group) * bs);
+    keep_images = std::min(host_left / sizes.matcher_bytes_per_image, cache_images);
   }
   sizes.matcher_keep_bytes =
       in_use + static_cast<size_t>(0.8 * static_cast<double>(keep_images * sizes.matcher_bytes_per_image));

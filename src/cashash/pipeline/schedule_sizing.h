@@ -37,6 +37,12 @@ constexpr int kCacheGroups = 3;
 // Blocks are never made larger than COLMAP's default on their own: a chunk
 // (block_size^2 pairs) is the unit of progress and of commits.
 constexpr int kMaxDerivedBlockSize = 50;
+// A group never holds more images than this, whatever the host cap leaves:
+// a cross group pair matches a group's every image against the other's, so
+// past a few thousand images a group's read (on the cache's loaders, beside
+// the matching) costs little next to its pairs, while what the cache and the
+// CPU matcher hold, three groups, would otherwise grow with the collection.
+constexpr size_t kMaxGroupImages = 2000;
 
 struct ScheduleLimits {
   size_t max_host_bytes = 0;
@@ -69,7 +75,8 @@ struct ScheduleSizes {
   size_t predicted_gpu_bytes = 0;      // images held by the GPU matcher
   // What the matcher may keep of images the pipeline has let go, so that
   // they are not hashed again (RetainingFeatureMatcher): the images in use
-  // plus 80 % of what both caps leave over.
+  // plus 80 % of what both caps leave over; on the CPU backend at most the
+  // images of the groups the cache holds.
   size_t matcher_keep_bytes = 0;
   std::string warning;                 // set when a user block size exceeds the GPU cap
 };
