@@ -330,15 +330,23 @@ std::vector<std::vector<RetrievalNeighbor>> GpuTopK(const RetrievalIndexView& in
     batch_words.clear();
     batch_images.assign(query_images.begin() + static_cast<std::ptrdiff_t>(first),
                         query_images.begin() + static_cast<std::ptrdiff_t>(first + count));
+    // Consecutive images (every image's search) have their words in one
+    // piece of the index: sent from there, without a copy on the host.
+    bool consecutive = true;
+    for (size_t q = 1; q < count && consecutive; ++q) consecutive = batch_images[q] == batch_images[0] + q;
+    const RetrievalQueryWord* words = index.queries + index.query_offsets[batch_images.front()];
     for (uint32_t image : batch_images) {
-      batch_words.insert(batch_words.end(), index.queries + index.query_offsets[image],
-                         index.queries + index.query_offsets[image + 1]);
-      batch_offsets.push_back(batch_words.size());
+      const size_t size = index.query_offsets[image + 1] - index.query_offsets[image];
+      if (!consecutive) {
+        batch_words.insert(batch_words.end(), index.queries + index.query_offsets[image],
+                           index.queries + index.query_offsets[image + 1]);
+      }
+      batch_offsets.push_back(batch_offsets.back() + size);
     }
-    if (!batch_words.empty()) {
-      CUDA_CHECK(cudaMemcpyAsync(words_buffer.as<void>(), batch_words.data(),
-                                 batch_words.size() * sizeof(RetrievalQueryWord), cudaMemcpyHostToDevice,
-                                 stream.get()));
+    if (!consecutive) words = batch_words.data();
+    if (batch_offsets.back() > 0) {
+      CUDA_CHECK(cudaMemcpyAsync(words_buffer.as<void>(), words, batch_offsets.back() * sizeof(RetrievalQueryWord),
+                                 cudaMemcpyHostToDevice, stream.get()));
     }
     CUDA_CHECK(cudaMemcpyAsync(offsets_buffer.as<void>(), batch_offsets.data(),
                                batch_offsets.size() * sizeof(uint64_t), cudaMemcpyHostToDevice, stream.get()));
