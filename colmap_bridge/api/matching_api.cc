@@ -311,7 +311,10 @@ MatchingSummary MatchSequential(const std::string& database_path, const MatcherC
     if (checked.sequential.loop_detection && retrieval == nullptr) {
       std::vector<image_t> image_ids;
       for (const Image& image : source.images()) image_ids.push_back(image.image_id);
-      own_retrieval = CreateImageRetrievalForRun(checked, database_path, image_ids);
+      RetrievalMessages messages;
+      messages.info = [callbacks](const std::string& text) { Info(callbacks, text); };
+      messages.warning = [callbacks](const std::string& text) { Warn(callbacks, text); };
+      own_retrieval = CreateImageRetrievalForRun(checked, database_path, image_ids, std::move(messages));
       retrieval = own_retrieval.get();
     }
     const SelectedPairs selected =

@@ -1,12 +1,12 @@
 #include "colmap_bridge/api/pair_selection.h"
 
 #include <algorithm>
+#include <chrono>
 #include <sstream>
 #include <stdexcept>
 #include <unordered_map>
 #include <utility>
 
-#include "cashash/base/parallel_for.h"
 #include "cashash/pipeline/sequential_pairs.h"
 #include "cashash/pipeline/spatial_pairs.h"
 #include "cashash/retrieval/retrieval_options.h"
@@ -40,12 +40,13 @@ std::string Plural(size_t count, const std::string& noun) {
 std::string ImagesHave(size_t count) { return Plural(count, "image") + (count == 1 ? " has" : " have"); }
 
 // Loop detection's retrieval: an index over the run's images built from
-// the database's own descriptors (retrieval_api.h), asked one query image
-// at a time on the options' threads.
+// the database's own descriptors (retrieval_api.h), asked for all queries
+// of a call at once on the run's device (SearchNeighbors: its first GPU,
+// else the CPU's threads).
 class DatabaseImageRetrieval : public ImageRetrieval {
  public:
-  DatabaseImageRetrieval(DatabaseRetrievalIndex index, int num_threads)
-      : index_(std::move(index)), num_threads_(num_threads) {
+  DatabaseImageRetrieval(DatabaseRetrievalIndex index, RetrievalDevice device, RetrievalMessages messages)
+      : index_(std::move(index)), device_(device), messages_(std::move(messages)) {
     for (size_t i = 0; i < index_.image_ids.size(); ++i) position_of_.emplace(index_.image_ids[i], i);
   }
 
@@ -53,20 +54,42 @@ class DatabaseImageRetrieval : public ImageRetrieval {
                                                       int num_images) override {
     std::vector<std::vector<image_t>> result(query_image_ids.size());
     if (num_images <= 0) return result;
-    ParallelFor(query_image_ids.size(), num_threads_, [&](size_t q) {
+    // An image without an entry in the index has no words to ask with.
+    std::vector<size_t> asked;
+    std::vector<uint32_t> positions;
+    for (size_t q = 0; q < query_image_ids.size(); ++q) {
       const auto position = position_of_.find(query_image_ids[q]);
-      // An image without an entry in the index has no words to ask with.
-      if (position == position_of_.end()) return;
-      for (const RetrievalNeighbor& neighbor : index_.index->TopK(position->second, static_cast<size_t>(num_images))) {
-        result[q].push_back(index_.image_ids[neighbor.image]);
+      if (position == position_of_.end()) continue;
+      asked.push_back(q);
+      positions.push_back(static_cast<uint32_t>(position->second));
+    }
+    const auto start = std::chrono::steady_clock::now();
+    const NeighborSearch search =
+        SearchNeighbors(*index_.index, &positions, static_cast<size_t>(num_images), device_);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (!search.gpu_fallback.empty() && messages_.warning) {
+      messages_.warning("loop detection: " + search.gpu_fallback + "; querying on the CPU");
+    }
+    if (messages_.info) {
+      std::ostringstream line;
+      line.setf(std::ios::fixed);
+      line.precision(3);
+      line << "Loop detection retrieval: " << Plural(positions.size(), "query") << " " << SearchPlace(search.gpu_index)
+           << " in " << seconds << " s";
+      messages_.info(line.str());
+    }
+    for (size_t a = 0; a < asked.size(); ++a) {
+      for (const RetrievalNeighbor& neighbor : search.neighbors[a]) {
+        result[asked[a]].push_back(index_.image_ids[neighbor.image]);
       }
-    });
+    }
     return result;
   }
 
  private:
   DatabaseRetrievalIndex index_;
-  int num_threads_;
+  RetrievalDevice device_;
+  RetrievalMessages messages_;
   std::unordered_map<image_t, size_t> position_of_;
 };
 
@@ -74,7 +97,8 @@ class DatabaseImageRetrieval : public ImageRetrieval {
 
 std::unique_ptr<ImageRetrieval> CreateImageRetrievalForRun(const MatcherCommandOptions& options,
                                                            const std::string& database_path,
-                                                           const std::vector<image_t>& image_ids) {
+                                                           const std::vector<image_t>& image_ids,
+                                                           RetrievalMessages messages) {
   const SequentialPairingOptions& sequential = options.sequential;
   RetrievalOptions retrieval;
   retrieval.num_images = sequential.loop_detection_num_images;
@@ -90,7 +114,8 @@ std::unique_ptr<ImageRetrieval> CreateImageRetrievalForRun(const MatcherCommandO
   retrieval.num_threads = sequential.num_threads;
   retrieval.random_seed = options.random_seed;
   DatabaseRetrievalIndex index = BuildDatabaseRetrievalIndex(database_path, retrieval, image_ids);
-  return std::make_unique<DatabaseImageRetrieval>(std::move(index), sequential.num_threads);
+  return std::make_unique<DatabaseImageRetrieval>(std::move(index), RetrievalDeviceForRun(options),
+                                                  std::move(messages));
 }
 
 std::string LoopDetectionUnavailableMessage() {

@@ -9,6 +9,7 @@
 
 #include "cashash/pipeline/image_retrieval.h"
 #include "colmap_bridge/api/command_options.h"
+#include "colmap_bridge/api/retrieval_api.h"
 #include "colmap_bridge/database.h"
 
 namespace cashash {
@@ -24,11 +25,15 @@ struct SelectedPairs {
 // image retrieval from the cascade's codes (retrieval_api.h), an index over
 // `image_ids` (all images of the database when empty) built from the
 // database's own descriptors with options.sequential's loop_detection_*
-// settings, num_threads, and options.random_seed. Throws as
-// BuildDatabaseRetrievalIndex does.
+// settings, num_threads, and options.random_seed. Its queries run where
+// the run matches (RetrievalDeviceForRun: the run's first GPU, else the
+// CPU); `messages` get a line per call saying where and how long, and a
+// warning where the GPU had no room. Throws as BuildDatabaseRetrievalIndex
+// does.
 std::unique_ptr<ImageRetrieval> CreateImageRetrievalForRun(const MatcherCommandOptions& options,
                                                            const std::string& database_path,
-                                                           const std::vector<image_t>& image_ids = {});
+                                                           const std::vector<image_t>& image_ids = {},
+                                                           RetrievalMessages messages = {});
 
 // The message of a loop detection without a retrieval (a library caller's
 // mistake), naming the option.

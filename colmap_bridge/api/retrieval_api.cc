@@ -9,11 +9,18 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "cashash/base/device_memory_error.h"
 #include "cashash/base/pair_id.h"
 #include "cashash/matching/mean_descriptor.h"
 #include "cashash/base/parallel_for.h"
+#include "cashash/pipeline/schedule_sizing.h"
+#include "colmap_bridge/api/run_devices.h"
 #include "colmap_bridge/api/run_plan.h"
 #include "colmap_bridge/database.h"
+#ifdef CASHASH_WITH_CUDA
+#include "cashash_cuda/retrieval/image_retrieval_index.h"
+#include "cashash_cuda/utils/gpu_resources.h"
+#endif
 
 namespace cashash {
 namespace colmap {
@@ -115,11 +122,59 @@ DatabaseRetrievalIndex BuildDatabaseRetrievalIndex(const std::string& database_p
   return result;
 }
 
-RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const RetrievalOptions& options) {
+RetrievalDevice RetrievalDeviceForRun(const MatcherCommandOptions& options) {
+  RetrievalDevice device;
+  // The devices' warnings are the matching run's to give.
+  const RunDevices devices = ChooseRunDevices(options, MachineDeviceFacts());
+  if (devices.gpu_indices.empty()) return device;
+  device.gpu_index = devices.gpu_indices.front();
+  if (!options.max_gpu_memory.empty() && !ParseMemorySize(options.max_gpu_memory, &device.memory_budget_bytes)) {
+    throw std::invalid_argument("--max_gpu_memory " + options.max_gpu_memory + " is not a memory size");
+  }
+  return device;
+}
+
+std::string SearchPlace(int gpu_index) {
+  return gpu_index < 0 ? "on the CPU" : "on GPU " + std::to_string(gpu_index);
+}
+
+NeighborSearch SearchNeighbors(const ImageRetrievalIndex& index, const std::vector<uint32_t>* images, size_t k,
+                               const RetrievalDevice& device) {
+  NeighborSearch search;
+  if (device.gpu_index >= 0) {
+#ifdef CASHASH_WITH_CUDA
+    const RetrievalIndexView view = index.View();
+    try {
+      // The search's own owner of the device's memory, under the run's
+      // budget: it gives everything back before the matchers start.
+      cuda::GpuResources resources(device.gpu_index, device.memory_budget_bytes);
+      cuda::GpuRetrievalConfig config;
+      config.resources = &resources;
+      search.neighbors = images != nullptr ? cuda::GpuTopK(view, *images, k, config) : cuda::GpuAllTopK(view, k, config);
+      search.gpu_index = device.gpu_index;
+      return search;
+    } catch (const DeviceMemoryError& error) {
+      search.gpu_fallback = "GPU " + std::to_string(device.gpu_index) + " has no room for the index (" +
+                            std::to_string((cuda::GpuRetrievalResidentBytes(view) + (1u << 20) - 1) >> 20) +
+                            " MiB of postings and word offsets): " + error.what();
+    }
+#else
+    search.gpu_fallback = "cashash was built without CUDA";
+#endif
+  }
+  search.neighbors = images != nullptr ? index.TopKOf(*images, k) : index.AllTopK(k);
+  return search;
+}
+
+RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const RetrievalOptions& options,
+                             const RetrievalDevice& device) {
   const auto start = std::chrono::steady_clock::now();
   const double cpu_start = CpuSeconds();
   RetrievedPairs result;
-  const auto neighbors = index.index->AllTopK(static_cast<size_t>(options.num_images));
+  NeighborSearch search = SearchNeighbors(*index.index, nullptr, static_cast<size_t>(options.num_images), device);
+  result.gpu_index = search.gpu_index;
+  result.gpu_fallback = std::move(search.gpu_fallback);
+  const auto neighbors = std::move(search.neighbors);
   for (const auto& [a, b] : UnionOfNeighborPairs(neighbors)) {
     const image_t id1 = index.image_ids[a];
     const image_t id2 = index.image_ids[b];
@@ -234,7 +289,8 @@ MatchingSummary MatchRetrieval(const std::string& database_path, const MatcherCo
     retrieval.random_seed = checked.random_seed;
     retrieval.num_threads = checked.sift.num_threads;
     const DatabaseRetrievalIndex index = BuildDatabaseRetrievalIndex(database_path, retrieval, image_ids);
-    const RetrievedPairs retrieved = RetrievePairs(index, retrieval);
+    const RetrievedPairs retrieved = RetrievePairs(index, retrieval, RetrievalDeviceForRun(checked));
+    if (!retrieved.gpu_fallback.empty()) Warn(callbacks, "retrieval: " + retrieved.gpu_fallback + "; querying on the CPU");
     const double n = static_cast<double>(image_ids.size());
     std::ostringstream line;
     line.setf(std::ios::fixed);
@@ -248,7 +304,7 @@ MatchingSummary MatchRetrieval(const std::string& database_path, const MatcherCo
     Info(callbacks, "Retrieval time: mean " + FormatSeconds(index.seconds_mean) + ", reading and hashing " +
                         FormatSeconds(index.seconds_reading_and_hashing) + ", indexing " +
                         FormatSeconds(index.seconds_indexing) + ", querying " +
-                        FormatSeconds(retrieved.seconds_querying));
+                        FormatSeconds(retrieved.seconds_querying) + " " + SearchPlace(retrieved.gpu_index));
     summary.phases_outside_pipeline = {{"retrieval: mean descriptor", index.seconds_mean},
                                        {"retrieval: reading and hashing", index.seconds_reading_and_hashing},
                                        {"retrieval: indexing", index.seconds_indexing},

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -45,14 +46,52 @@ DatabaseRetrievalIndex BuildDatabaseRetrievalIndex(const std::string& database_p
                                                    const RetrievalOptions& options,
                                                    std::vector<image_t> image_ids = {});
 
+// Where a retrieval tells what it did: lines of information, warnings.
+struct RetrievalMessages {
+  std::function<void(const std::string&)> info;
+  std::function<void(const std::string&)> warning;
+};
+
+// Where retrieval's queries run: a GPU, within a budget of its memory, or
+// the CPU (the index's threads).
+struct RetrievalDevice {
+  int gpu_index = -1;              // -1: the CPU
+  size_t memory_budget_bytes = 0;  // --max_gpu_memory; 0: none but the device's own
+};
+
+// The device of a run of `options`: the first GPU the run matches on
+// (ChooseRunDevices: --FeatureMatching.use_gpu and gpu_index, a usable
+// device of a CUDA build), the CPU otherwise. Throws std::invalid_argument
+// for a malformed gpu_index or max_gpu_memory.
+RetrievalDevice RetrievalDeviceForRun(const MatcherCommandOptions& options);
+
+// The best k neighbours of each of `images` (positions of the index, in
+// that order; every image where null), found on `device`; where that GPU
+// has no room for the index (DeviceMemoryError) or the build has no CUDA,
+// on the CPU, and gpu_fallback says why.
+struct NeighborSearch {
+  std::vector<std::vector<RetrievalNeighbor>> neighbors;
+  int gpu_index = -1;        // where the search ran; -1: the CPU
+  std::string gpu_fallback;  // why a GPU search ran on the CPU; empty otherwise
+};
+NeighborSearch SearchNeighbors(const ImageRetrievalIndex& index, const std::vector<uint32_t>* images, size_t k,
+                               const RetrievalDevice& device);
+
+// "on GPU 0", "on the CPU": where a search ran, for the log.
+std::string SearchPlace(int gpu_index);
+
 // The pairs retrieval chooses: each image with its options.num_images most
 // similar images, as image ids (smaller first), each pair once, sorted.
+// The queries run on `device` (SearchNeighbors).
 struct RetrievedPairs {
   std::vector<ImagePair> pairs;
   double seconds_querying = 0;
   double cpu_seconds_querying = 0;
+  int gpu_index = -1;        // where the queries ran; -1: the CPU
+  std::string gpu_fallback;  // why they ran on the CPU although a GPU was asked for
 };
-RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const RetrievalOptions& options);
+RetrievedPairs RetrievePairs(const DatabaseRetrievalIndex& index, const RetrievalOptions& options,
+                             const RetrievalDevice& device = {});
 
 // Retrieves the pairs (RetrievePairs) and matches and verifies them as
 // MatchPairs does; the summary's phases begin with the retrieval's.

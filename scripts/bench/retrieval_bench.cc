@@ -6,8 +6,15 @@
 //       [--max_num_features M] [--threads N] [--seed S]
 //       [--truth EXHAUSTIVE_DB] [--min_inliers 15] [--strong_inliers 50]
 //       [--pairs_out FILE] [--max_images N]
+//       [--use_gpu 0|1] [--gpu_index G] [--max_gpu_memory SIZE]
 //   retrieval_bench --database SOURCE_DB --synthetic_images N
-//       [--synthetic_features F] [options]
+//       [--synthetic_features F] [--compare_cpu 0|1] [options]
+//
+// --use_gpu 1 runs the queries on GPU G (default 0) as the command does
+// with a GPU (docs/retrieval.md, "Queries on the GPU"), under
+// --max_gpu_memory if given; the rest runs on the CPU either way. With
+// --synthetic_images, --compare_cpu 1 also queries on the CPU and prints
+// both times and the share of images whose neighbour lists are identical.
 //
 // Prints the wall time of each phase (mean descriptor; reading and hashing
 // every image; building the inverted file; querying every image), the
@@ -47,6 +54,7 @@
 
 #include "cashash/base/pair_id.h"
 #include "cashash/base/parallel_for.h"
+#include "cashash/pipeline/schedule_sizing.h"
 #include "colmap_bridge/api/retrieval_api.h"
 #include "colmap_bridge/database.h"
 
@@ -151,8 +159,21 @@ FeatureDescriptors SyntheticImage(const std::vector<std::array<uint8_t, kDescrip
   return d;
 }
 
+// Share of the images whose lists hold the same images in the same order.
+double IdenticalShare(const std::vector<std::vector<RetrievalNeighbor>>& a,
+                      const std::vector<std::vector<RetrievalNeighbor>>& b) {
+  size_t same = 0;
+  for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    bool equal = a[i].size() == b[i].size();
+    for (size_t r = 0; equal && r < a[i].size(); ++r) equal = a[i][r].image == b[i][r].image;
+    same += equal;
+  }
+  return a.empty() ? 1.0 : static_cast<double>(same) / static_cast<double>(a.size());
+}
+
 // Hash, index and query synthetic images; prints the times.
-void RunSynthetic(const std::string& source, int num_images, int num_features, const RetrievalOptions& options) {
+void RunSynthetic(const std::string& source, int num_images, int num_features, const RetrievalOptions& options,
+                  const colmap::RetrievalDevice& device, bool compare_cpu) {
   const auto pool = DescriptorPool(source);
   std::vector<FeatureDescriptors> sample;
   for (int k = 0; k < std::min(num_images, 100); ++k) {
@@ -185,9 +206,19 @@ void RunSynthetic(const std::string& source, int num_images, int num_features, c
   const double indexing_wall = WallSeconds() - wall, indexing_cpu = CpuSeconds() - cpu;
   wall = WallSeconds();
   cpu = CpuSeconds();
-  const auto neighbors = index.AllTopK(static_cast<size_t>(options.num_images));
+  colmap::NeighborSearch search =
+      colmap::SearchNeighbors(index, nullptr, static_cast<size_t>(options.num_images), device);
+  const auto neighbors = std::move(search.neighbors);
   const auto pairs = UnionOfNeighborPairs(neighbors);
   const double querying_wall = WallSeconds() - wall, querying_cpu = CpuSeconds() - cpu;
+  if (!search.gpu_fallback.empty()) std::printf("GPU fallback: %s\n", search.gpu_fallback.c_str());
+  std::printf("querying %s\n", colmap::SearchPlace(search.gpu_index).c_str());
+  if (compare_cpu && search.gpu_index >= 0) {
+    const double cpu_wall = WallSeconds();
+    const auto on_cpu = index.AllTopK(static_cast<size_t>(options.num_images));
+    std::printf("querying on the CPU: wall seconds %.3f (GPU %.3f), identical neighbour lists %.4f\n",
+                WallSeconds() - cpu_wall, querying_wall, IdenticalShare(neighbors, on_cpu));
+  }
   // Views of the same stretch: how many of each image's 2 x 9 overlapping neighbours it retrieved.
   size_t near = 0;
   for (size_t i = 0; i < neighbors.size(); ++i) {
@@ -212,6 +243,9 @@ int main(int argc, char** argv) {
   RetrievalOptions options;
   options.num_images = 50;  // the scale target's
   int min_inliers = 15, strong_inliers = 50, max_images = 0, synthetic_images = 0, synthetic_features = 4096;
+  bool use_gpu = false, compare_cpu = false;
+  int gpu_index = 0;
+  std::string max_gpu_memory;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const std::string value = argv[i + 1];
@@ -231,6 +265,10 @@ int main(int argc, char** argv) {
     else if (key == "--synthetic_images") synthetic_images = std::stoi(value);
     else if (key == "--synthetic_features") synthetic_features = std::stoi(value);
     else if (key == "--strong_inliers") strong_inliers = std::stoi(value);
+    else if (key == "--use_gpu") use_gpu = std::stoi(value) != 0;
+    else if (key == "--gpu_index") gpu_index = std::stoi(value);
+    else if (key == "--max_gpu_memory") max_gpu_memory = value;
+    else if (key == "--compare_cpu") compare_cpu = std::stoi(value) != 0;
     else {
       std::fprintf(stderr, "unknown option %s\n", key.c_str());
       return 1;
@@ -240,9 +278,17 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: retrieval_bench --database DB [--truth EXHAUSTIVE_DB] [options]\n");
     return 1;
   }
+  colmap::RetrievalDevice device;
+  if (use_gpu) {
+    device.gpu_index = gpu_index;
+    if (!max_gpu_memory.empty() && !ParseMemorySize(max_gpu_memory, &device.memory_budget_bytes)) {
+      std::fprintf(stderr, "--max_gpu_memory %s is not a memory size\n", max_gpu_memory.c_str());
+      return 1;
+    }
+  }
   try {
     if (synthetic_images > 0) {
-      RunSynthetic(database, synthetic_images, synthetic_features, options);
+      RunSynthetic(database, synthetic_images, synthetic_features, options, device, compare_cpu);
       return 0;
     }
     std::vector<image_t> image_ids;
@@ -253,7 +299,9 @@ int main(int argc, char** argv) {
       }
     }
     const colmap::DatabaseRetrievalIndex index = colmap::BuildDatabaseRetrievalIndex(database, options, image_ids);
-    const colmap::RetrievedPairs retrieved = colmap::RetrievePairs(index, options);
+    const colmap::RetrievedPairs retrieved = colmap::RetrievePairs(index, options, device);
+    if (!retrieved.gpu_fallback.empty()) std::printf("GPU fallback: %s\n", retrieved.gpu_fallback.c_str());
+    std::printf("querying %s\n", colmap::SearchPlace(retrieved.gpu_index).c_str());
     const size_t n = index.image_ids.size();
     const double all_pairs = 0.5 * static_cast<double>(n) * static_cast<double>(n - 1);
     std::printf("images %zu, features %zu, %d tables x %d bits, %d words per feature and table per query\n", n,

@@ -2,8 +2,11 @@
 # Retrieval's time against the whole command's on a generated street, at
 # every size of the scale table (docs/BENCHMARKS.md, "Retrieval").
 #
-#   scripts/bench/retrieval_scale.sh BUILD_DIR SOURCE_DB WORK_DIR [SIZES] [FEATURES] [NUM_IMAGES]
+#   scripts/bench/retrieval_scale.sh BUILD_DIR SOURCE_DB WORK_DIR [SIZES] [FEATURES] [NUM_IMAGES] [USE_GPU]
 #
+# USE_GPU (default 1): retrieval's queries on the GPU, as the command runs
+# them on a machine with one (docs/retrieval.md, "Queries on the GPU"); 0
+# runs the benchmark and the command on the CPU alone.
 # SOURCE_DB: a COLMAP database of real SIFT (e.g. herzjesu-P25's). One street
 # of the largest size (default 20000 images x 4096 features) is generated
 # into WORK_DIR once; each size (default "2500 5000 10000 20000") then
@@ -17,7 +20,7 @@
 # and its plot WORK_DIR/retrieval_scale.png (scripts/bench/plot_retrieval_scale.py).
 set -euo pipefail
 BUILD="$1"; SOURCE="$2"; WORK="$3"
-SIZES="${4:-2500 5000 10000 20000}"; FEATURES="${5:-4096}"; K="${6:-50}"
+SIZES="${4:-2500 5000 10000 20000}"; FEATURES="${5:-4096}"; K="${6:-50}"; USE_GPU="${7:-1}"
 CASHASH="$BUILD/colmap_bridge/cashash"; BENCH="$BUILD/scripts/retrieval_bench"
 mkdir -p "$WORK"
 largest=0; for n in $SIZES; do (( n > largest )) && largest=$n; done
@@ -28,11 +31,12 @@ if [[ ! -f "$STREET" ]]; then
 fi
 TABLE="$WORK/retrieval_scale.md"
 {
-echo "| images | retrieval_bench wall s | retrieval_bench CPU s | pairs | command: retrieval s | command: wall s | retrieval share |"
-echo "|---:|---|---|---:|---:|---:|---:|"
+echo "| images | retrieval_bench wall s | retrieval_bench CPU s | pairs | queries | command: retrieval s | command: wall s | retrieval share |"
+echo "|---:|---|---|---:|---|---:|---:|---:|"
 for n in $SIZES; do
   log="$WORK/bench_$n.log"
-  "$BENCH" --database "$STREET" --max_images "$n" --num_images "$K" --pairs_out "$WORK/pairs_$n.txt" > "$log"
+  "$BENCH" --database "$STREET" --max_images "$n" --num_images "$K" --use_gpu "$USE_GPU" \
+    --pairs_out "$WORK/pairs_$n.txt" > "$log"
   walls=$(sed -n 's/^seconds: //p' "$log"); cpus=$(sed -n 's/^cpu seconds: //p' "$log")
   pairs=$(sed -n 's/^pairs \([0-9]*\) .*/\1/p' "$log")
   db="$WORK/run_$n.db"; rm -f "$db" "$db"-*
@@ -40,11 +44,14 @@ for n in $SIZES; do
   cp "$STREET" "$db"
   sqlite3 "$db" "DELETE FROM keypoints WHERE image_id > $n; DELETE FROM descriptors WHERE image_id > $n; DELETE FROM images WHERE image_id > $n;"
   /usr/bin/time -f "%e" -o "$WORK/time_$n.txt" "$CASHASH" retrieval_matcher --database_path "$db" \
-    --VocabTreeMatching.num_images "$K" > "$WORK/run_$n.log" 2>&1
+    --VocabTreeMatching.num_images "$K" --FeatureMatching.use_gpu "$USE_GPU" > "$WORK/run_$n.log" 2>&1
   command_s=$(tail -1 "$WORK/time_$n.txt")
+  # "Retrieval time: mean A s, reading and hashing B s, indexing C s,
+  # querying D s on GPU 0": the sum of the phases, and where the queries ran.
   retrieval_s=$(sed -n 's/^Retrieval time: //p' "$WORK/run_$n.log" | grep -o '[0-9.]* s' | awk '{t += $1} END {print t}')
+  queries=$(sed -n 's/^Retrieval time: .* s on \(.*\)$/\1/p' "$WORK/run_$n.log")
   share=$(python3 -c "print('%.1f %%' % (100 * $retrieval_s / $command_s))")
-  echo "| $n | $walls | $cpus | $pairs | $retrieval_s | $command_s | $share |"
+  echo "| $n | $walls | $cpus | $pairs | $queries | $retrieval_s | $command_s | $share |"
   rm -f "$db" "$db"-*
 done
 } | tee "$TABLE"

@@ -118,6 +118,42 @@ TEST(ImageRetrievalIndex, SameResultOnAnyThreadCount) {
   }
 }
 
+TEST(ImageRetrievalIndex, TopKOfSomeImagesAndTheViewOfTheArrays) {
+  std::vector<ImageWords> images;
+  for (uint32_t i = 0; i < 20; ++i) images.push_back(WordRange(10 * i, 60));
+  const ImageRetrievalIndex index(images, 1000, 3);
+  const std::vector<uint32_t> asked = {19, 3, 3, 0};
+  const auto lists = index.TopKOf(asked, 4);
+  ASSERT_EQ(lists.size(), asked.size());
+  for (size_t q = 0; q < asked.size(); ++q) {
+    const auto alone = index.TopK(asked[q], 4);
+    ASSERT_EQ(lists[q].size(), alone.size());
+    for (size_t r = 0; r < alone.size(); ++r) {
+      EXPECT_EQ(lists[q][r].image, alone[r].image);
+      EXPECT_EQ(lists[q][r].score, alone[r].score);
+      if (r > 0) EXPECT_TRUE(RanksBefore(lists[q][r - 1], lists[q][r]));
+    }
+  }
+  EXPECT_THROW(index.TopKOf({20}, 1), std::out_of_range);
+
+  // The view: every query word has postings, by image ascending, and the
+  // dot product over them is the score TopK gives.
+  const RetrievalIndexView view = index.View();
+  EXPECT_EQ(view.num_images, 20u);
+  EXPECT_EQ(view.vocabulary_size, 1000u);
+  const RetrievalNeighbor best = index.TopK(3, 1)[0];
+  double score = 0;
+  for (size_t w = view.query_offsets[3]; w < view.query_offsets[4]; ++w) {
+    const RetrievalQueryWord word = view.queries[w];
+    ASSERT_LT(view.posting_offsets[word.word], view.posting_offsets[word.word + 1]);
+    for (size_t p = view.posting_offsets[word.word]; p < view.posting_offsets[word.word + 1]; ++p) {
+      if (p > view.posting_offsets[word.word]) EXPECT_LT(view.postings[p - 1].image, view.postings[p].image);
+      if (view.postings[p].image == best.image) score += static_cast<double>(word.weight) * view.postings[p].weight;
+    }
+  }
+  EXPECT_NEAR(score, best.score, 1e-6);
+}
+
 TEST(ImageRetrievalIndex, RefusesWordsPastTheVocabulary) {
   EXPECT_THROW(ImageRetrievalIndex({WordRange(0, 10), WordRange(95, 10)}, 100, 1), std::invalid_argument);
   const ImageRetrievalIndex index({WordRange(0, 10), WordRange(5, 10)}, 100, 1);

@@ -28,11 +28,6 @@ std::vector<WordCount> CountWords(std::vector<uint32_t> words) {
   return counts;
 }
 
-// Better first: score descending, then position ascending.
-bool Better(const RetrievalNeighbor& a, const RetrievalNeighbor& b) {
-  return a.score != b.score ? a.score > b.score : a.image < b.image;
-}
-
 }  // namespace
 
 ImageRetrievalIndex::ImageRetrievalIndex(std::vector<ImageWords> images, uint32_t vocabulary_size, int num_threads,
@@ -188,7 +183,7 @@ std::vector<RetrievalNeighbor> ImageRetrievalIndex::TopKWithScratch(size_t image
   }
   // Every weight read is > 0 (query words of idf 0 are dropped), so an
   // image is touched once per query.
-  std::sort(candidates.begin(), candidates.end(), Better);
+  std::sort(candidates.begin(), candidates.end(), RanksBefore);
   if (candidates.size() > k) candidates.resize(k);
   return candidates;
 }
@@ -211,10 +206,33 @@ std::vector<std::vector<RetrievalNeighbor>> ImageRetrievalIndex::AllTopK(size_t 
   return result;
 }
 
+std::vector<std::vector<RetrievalNeighbor>> ImageRetrievalIndex::TopKOf(const std::vector<uint32_t>& images,
+                                                                        size_t k) const {
+  std::vector<std::vector<RetrievalNeighbor>> result(images.size());
+  const size_t workers = NumParallelWorkers(images.size(), num_threads_);
+  std::vector<std::vector<float>> scores(workers);
+  std::vector<std::vector<uint32_t>> touched(workers);
+  ParallelForWorkers(images.size(), num_threads_, [&](size_t q, size_t worker) {
+    result[q] = TopKWithScratch(images[q], k, &scores[worker], &touched[worker]);
+  });
+  return result;
+}
+
 uint64_t ImageRetrievalIndex::PostingsReadByAllQueries() const {
   uint64_t total = 0;
   for (const WeightedWord& word : queries_) total += posting_offsets_[word.word + 1] - posting_offsets_[word.word];
   return total;
+}
+
+RetrievalIndexView ImageRetrievalIndex::View() const {
+  RetrievalIndexView view;
+  view.num_images = num_images();
+  view.vocabulary_size = static_cast<uint32_t>(posting_offsets_.size() - 1);
+  view.query_offsets = query_offsets_.data();
+  view.queries = queries_.data();
+  view.posting_offsets = posting_offsets_.data();
+  view.postings = postings_.data();
+  return view;
 }
 
 std::vector<std::pair<uint32_t, uint32_t>> UnionOfNeighborPairs(

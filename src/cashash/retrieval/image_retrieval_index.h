@@ -30,6 +30,40 @@ struct RetrievalNeighbor {
   float score = 0.f;   // cosine similarity of the tf-idf vectors, in (0, 1]
 };
 
+// One word of an image's query vector, and one posting of a word's list.
+struct RetrievalQueryWord {
+  uint32_t word;
+  float weight;
+};
+struct RetrievalPosting {
+  uint32_t image;
+  float weight;
+};
+
+// Read-only view of an index's arrays, for a search that runs elsewhere
+// (the GPU's, cuda/cashash_cuda/retrieval/image_retrieval_index.h); valid
+// while the index lives.
+struct RetrievalIndexView {
+  size_t num_images = 0;
+  uint32_t vocabulary_size = 0;
+  // Query vector of image i: queries[query_offsets[i] .. query_offsets[i + 1]),
+  // by word ascending; every word has a posting list.
+  const size_t* query_offsets = nullptr;  // num_images + 1
+  const RetrievalQueryWord* queries = nullptr;
+  // Postings of word w: postings[posting_offsets[w] .. posting_offsets[w + 1]),
+  // by image ascending; every weight > 0.
+  const size_t* posting_offsets = nullptr;  // vocabulary_size + 1
+  const RetrievalPosting* postings = nullptr;
+  size_t num_query_words() const { return query_offsets[num_images]; }
+  size_t num_postings() const { return posting_offsets[vocabulary_size]; }
+};
+
+// Whether `a` ranks before `b` in a neighbour list: score descending, then
+// position ascending (the rule of every TopK, CPU and GPU).
+inline bool RanksBefore(const RetrievalNeighbor& a, const RetrievalNeighbor& b) {
+  return a.score != b.score ? a.score > b.score : a.image < b.image;
+}
+
 class ImageRetrievalIndex {
  public:
   // images[i] are the words of image i (its query words are its indexed
@@ -54,18 +88,18 @@ class ImageRetrievalIndex {
   // TopK of every image, on num_threads threads.
   std::vector<std::vector<RetrievalNeighbor>> AllTopK(size_t k) const;
 
+  // TopK of each of `images`, in that order, on num_threads threads.
+  std::vector<std::vector<RetrievalNeighbor>> TopKOf(const std::vector<uint32_t>& images, size_t k) const;
+
   // Postings read by the queries of all images (the cost of AllTopK).
   uint64_t PostingsReadByAllQueries() const;
 
+  // The arrays the queries read, for a search elsewhere (the GPU).
+  RetrievalIndexView View() const;
+
  private:
-  struct WeightedWord {
-    uint32_t word;
-    float weight;
-  };
-  struct Posting {
-    uint32_t image;
-    float weight;
-  };
+  using WeightedWord = RetrievalQueryWord;
+  using Posting = RetrievalPosting;
 
   std::vector<RetrievalNeighbor> TopKWithScratch(size_t image, size_t k, std::vector<float>* scores,
                                                  std::vector<uint32_t>* touched) const;
