@@ -18,6 +18,7 @@
 
 #include "cashash/base/device_memory_error.h"
 #include "cashash/matchers/feature_matcher.h"
+#include "cashash/pipeline/exact_rematch_stage.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/device_memory.cuh"
@@ -428,6 +429,37 @@ TEST(GpuCascadeTest, HeldImagesAreMatchedLaterFromTheBlocksTheyHold) {
   }
   EXPECT_GT(total, 500u);
   EXPECT_TRUE(later[3].empty());
+}
+
+// The exact rematch stage on the GPU cascade: held on the matching thread
+// and completed on another one after the images are gone, it gives what the
+// rematch at once gives, and only the selected pairs change.
+TEST(GpuCascadeTest, TheRematchStageFromHeldImagesEqualsTheRematchAtOnce) {
+  SKIP_WITHOUT_CUDA_DEVICE();
+  DescriptorSource source(13);
+  const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
+  const std::vector<ImagePair> pairs = {{0, 1}, {1, 2}, {0, 2}, {0, 3}};
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), MeanOf(images), 0);
+  ExactRematchPolicy policy;
+  policy.min_matches = 12;
+  policy.where = RematchPlace::kMatchingThread;
+  ExactRematchStage at_once(policy, cascade.get());
+  policy.where = RematchPlace::kVerificationThread;
+  ExactRematchStage held(policy, cascade.get());
+  const std::vector<FeatureMatches> cascade_matches = AddAndMatch(cascade.get(), images, pairs);
+  std::vector<FeatureMatches> expected = cascade_matches;
+  at_once.AfterMatching(pairs, &expected);
+  std::vector<FeatureMatches> later = cascade_matches;
+  PendingRematch pending = held.AfterMatching(pairs, &later);
+  ASSERT_FALSE(pending.empty());
+  for (image_t id = 0; id < images.size(); ++id) cascade->RemoveImage(id);
+  std::thread([&]() {
+    held.Complete(&pending, [](image_t) -> std::shared_ptr<const FeatureDescriptors> { return nullptr; }, &later);
+  }).join();
+  EXPECT_EQ(later, expected);
+  EXPECT_EQ(held.counts().rematched.load(), at_once.counts().rematched.load());
+  EXPECT_GE(held.counts().rematched.load(), 2u) << "the chained images' pairs";
+  EXPECT_EQ(later[3], cascade_matches[3]) << "the empty image's pair keeps the cascade's (none)";
 }
 
 TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {

@@ -96,12 +96,14 @@ void SplitFeatureMatcher::RemoveImage(image_t image_id) {
 std::vector<FeatureMatches> SplitFeatureMatcher::Match(const std::vector<ImagePair>& pairs,
                                                        const std::vector<EpipolarGuide>& guides) {
   CheckGuides(pairs, guides);
+  if (parts_.size() == 1) return parts_[0]->Match(pairs, guides);
   return MatchSlices(parts_.size(), pairs.size(), [&](size_t k, size_t begin, size_t end) {
     return parts_[k]->Match(Slice(pairs, begin, end), Slice(guides, begin, end));
   });
 }
 
 std::vector<FeatureMatches> SplitFeatureMatcher::MatchExact(const std::vector<ImagePair>& pairs) {
+  if (parts_.size() == 1) return parts_[0]->MatchExact(pairs);
   return MatchSlices(parts_.size(), pairs.size(), [&](size_t k, size_t begin, size_t end) {
     return parts_[k]->MatchExact(Slice(pairs, begin, end));
   });
