@@ -698,6 +698,13 @@ void Database::Commit() {
   impl_->in_transaction = false;
 }
 
+size_t Database::CachedPageBytes() const {
+  int used = 0;
+  int highest = 0;
+  if (sqlite3_db_status(impl_->db, SQLITE_DBSTATUS_CACHE_USED, &used, &highest, 0) != SQLITE_OK) return 0;
+  return used > 0 ? static_cast<size_t>(used) : 0;
+}
+
 void Database::ReleaseCachedPages() { sqlite3_db_release_memory(impl_->db); }
 
 void Database::Rollback() {

@@ -169,6 +169,8 @@ class Database {
   void BeginTransaction();
   void Commit();
   void Rollback();
+  // Bytes of pages this connection's cache holds.
+  size_t CachedPageBytes() const;
   // Gives back the pages this connection's cache holds unchanged (all of
   // them between transactions); the next statements read what they need
   // again.

@@ -217,8 +217,12 @@ void DatabaseResultSink::Commit() {
   // commit, the pages would fill it with what was written (cache_mib of
   // host memory, for a run of any size), while the next transaction writes
   // mostly other pages (the chunks' key ranges move on with the block
-  // rows) and reads the few it shares again at little cost.
-  database_.ReleaseCachedPages();
+  // rows) and reads the few it shares again. Below options_.kept_cache_mib
+  // they stay: short transactions (a commit per chunk) then find the
+  // interior pages and the leaves they go on with.
+  if (database_.CachedPageBytes() > static_cast<size_t>(options_.kept_cache_mib) << 20) {
+    database_.ReleaseCachedPages();
+  }
   ++commits_;
   rows_written_ += pending_rows_;
   empty_pairs_recorded_ += pending_empty_pairs_;

@@ -98,8 +98,10 @@ class DatabaseResultSink : public ResultSink {
     // the uncommitted chunks are matched again by the next run.
     double commit_seconds = 1.0;
     // DatabaseOptions::cache_mib of the writer's connection: room for a
-    // transaction's changed pages, given back after each commit.
+    // transaction's changed pages, given back after a commit that leaves
+    // more than kept_cache_mib in the cache.
     int cache_mib = 256;
+    int kept_cache_mib = 16;
     // DatabaseOptions::disk_sync of the writer's connection (see DiskSync
     // for what each setting risks).
     DiskSync disk_sync = DiskSync::kFull;
