@@ -135,7 +135,8 @@ def main():
     parser.add_argument("--png", default=None)
     parser.add_argument("--table", default=None, help="also write the table and the projection here")
     args = parser.parse_args()
-    rows = read_rows(args.csv)
+    # Calls that append (APPEND=1) may add sizes in any order.
+    rows = sorted(read_rows(args.csv), key=lambda r: (r["kind"], int(r["images"])))
     with open(args.csv) as f:
         notes = [line[2:].strip() for line in f if line.startswith("# ")]
     text = "\n".join(notes) + "\n\n" + table(rows) + "\n\n" + projection(rows) + "\n"

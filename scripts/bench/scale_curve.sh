@@ -19,6 +19,9 @@
 #   WORK [/tmp/cashash_scale_curve]: where the databases go (about 1.2 MiB
 #       per image of 8,192 features, twice with COLMAP's copy)
 #   EXTRA: more options for every cashash run
+#   APPEND [0]: 1 adds the rows to OUT_DIR/scale_curve.csv of an earlier call
+#       (sizes split over calls shorter than a time limit) and tabulates and
+#       plots them all
 # Writes OUT_DIR/scale_curve.csv, the table OUT_DIR/scale_curve.md and its
 # plot OUT_DIR/scale_curve.png (scripts/bench/plot_scale_curve.py), and
 # OUT_DIR/logs/; prints the table.
@@ -31,13 +34,14 @@ NUM_FEATURES="${NUM_FEATURES:-8192}"
 COLMAP_TIME_LIMIT="${COLMAP_TIME_LIMIT:-20}"
 WORK="${WORK:-/tmp/cashash_scale_curve}"
 EXTRA="${EXTRA:-}"
+APPEND="${APPEND:-0}"
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 mkdir -p "$OUT/logs" "$WORK"
 CSV="$OUT/scale_curve.csv"
 
 HAVE_SMI=0
 command -v nvidia-smi > /dev/null 2>&1 && nvidia-smi > /dev/null 2>&1 && HAVE_SMI=1
-{
+[ "$APPEND" = 1 ] && [ -s "$CSV" ] || {
   echo "# scale_curve.sh $(date -u +%Y-%m-%dT%H:%M:%SZ) on $(nproc) cores; $("$CASHASH" --version 2>&1 | head -1)"
   [ "$HAVE_SMI" = 1 ] && echo "# $(nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | head -1)"
   echo "kind,images,mean_features,pairs,wall_s,pipeline_s,pairs_per_s,matching_s,verification_s,writing_s,verified_pairs,peak_rss_mib,peak_gpu_mib,colmap_pairs,colmap_pairs_per_s,colmap_verified_pairs"

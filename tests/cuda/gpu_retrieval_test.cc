@@ -205,6 +205,16 @@ TEST_F(GpuRetrieval, TilesGiveTheSameNeighbours) {
   EXPECT_GE(CompareWithCpu(index.View(), cut, index.AllTopK(25), 25), 0.99);
 }
 
+TEST_F(GpuRetrieval, ImagesPastOneBlocksSharedMemoryAreTiled) {
+  // 70,000 images: more 32-bit scores than one block's shared memory holds
+  // (about 57,800 on an H100 or H200), so the device's own limit tiles them.
+  const ImageRetrievalIndex index(RandomImages(70000, 20, 1u << 16, 8), 1u << 16, -1);
+  cuda::GpuRetrievalStats stats;
+  const Lists gpu = cuda::GpuAllTopK(index.View(), 5, config_, &stats);
+  EXPECT_GE(stats.tiles, 2u);
+  EXPECT_GE(CompareWithCpu(index.View(), gpu, index.AllTopK(5), 5), 0.99);
+}
+
 TEST_F(GpuRetrieval, KPastTheImagesReturnsEveryImageSharingAWord) {
   const ImageRetrievalIndex index(RandomImages(60, 300, 4000, 5), 4000, 2);
   const size_t k = 100;  // more than the 59 other images
