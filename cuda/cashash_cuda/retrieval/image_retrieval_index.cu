@@ -27,39 +27,15 @@ constexpr float kScoreScale = 2147483648.f;
 // their results.
 constexpr size_t kBatchBytes = size_t{256} << 20;
 
-// Block q of the grid's x is query q of the batch, the grid's y is its tile
-// of images [tile * tile_size, min(num_images, tile * tile_size +
-// tile_size)). Writes the tile's best min(k, candidates) (score in units
-// of kGpuRetrievalScoreStep, image position) to slot (q, tile), in no
-// particular order (the host sorts them), and their number to
-// out_counts[slot]. Dynamic shared memory: tile_size 32-bit scores.
-__global__ void __launch_bounds__(kThreads)
-    RetrievalTopKKernel(const uint64_t* __restrict__ posting_offsets, const RetrievalPosting* __restrict__ postings,
-                        const uint64_t* __restrict__ query_offsets, const RetrievalQueryWord* __restrict__ query_words,
-                        const uint32_t* __restrict__ query_images, uint32_t num_images, uint32_t tile_size,
-                        uint32_t k, uint32_t* __restrict__ out_scores, uint32_t* __restrict__ out_images,
-                        uint32_t* __restrict__ out_counts) {
-  extern __shared__ uint32_t scores[];
-  __shared__ uint32_t histogram[256];
-  __shared__ uint32_t warp_counts[kWarps];
-  __shared__ uint32_t threshold_prefix, threshold_remaining, take_all_flag, written;
-
-  const uint32_t tid = threadIdx.x;
-  const uint32_t lane = tid & 31u;
-  const uint32_t warp = tid >> 5;
-  const uint32_t tile_begin = blockIdx.y * tile_size;
-  const uint32_t size = min(num_images, tile_begin + tile_size) - tile_begin;
-  const uint64_t slot = static_cast<uint64_t>(blockIdx.x) * gridDim.y + blockIdx.y;
-
-  for (uint32_t i = tid; i < size; i += kThreads) scores[i] = 0;
-  __syncthreads();
-
-  // Scores: each warp takes 32 query words at a time (one coalesced load),
-  // then their posting lists one after the other, a lane per posting. A
-  // word's postings name distinct images, so the lanes of one atomicAdd
-  // never wait on each other's address.
-  const uint64_t words_begin = query_offsets[blockIdx.x];
-  const uint64_t words_end = query_offsets[blockIdx.x + 1];
+// Adds the query's terms to the tile's scores: each warp takes 32 query
+// words at a time (one coalesced load), then their posting lists one after
+// the other, a lane per posting. A word's postings name distinct images,
+// so the lanes of one atomicAdd never wait on each other's address.
+__device__ __forceinline__ void AccumulateScores(const uint64_t* __restrict__ posting_offsets,
+                                                 const RetrievalPosting* __restrict__ postings,
+                                                 const RetrievalQueryWord* __restrict__ query_words,
+                                                 uint64_t words_begin, uint64_t words_end, uint32_t tile_begin,
+                                                 uint32_t size, uint32_t lane, uint32_t warp, uint32_t* scores) {
   for (uint64_t base = words_begin + warp * 32u; base < words_end; base += kThreads) {
     uint64_t begin = 0, end = 0;
     float weight = 0.f;
@@ -87,21 +63,16 @@ __global__ void __launch_bounds__(kThreads)
       }
     }
   }
-  __syncthreads();
-  const uint32_t self = query_images[blockIdx.x] - tile_begin;
-  if (tid == 0) {
-    if (self < size) scores[self] = 0;  // never its own neighbour
-    threshold_prefix = 0;
-    threshold_remaining = k;
-    take_all_flag = 0;
-    written = 0;
-  }
-  __syncthreads();
+}
 
-  // The k-th largest nonzero score, a byte at a time from the top (radix
-  // select): after the four passes `threshold_prefix` is that score and
-  // `threshold_remaining` how many of the images holding it are kept. With
-  // k or fewer nonzero scores, every one is kept.
+// The k-th largest nonzero score, a byte at a time from the top (radix
+// select): after the four passes `threshold_prefix` is that score and
+// `threshold_remaining` how many of the images holding it are kept. With
+// k or fewer nonzero scores, every one is kept and `take_all_flag` is set.
+// The three outputs are shared and start as 0, k and 0.
+__device__ __forceinline__ void SelectThreshold(const uint32_t* scores, uint32_t size, uint32_t tid,
+                                                uint32_t* histogram, uint32_t& threshold_prefix,
+                                                uint32_t& threshold_remaining, uint32_t& take_all_flag) {
   uint32_t mask = 0;
   for (int shift = 24; shift >= 0; shift -= 8) {
     for (uint32_t b = tid; b < 256; b += kThreads) histogram[b] = 0;
@@ -131,13 +102,14 @@ __global__ void __launch_bounds__(kThreads)
     if (take_all_flag) break;
     mask |= 255u << shift;
   }
-  const bool take_all = take_all_flag != 0;
-  const uint32_t threshold = threshold_prefix;
-  const uint32_t ties = take_all ? 0 : threshold_remaining;
+}
 
-  uint32_t* slot_scores = out_scores + slot * k;
-  uint32_t* slot_images = out_images + slot * k;
-  // Above the threshold (or every nonzero score): fewer than k, any order.
+// Writes the scores above the threshold (or every nonzero score) to the
+// slot, fewer than k, in any order; `written` (shared, 0) counts them.
+__device__ __forceinline__ void WriteAboveThreshold(const uint32_t* scores, uint32_t size, uint32_t tid,
+                                                    uint32_t tile_begin, bool take_all, uint32_t threshold,
+                                                    uint32_t& written, uint32_t* slot_scores,
+                                                    uint32_t* slot_images) {
   for (uint32_t i = tid; i < size; i += kThreads) {
     const uint32_t s = scores[i];
     if (s != 0 && (take_all || s > threshold)) {
@@ -146,10 +118,15 @@ __global__ void __launch_bounds__(kThreads)
       slot_images[at] = tile_begin + i;
     }
   }
-  __syncthreads();
-  const uint32_t above_count = written;
-  // At the threshold: the `ties` lowest positions, found in position order
-  // (a block-wide count of the earlier ones), so the choice is the CPU's.
+}
+
+// Writes the `ties` lowest positions holding the threshold after the
+// `above_count` written before them, found in position order (a
+// block-wide count of the earlier ones), so the choice is the CPU's.
+__device__ __forceinline__ void WriteTies(const uint32_t* scores, uint32_t size, uint32_t tid, uint32_t lane,
+                                          uint32_t warp, uint32_t tile_begin, uint32_t threshold, uint32_t ties,
+                                          uint32_t above_count, uint32_t* warp_counts, uint32_t* slot_scores,
+                                          uint32_t* slot_images) {
   uint32_t taken = 0;
   for (uint32_t base = 0; base < size && taken < ties; base += kThreads) {
     const uint32_t i = base + tid;
@@ -170,6 +147,59 @@ __global__ void __launch_bounds__(kThreads)
     taken += total;
     __syncthreads();  // warp_counts is rewritten next round
   }
+}
+
+// Block q of the grid's x is query q of the batch, the grid's y is its tile
+// of images [tile * tile_size, min(num_images, tile * tile_size +
+// tile_size)). Writes the tile's best min(k, candidates) (score in units
+// of kGpuRetrievalScoreStep, image position) to slot (q, tile), in no
+// particular order (the host sorts them), and their number to
+// out_counts[slot]. Dynamic shared memory: tile_size 32-bit scores.
+__global__ void __launch_bounds__(kThreads)
+    RetrievalTopKKernel(const uint64_t* __restrict__ posting_offsets, const RetrievalPosting* __restrict__ postings,
+                        const uint64_t* __restrict__ query_offsets, const RetrievalQueryWord* __restrict__ query_words,
+                        const uint32_t* __restrict__ query_images, uint32_t num_images, uint32_t tile_size,
+                        uint32_t k, uint32_t* __restrict__ out_scores, uint32_t* __restrict__ out_images,
+                        uint32_t* __restrict__ out_counts) {
+  extern __shared__ uint32_t scores[];
+  __shared__ uint32_t histogram[256];
+  __shared__ uint32_t warp_counts[kWarps];
+  __shared__ uint32_t threshold_prefix, threshold_remaining, take_all_flag, written;
+
+  const uint32_t tid = threadIdx.x;
+  const uint32_t lane = tid & 31u;
+  const uint32_t warp = tid >> 5;
+  const uint32_t tile_begin = blockIdx.y * tile_size;
+  const uint32_t size = min(num_images, tile_begin + tile_size) - tile_begin;
+  const uint64_t slot = static_cast<uint64_t>(blockIdx.x) * gridDim.y + blockIdx.y;
+
+  for (uint32_t i = tid; i < size; i += kThreads) scores[i] = 0;
+  __syncthreads();
+  AccumulateScores(posting_offsets, postings, query_words, query_offsets[blockIdx.x], query_offsets[blockIdx.x + 1],
+                   tile_begin, size, lane, warp, scores);
+  __syncthreads();
+  const uint32_t self = query_images[blockIdx.x] - tile_begin;
+  if (tid == 0) {
+    if (self < size) scores[self] = 0;  // never its own neighbour
+    threshold_prefix = 0;
+    threshold_remaining = k;
+    take_all_flag = 0;
+    written = 0;
+  }
+  __syncthreads();
+
+  SelectThreshold(scores, size, tid, histogram, threshold_prefix, threshold_remaining, take_all_flag);
+  const bool take_all = take_all_flag != 0;
+  const uint32_t threshold = threshold_prefix;
+  const uint32_t ties = take_all ? 0 : threshold_remaining;
+
+  uint32_t* slot_scores = out_scores + slot * k;
+  uint32_t* slot_images = out_images + slot * k;
+  WriteAboveThreshold(scores, size, tid, tile_begin, take_all, threshold, written, slot_scores, slot_images);
+  __syncthreads();
+  const uint32_t above_count = written;
+  WriteTies(scores, size, tid, lane, warp, tile_begin, threshold, ties, above_count, warp_counts, slot_scores,
+            slot_images);
   if (tid == 0) out_counts[slot] = above_count + ties;
 }
 
@@ -246,6 +276,187 @@ std::vector<size_t> BatchStarts(const RetrievalIndexView& index, const std::vect
   return starts;
 }
 
+
+// Throws for a query image outside the index, a missing GpuResources, or
+// more images than 32-bit positions can name.
+void CheckTopKArguments(const RetrievalIndexView& index, const std::vector<uint32_t>& query_images,
+                        const GpuRetrievalConfig& config) {
+  const size_t n = index.num_images;
+  for (uint32_t image : query_images) {
+    if (image >= n) {
+      throw std::out_of_range("GpuTopK: image " + std::to_string(image) + " of " + std::to_string(n));
+    }
+  }
+  if (config.resources == nullptr) throw std::invalid_argument("GpuTopK: no GpuResources");
+  if (n > UINT32_MAX) throw std::invalid_argument("GpuTopK: more images than 32-bit positions");
+}
+
+// How one call splits the images: their number, images per tile, tiles,
+// and how many results a tile keeps.
+struct TilePlan {
+  uint32_t num_images = 0;
+  uint32_t tile_size = 0;
+  uint32_t num_tiles = 1;
+  uint32_t kept = 0;
+};
+
+// The postings and word offsets on the device, for the whole call.
+struct ResidentIndex {
+  DeviceBuffer posting_offsets, postings;
+};
+
+ResidentIndex UploadIndex(GpuResources* resources, const RetrievalIndexView& index, cudaStream_t stream) {
+  ResidentIndex resident;
+  resident.posting_offsets.Allocate(resources, (static_cast<size_t>(index.vocabulary_size) + 1) * sizeof(uint64_t),
+                                    "retrieval word offsets");
+  resident.postings.Allocate(resources, index.num_postings() * sizeof(RetrievalPosting), "retrieval postings");
+  CUDA_CHECK(cudaMemcpyAsync(resident.posting_offsets.as<void>(), index.posting_offsets,
+                             resident.posting_offsets.bytes(), cudaMemcpyHostToDevice, stream));
+  if (resident.postings.bytes() > 0) {
+    CUDA_CHECK(cudaMemcpyAsync(resident.postings.as<void>(), index.postings, resident.postings.bytes(),
+                               cudaMemcpyHostToDevice, stream));
+  }
+  return resident;
+}
+
+// The device buffers of one batch of queries, sized for the largest batch.
+struct BatchBuffers {
+  DeviceBuffer words, offsets, images, scores, positions, counts;
+};
+
+// The most query words and the most queries of any batch.
+void LargestBatch(const RetrievalIndexView& index, const std::vector<uint32_t>& query_images,
+                  const std::vector<size_t>& starts, size_t* most_words, size_t* most_queries) {
+  *most_words = 0;
+  *most_queries = 0;
+  for (size_t b = 0; b + 1 < starts.size(); ++b) {
+    size_t words = 0;
+    for (size_t q = starts[b]; q < starts[b + 1]; ++q) {
+      words += index.query_offsets[query_images[q] + 1] - index.query_offsets[query_images[q]];
+    }
+    *most_words = std::max(*most_words, words);
+    *most_queries = std::max(*most_queries, starts[b + 1] - starts[b]);
+  }
+}
+
+// Splits the queries into batches and allocates `buffers` for the largest,
+// halving the batches while the budget has no room for them. Returns the
+// batches' starts (BatchStarts).
+std::vector<size_t> AllocateBatches(GpuResources* resources, const RetrievalIndexView& index,
+                                    const std::vector<uint32_t>& query_images, const TilePlan& plan,
+                                    BatchBuffers* buffers) {
+  const size_t result_bytes_per_query =
+      static_cast<size_t>(plan.num_tiles) * (plan.kept * 2 * sizeof(uint32_t) + sizeof(uint32_t));
+  size_t batch_bytes = kBatchBytes;
+  for (;;) {
+    std::vector<size_t> starts = BatchStarts(index, query_images, result_bytes_per_query, batch_bytes);
+    size_t most_words = 0, most_queries = 0;
+    LargestBatch(index, query_images, starts, &most_words, &most_queries);
+    try {
+      buffers->words.Allocate(resources, most_words * sizeof(RetrievalQueryWord), "retrieval query words");
+      buffers->offsets.Allocate(resources, (most_queries + 1) * sizeof(uint64_t), "retrieval query offsets");
+      buffers->images.Allocate(resources, most_queries * sizeof(uint32_t), "retrieval query images");
+      const size_t slots = most_queries * plan.num_tiles;
+      buffers->scores.Allocate(resources, slots * plan.kept * sizeof(uint32_t), "retrieval result scores");
+      buffers->positions.Allocate(resources, slots * plan.kept * sizeof(uint32_t), "retrieval result images");
+      buffers->counts.Allocate(resources, slots * sizeof(uint32_t), "retrieval result counts");
+      return starts;
+    } catch (const DeviceMemoryError&) {
+      // One query per batch is the least there is.
+      if (most_queries <= 1) throw;
+      batch_bytes /= 2;
+    }
+  }
+}
+
+// The words of the batch's queries, with their offsets (from 0) in
+// `offsets`. Consecutive images (every image's search) have their words in
+// one piece of the index: returned from there, without a copy on the host;
+// other batches' words are gathered into `gathered`.
+const RetrievalQueryWord* GatherBatchWords(const RetrievalIndexView& index, const std::vector<uint32_t>& batch_images,
+                                           std::vector<uint64_t>* offsets,
+                                           std::vector<RetrievalQueryWord>* gathered) {
+  offsets->assign(1, 0);
+  gathered->clear();
+  const size_t count = batch_images.size();
+  bool consecutive = true;
+  for (size_t q = 1; q < count && consecutive; ++q) consecutive = batch_images[q] == batch_images[0] + q;
+  const RetrievalQueryWord* words = index.queries + index.query_offsets[batch_images.front()];
+  for (uint32_t image : batch_images) {
+    const size_t size = index.query_offsets[image + 1] - index.query_offsets[image];
+    if (!consecutive) {
+      gathered->insert(gathered->end(), index.queries + index.query_offsets[image],
+                       index.queries + index.query_offsets[image + 1]);
+    }
+    offsets->push_back(offsets->back() + size);
+  }
+  if (!consecutive) words = gathered->data();
+  return words;
+}
+
+// Every (query, tile) slot's list of one batch, on the host: slot s has
+// counts[s] entries from s * kept in scores and images.
+struct TileLists {
+  std::vector<uint32_t> scores, images, counts;
+};
+
+// Sends the batch's queries, runs the kernel on each of its slots and
+// brings the slots' lists back into `lists`; waits for the stream.
+void RunBatch(const ResidentIndex& resident, const BatchBuffers& buffers, const TilePlan& plan,
+              const std::vector<uint32_t>& batch_images, const std::vector<uint64_t>& offsets,
+              const RetrievalQueryWord* words, cudaStream_t stream, TileLists* lists) {
+  const size_t count = batch_images.size();
+  if (offsets.back() > 0) {
+    CUDA_CHECK(cudaMemcpyAsync(buffers.words.as<void>(), words, offsets.back() * sizeof(RetrievalQueryWord),
+                               cudaMemcpyHostToDevice, stream));
+  }
+  CUDA_CHECK(cudaMemcpyAsync(buffers.offsets.as<void>(), offsets.data(), offsets.size() * sizeof(uint64_t),
+                             cudaMemcpyHostToDevice, stream));
+  CUDA_CHECK(cudaMemcpyAsync(buffers.images.as<void>(), batch_images.data(), count * sizeof(uint32_t),
+                             cudaMemcpyHostToDevice, stream));
+  const dim3 grid(static_cast<unsigned>(count), plan.num_tiles);
+  RetrievalTopKKernel<<<grid, kThreads, plan.tile_size * sizeof(uint32_t), stream>>>(
+      resident.posting_offsets.as<uint64_t>(), resident.postings.as<RetrievalPosting>(),
+      buffers.offsets.as<uint64_t>(), buffers.words.as<RetrievalQueryWord>(), buffers.images.as<uint32_t>(),
+      plan.num_images, plan.tile_size, plan.kept, buffers.scores.as<uint32_t>(), buffers.positions.as<uint32_t>(),
+      buffers.counts.as<uint32_t>());
+  CUDA_CHECK_LAUNCH();
+  const size_t slots = count * plan.num_tiles;
+  lists->scores.resize(slots * plan.kept);
+  lists->images.resize(slots * plan.kept);
+  lists->counts.resize(slots);
+  CUDA_CHECK(cudaMemcpyAsync(lists->counts.data(), buffers.counts.as<void>(), slots * sizeof(uint32_t),
+                             cudaMemcpyDeviceToHost, stream));
+  CUDA_CHECK(cudaMemcpyAsync(lists->scores.data(), buffers.scores.as<void>(), slots * plan.kept * sizeof(uint32_t),
+                             cudaMemcpyDeviceToHost, stream));
+  CUDA_CHECK(cudaMemcpyAsync(lists->images.data(), buffers.positions.as<void>(),
+                             slots * plan.kept * sizeof(uint32_t), cudaMemcpyDeviceToHost, stream));
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+// Query q's best k of its tiles' lists, merged by the CPU's rule on the
+// integer scores (two scores a unit apart may round to the same float).
+// `candidates` is scratch space.
+void MergeTileLists(const TileLists& lists, size_t q, const TilePlan& plan, size_t k,
+                    std::vector<std::pair<uint32_t, uint32_t>>* candidates,
+                    std::vector<RetrievalNeighbor>* neighbors) {
+  candidates->clear();
+  for (uint32_t tile = 0; tile < plan.num_tiles; ++tile) {
+    const size_t slot = q * plan.num_tiles + tile;
+    for (uint32_t c = 0; c < lists.counts[slot]; ++c) {
+      candidates->emplace_back(lists.scores[slot * plan.kept + c], lists.images[slot * plan.kept + c]);
+    }
+  }
+  std::sort(candidates->begin(), candidates->end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  if (candidates->size() > k) candidates->resize(k);
+  neighbors->reserve(candidates->size());
+  for (const auto& [units, image] : *candidates) {
+    neighbors->push_back({image, static_cast<float>(units * kGpuRetrievalScoreStep)});
+  }
+}
+
 }  // namespace
 
 size_t GpuRetrievalResidentBytes(const RetrievalIndexView& index) {
@@ -256,145 +467,41 @@ size_t GpuRetrievalResidentBytes(const RetrievalIndexView& index) {
 std::vector<std::vector<RetrievalNeighbor>> GpuTopK(const RetrievalIndexView& index,
                                                     const std::vector<uint32_t>& query_images, size_t k,
                                                     const GpuRetrievalConfig& config, GpuRetrievalStats* stats) {
+  CheckTopKArguments(index, query_images, config);
   const size_t n = index.num_images;
-  for (uint32_t image : query_images) {
-    if (image >= n) {
-      throw std::out_of_range("GpuTopK: image " + std::to_string(image) + " of " + std::to_string(n));
-    }
-  }
-  if (config.resources == nullptr) throw std::invalid_argument("GpuTopK: no GpuResources");
-  if (n > UINT32_MAX) throw std::invalid_argument("GpuTopK: more images than 32-bit positions");
   std::vector<std::vector<RetrievalNeighbor>> result(query_images.size());
   if (query_images.empty() || k == 0 || n < 2) return result;
   GpuResources* resources = config.resources;
   DeviceScope scope(resources->device());
   Stream stream;
 
-  uint32_t num_tiles = 1;
-  const uint32_t tile_size = ImagesPerTile(n, config.max_images_per_tile, &num_tiles);
+  TilePlan plan;
+  plan.num_images = static_cast<uint32_t>(n);
+  plan.tile_size = ImagesPerTile(n, config.max_images_per_tile, &plan.num_tiles);
   // A tile keeps at most k, and never more than its images.
-  const uint32_t kept = static_cast<uint32_t>(std::min<size_t>(k, tile_size));
+  plan.kept = static_cast<uint32_t>(std::min<size_t>(k, plan.tile_size));
 
-  // The postings and word offsets, for the whole call.
-  DeviceBuffer posting_offsets(resources, (static_cast<size_t>(index.vocabulary_size) + 1) * sizeof(uint64_t),
-                               "retrieval word offsets");
-  DeviceBuffer postings(resources, index.num_postings() * sizeof(RetrievalPosting), "retrieval postings");
-  CUDA_CHECK(cudaMemcpyAsync(posting_offsets.as<void>(), index.posting_offsets, posting_offsets.bytes(),
-                             cudaMemcpyHostToDevice, stream.get()));
-  if (postings.bytes() > 0) {
-    CUDA_CHECK(cudaMemcpyAsync(postings.as<void>(), index.postings, postings.bytes(), cudaMemcpyHostToDevice,
-                               stream.get()));
-  }
-
-  // The batches' buffers, sized for the largest batch; halved while the
-  // budget has no room for them.
-  const size_t result_bytes_per_query = static_cast<size_t>(num_tiles) * (kept * 2 * sizeof(uint32_t) + sizeof(uint32_t));
-  size_t batch_bytes = kBatchBytes;
-  std::vector<size_t> starts;
-  DeviceBuffer words_buffer, offsets_buffer, images_buffer, scores_buffer, positions_buffer, counts_buffer;
-  for (;;) {
-    starts = BatchStarts(index, query_images, result_bytes_per_query, batch_bytes);
-    size_t most_words = 0, most_queries = 0;
-    for (size_t b = 0; b + 1 < starts.size(); ++b) {
-      size_t words = 0;
-      for (size_t q = starts[b]; q < starts[b + 1]; ++q) {
-        words += index.query_offsets[query_images[q] + 1] - index.query_offsets[query_images[q]];
-      }
-      most_words = std::max(most_words, words);
-      most_queries = std::max(most_queries, starts[b + 1] - starts[b]);
-    }
-    try {
-      words_buffer.Allocate(resources, most_words * sizeof(RetrievalQueryWord), "retrieval query words");
-      offsets_buffer.Allocate(resources, (most_queries + 1) * sizeof(uint64_t), "retrieval query offsets");
-      images_buffer.Allocate(resources, most_queries * sizeof(uint32_t), "retrieval query images");
-      const size_t slots = most_queries * num_tiles;
-      scores_buffer.Allocate(resources, slots * kept * sizeof(uint32_t), "retrieval result scores");
-      positions_buffer.Allocate(resources, slots * kept * sizeof(uint32_t), "retrieval result images");
-      counts_buffer.Allocate(resources, slots * sizeof(uint32_t), "retrieval result counts");
-      break;
-    } catch (const DeviceMemoryError&) {
-      // One query per batch is the least there is.
-      if (most_queries <= 1) throw;
-      batch_bytes /= 2;
-    }
-  }
+  const ResidentIndex resident = UploadIndex(resources, index, stream.get());
+  BatchBuffers buffers;
+  const std::vector<size_t> starts = AllocateBatches(resources, index, query_images, plan, &buffers);
 
   std::vector<uint64_t> batch_offsets;
   std::vector<RetrievalQueryWord> batch_words;
   std::vector<uint32_t> batch_images;
-  std::vector<uint32_t> out_scores, out_images, out_counts;
+  TileLists lists;
   std::vector<std::pair<uint32_t, uint32_t>> candidates;  // (units, image)
   for (size_t b = 0; b + 1 < starts.size(); ++b) {
     const size_t first = starts[b], count = starts[b + 1] - starts[b];
-    batch_offsets.assign(1, 0);
-    batch_words.clear();
     batch_images.assign(query_images.begin() + static_cast<std::ptrdiff_t>(first),
                         query_images.begin() + static_cast<std::ptrdiff_t>(first + count));
-    // Consecutive images (every image's search) have their words in one
-    // piece of the index: sent from there, without a copy on the host.
-    bool consecutive = true;
-    for (size_t q = 1; q < count && consecutive; ++q) consecutive = batch_images[q] == batch_images[0] + q;
-    const RetrievalQueryWord* words = index.queries + index.query_offsets[batch_images.front()];
-    for (uint32_t image : batch_images) {
-      const size_t size = index.query_offsets[image + 1] - index.query_offsets[image];
-      if (!consecutive) {
-        batch_words.insert(batch_words.end(), index.queries + index.query_offsets[image],
-                           index.queries + index.query_offsets[image + 1]);
-      }
-      batch_offsets.push_back(batch_offsets.back() + size);
-    }
-    if (!consecutive) words = batch_words.data();
-    if (batch_offsets.back() > 0) {
-      CUDA_CHECK(cudaMemcpyAsync(words_buffer.as<void>(), words, batch_offsets.back() * sizeof(RetrievalQueryWord),
-                                 cudaMemcpyHostToDevice, stream.get()));
-    }
-    CUDA_CHECK(cudaMemcpyAsync(offsets_buffer.as<void>(), batch_offsets.data(),
-                               batch_offsets.size() * sizeof(uint64_t), cudaMemcpyHostToDevice, stream.get()));
-    CUDA_CHECK(cudaMemcpyAsync(images_buffer.as<void>(), batch_images.data(), count * sizeof(uint32_t),
-                               cudaMemcpyHostToDevice, stream.get()));
-    const dim3 grid(static_cast<unsigned>(count), num_tiles);
-    RetrievalTopKKernel<<<grid, kThreads, tile_size * sizeof(uint32_t), stream.get()>>>(
-        posting_offsets.as<uint64_t>(), postings.as<RetrievalPosting>(), offsets_buffer.as<uint64_t>(),
-        words_buffer.as<RetrievalQueryWord>(), images_buffer.as<uint32_t>(), static_cast<uint32_t>(n), tile_size,
-        kept, scores_buffer.as<uint32_t>(), positions_buffer.as<uint32_t>(), counts_buffer.as<uint32_t>());
-    CUDA_CHECK_LAUNCH();
-    const size_t slots = count * num_tiles;
-    out_scores.resize(slots * kept);
-    out_images.resize(slots * kept);
-    out_counts.resize(slots);
-    CUDA_CHECK(cudaMemcpyAsync(out_counts.data(), counts_buffer.as<void>(), slots * sizeof(uint32_t),
-                               cudaMemcpyDeviceToHost, stream.get()));
-    CUDA_CHECK(cudaMemcpyAsync(out_scores.data(), scores_buffer.as<void>(), slots * kept * sizeof(uint32_t),
-                               cudaMemcpyDeviceToHost, stream.get()));
-    CUDA_CHECK(cudaMemcpyAsync(out_images.data(), positions_buffer.as<void>(), slots * kept * sizeof(uint32_t),
-                               cudaMemcpyDeviceToHost, stream.get()));
-    CUDA_CHECK(cudaStreamSynchronize(stream.get()));
-
-    // The tiles' lists merged by the CPU's rule, on the integer scores (two
-    // scores a unit apart may round to the same float).
-    for (size_t q = 0; q < count; ++q) {
-      candidates.clear();
-      for (uint32_t tile = 0; tile < num_tiles; ++tile) {
-        const size_t slot = q * num_tiles + tile;
-        for (uint32_t c = 0; c < out_counts[slot]; ++c) {
-          candidates.emplace_back(out_scores[slot * kept + c], out_images[slot * kept + c]);
-        }
-      }
-      std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
-        return a.first != b.first ? a.first > b.first : a.second < b.second;
-      });
-      if (candidates.size() > k) candidates.resize(k);
-      std::vector<RetrievalNeighbor>& neighbors = result[first + q];
-      neighbors.reserve(candidates.size());
-      for (const auto& [units, image] : candidates) {
-        neighbors.push_back({image, static_cast<float>(units * kGpuRetrievalScoreStep)});
-      }
-    }
+    const RetrievalQueryWord* words = GatherBatchWords(index, batch_images, &batch_offsets, &batch_words);
+    RunBatch(resident, buffers, plan, batch_images, batch_offsets, words, stream.get(), &lists);
+    for (size_t q = 0; q < count; ++q) MergeTileLists(lists, q, plan, k, &candidates, &result[first + q]);
   }
   if (stats != nullptr) {
-    stats->resident_bytes = posting_offsets.bytes() + postings.bytes();
+    stats->resident_bytes = resident.posting_offsets.bytes() + resident.postings.bytes();
     stats->batches = starts.size() - 1;
-    stats->tiles = num_tiles;
+    stats->tiles = plan.num_tiles;
   }
   return result;
 }
