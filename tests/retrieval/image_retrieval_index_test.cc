@@ -131,7 +131,9 @@ TEST(ImageRetrievalIndex, TopKOfSomeImagesAndTheViewOfTheArrays) {
     for (size_t r = 0; r < alone.size(); ++r) {
       EXPECT_EQ(lists[q][r].image, alone[r].image);
       EXPECT_EQ(lists[q][r].score, alone[r].score);
-      if (r > 0) EXPECT_TRUE(RanksBefore(lists[q][r - 1], lists[q][r]));
+      if (r > 0) {
+        EXPECT_TRUE(RanksBefore(lists[q][r - 1], lists[q][r]));
+      }
     }
   }
   EXPECT_THROW(index.TopKOf({20}, 1), std::out_of_range);
@@ -147,7 +149,9 @@ TEST(ImageRetrievalIndex, TopKOfSomeImagesAndTheViewOfTheArrays) {
     const RetrievalQueryWord word = view.queries[w];
     ASSERT_LT(view.posting_offsets[word.word], view.posting_offsets[word.word + 1]);
     for (size_t p = view.posting_offsets[word.word]; p < view.posting_offsets[word.word + 1]; ++p) {
-      if (p > view.posting_offsets[word.word]) EXPECT_LT(view.postings[p - 1].image, view.postings[p].image);
+      if (p > view.posting_offsets[word.word]) {
+        EXPECT_LT(view.postings[p - 1].image, view.postings[p].image);
+      }
       if (view.postings[p].image == best.image) score += static_cast<double>(word.weight) * view.postings[p].weight;
     }
   }
