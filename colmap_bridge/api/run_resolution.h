@@ -88,9 +88,9 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
 // The exact rematch of a run whose matcher, threshold and window are
 // resolved: none for brute force, guided matching (its stage 1 keeps the
 // cascade's matches) or a threshold of 0; else on the matching thread where
-// the bucket screen leaves that thread room (bucket_screen; 9 % faster at
-// 8,192 features and 3.5 % at 16,384 on the 300-image streets), on the CPU,
-// and on several GPUs (each chunk's rematch is shared out over the devices
+// the bucket screen leaves that thread idle while the device screens
+// (bucket_screen: the rematch then fills time the thread would wait), on
+// the CPU, and on several GPUs (each chunk's rematch is shared out over the devices
 // as its cascade is); on one GPU on the verification threads, from the
 // descriptors the cascade holds on the device, while the matching thread
 // goes on with the next chunk.
