@@ -10,6 +10,7 @@
 #include "cashash/base/device_memory_error.h"
 #include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/device_memory.cuh"
+#include "cashash_cuda/utils/device_scope.cuh"
 #include "cashash_cuda/utils/warp_primitives.cuh"
 
 namespace cashash {
@@ -202,21 +203,6 @@ __global__ void __launch_bounds__(kThreads)
             slot_images);
   if (tid == 0) out_counts[slot] = above_count + ties;
 }
-
-// Makes the resources' device current for the scope.
-class DeviceScope {
- public:
-  explicit DeviceScope(int device) {
-    CUDA_CHECK(cudaGetDevice(&previous_));
-    if (previous_ != device) CUDA_CHECK(cudaSetDevice(device));
-  }
-  ~DeviceScope() { cudaSetDevice(previous_); }
-  DeviceScope(const DeviceScope&) = delete;
-  DeviceScope& operator=(const DeviceScope&) = delete;
-
- private:
-  int previous_ = 0;
-};
 
 class Stream {
  public:

@@ -5,37 +5,10 @@
 #include <algorithm>
 
 #include "cashash_cuda/utils/cuda_check.cuh"
+#include "cashash_cuda/utils/device_scope.cuh"
 
 namespace cashash {
 namespace cuda {
-namespace {
-
-// Makes `device` current for the scope and restores the caller's device.
-class DeviceScope {
- public:
-  explicit DeviceScope(int device) {
-    CUDA_CHECK(cudaGetDevice(&previous_));
-    if (previous_ != device) CUDA_CHECK(cudaSetDevice(device));
-  }
-  ~DeviceScope() { cudaSetDevice(previous_); }
-  // Runs `free` with `device` current; never throws (it runs in destructors).
-  template <typename Free>
-  static void Quietly(int device, Free free) {
-    int previous = 0;
-    if (cudaGetDevice(&previous) != cudaSuccess) previous = device;
-    cudaSetDevice(device);
-    free();
-    cudaSetDevice(previous);
-    (void)cudaGetLastError();
-  }
-  DeviceScope(const DeviceScope&) = delete;
-  DeviceScope& operator=(const DeviceScope&) = delete;
-
- private:
-  int previous_ = 0;
-};
-
-}  // namespace
 
 class GpuResources::DeviceSource : public BlockSource {
  public:
