@@ -10,17 +10,23 @@
 namespace cashash {
 namespace testing_support {
 
-// The first column of the first row of `sql` on a read-only connection to
-// `path`; -1 where the query fails or returns no row.
-inline int64_t QueryInt(const std::string& path, const std::string& sql) {
-  sqlite3* db = nullptr;
-  sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+// The first column of `sql`'s first row on an open database; -1 where the
+// query fails or returns no row.
+inline int64_t ScalarOf(sqlite3* db, const std::string& sql) {
   sqlite3_stmt* s = nullptr;
   int64_t value = -1;
   if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
     value = sqlite3_column_int64(s, 0);
   }
   sqlite3_finalize(s);
+  return value;
+}
+
+// ScalarOf on a read-only connection to `path`.
+inline int64_t QueryInt(const std::string& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+  const int64_t value = ScalarOf(db, sql);
   sqlite3_close(db);
   return value;
 }
@@ -31,15 +37,10 @@ inline int64_t RowsDiffering(const std::string& a, const std::string& b, const s
   sqlite3* db = nullptr;
   sqlite3_open_v2(a.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
   sqlite3_exec(db, ("ATTACH DATABASE '" + b + "' AS other").c_str(), nullptr, nullptr, nullptr);
-  sqlite3_stmt* s = nullptr;
   const std::string sql = "SELECT (SELECT count(*) FROM (SELECT * FROM main." + table + " EXCEPT SELECT * FROM other." +
                           table + ")) + (SELECT count(*) FROM (SELECT * FROM other." + table +
                           " EXCEPT SELECT * FROM main." + table + "))";
-  int64_t value = -1;
-  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s, nullptr) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW) {
-    value = sqlite3_column_int64(s, 0);
-  }
-  sqlite3_finalize(s);
+  const int64_t value = ScalarOf(db, sql);
   sqlite3_close(db);
   return value;
 }
