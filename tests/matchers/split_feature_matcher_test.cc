@@ -111,17 +111,25 @@ TEST(SplitFeatureMatcher, SlicesCoverEveryItemOnceWithSizesWithinOne) {
   }
 }
 
+// A split over three recording CPU backends of `scene`; `recorders` gets
+// the parts, in order.
+std::unique_ptr<SplitFeatureMatcher> SplitOfThreeRecorders(const Scene& scene,
+                                                           std::vector<RecordingMatcher*>* recorders) {
+  std::vector<std::unique_ptr<MatchingBackend>> parts;
+  for (int k = 0; k < 3; ++k) {
+    auto part = std::make_unique<RecordingMatcher>(Cpu(scene), false);
+    recorders->push_back(part.get());
+    parts.push_back(std::move(part));
+  }
+  return std::make_unique<SplitFeatureMatcher>(std::move(parts));
+}
+
 TEST(SplitFeatureMatcher, SameMatchesInTheSameOrderAsOneMatcher) {
   const Scene scene = MakeScene(7);  // 21 pairs
   auto single = Cpu(scene);
-  std::vector<std::unique_ptr<MatchingBackend>> parts;
   std::vector<RecordingMatcher*> recorders;
-  for (int k = 0; k < 3; ++k) {
-    auto part = std::make_unique<RecordingMatcher>(Cpu(scene), false);
-    recorders.push_back(part.get());
-    parts.push_back(std::move(part));
-  }
-  SplitFeatureMatcher split(std::move(parts));
+  const std::unique_ptr<SplitFeatureMatcher> split_owner = SplitOfThreeRecorders(scene, &recorders);
+  SplitFeatureMatcher& split = *split_owner;
   EXPECT_EQ(split.num_parts(), 3u);
   EXPECT_EQ(split.Name(), "recording x3");
   for (size_t i = 0; i < scene.images.size(); ++i) {
@@ -162,14 +170,9 @@ TEST(SplitFeatureMatcher, SameMatchesInTheSameOrderAsOneMatcher) {
 TEST(SplitFeatureMatcher, ExactMatchingIsSharedOutAsMatchingIs) {
   const Scene scene = MakeScene(7);  // 21 pairs
   auto single = Cpu(scene);
-  std::vector<std::unique_ptr<MatchingBackend>> parts;
   std::vector<RecordingMatcher*> recorders;
-  for (int k = 0; k < 3; ++k) {
-    auto part = std::make_unique<RecordingMatcher>(Cpu(scene), false);
-    recorders.push_back(part.get());
-    parts.push_back(std::move(part));
-  }
-  SplitFeatureMatcher split(std::move(parts));
+  const std::unique_ptr<SplitFeatureMatcher> split_owner = SplitOfThreeRecorders(scene, &recorders);
+  SplitFeatureMatcher& split = *split_owner;
   EXPECT_TRUE(split.traits().epipolar_guidance);
   for (size_t i = 0; i < scene.images.size(); ++i) {
     single->AddImage(image_t(i), scene.images[i]);
