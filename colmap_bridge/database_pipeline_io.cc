@@ -166,6 +166,7 @@ void DatabaseResultSink::WriteRows(const std::vector<PairResult>& results) {
   for (size_t k : order_) {
     const PairResult& r = results[k];
     rows_.push_back(PairRowsRef{r.pair.first, r.pair.second, &r.matches, &r.geometry});
+    pending_bytes_ += sizeof(FeatureMatch) * (r.matches.size() + r.geometry.inlier_matches.size());
   }
   database_.WriteMatchesRows(rows_);
   if (options_.write_two_view_geometries) {
@@ -191,13 +192,14 @@ void DatabaseResultSink::WriteChunk(const std::vector<PairResult>& results) {
     WriteRows(results);
   } catch (...) {
     in_transaction_ = false;
-    pending_rows_ = pending_empty_pairs_ = 0;
+    pending_rows_ = pending_empty_pairs_ = pending_bytes_ = 0;
     database_.Rollback();
     throw;
   }
   const double open_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - transaction_start_).count();
-  if (open_seconds >= options_.commit_seconds) Commit();
+  const bool log_bound = options_.commit_mib > 0 && pending_bytes_ >= static_cast<size_t>(options_.commit_mib) << 20;
+  if (open_seconds >= options_.commit_seconds || log_bound) Commit();
 }
 
 void DatabaseResultSink::Flush() {
@@ -209,7 +211,7 @@ void DatabaseResultSink::Commit() {
   try {
     database_.Commit();
   } catch (...) {
-    pending_rows_ = pending_empty_pairs_ = 0;
+    pending_rows_ = pending_empty_pairs_ = pending_bytes_ = 0;
     database_.Rollback();
     throw;
   }
@@ -226,7 +228,7 @@ void DatabaseResultSink::Commit() {
   ++commits_;
   rows_written_ += pending_rows_;
   empty_pairs_recorded_ += pending_empty_pairs_;
-  pending_rows_ = pending_empty_pairs_ = 0;
+  pending_rows_ = pending_empty_pairs_ = pending_bytes_ = 0;
   if (checkpointer_) {
     if (logged_pages_ >= options_.log_pages_before_catch_up) {
       checkpointer_->CatchUp();

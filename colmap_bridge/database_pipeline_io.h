@@ -97,6 +97,14 @@ class DatabaseResultSink : public ResultSink {
     // instead of once per chunk. What a kill -9 loses is bounded by it:
     // the uncommitted chunks are matched again by the next run.
     double commit_seconds = 1.0;
+    // A transaction also commits after the chunk that brings its rows'
+    // blobs to this many MiB (0: no bound). Grouped by time alone, a fast
+    // run's transaction grows past the log's catch-up bound: the commit
+    // then writes it all to the log at once, and the writer waits for the
+    // checkpointer to fold it, where smaller commits let the checkpointer
+    // fold one transaction while the next is written. A quarter of
+    // log_pages_before_catch_up keeps several commits between catch-ups.
+    int commit_mib = 16;
     // DatabaseOptions::cache_mib of the writer's connection: room for a
     // transaction's changed pages, given back after a commit that leaves
     // more than kept_cache_mib in the cache.
@@ -147,6 +155,7 @@ class DatabaseResultSink : public ResultSink {
   std::vector<PairRowsRef> rows_;  // the same, as written, reused
   std::vector<pair_t> empty_pairs_;  // reused
   size_t pending_rows_ = 0;          // in the open transaction
+  size_t pending_bytes_ = 0;         // the same rows' blobs
   size_t pending_empty_pairs_ = 0;
   size_t rows_written_ = 0;
   size_t empty_pairs_recorded_ = 0;

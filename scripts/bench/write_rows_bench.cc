@@ -17,6 +17,7 @@
 // in pair-id order (the floor). Prints every round and the medians.
 //   per chunk    one transaction per chunk, SQLite's 2 MiB page cache: how
 //                the writer committed before it grouped chunks
+//   1 s, no MiB bound  grouped by time alone (commit_mib 0)
 //   default      DatabaseResultSink::Options' defaults
 //   sync NORMAL  the defaults with DiskSync::kNormal (see DiskSync's risk)
 //
@@ -68,9 +69,14 @@ std::vector<Setting> Settings() {
   DatabaseResultSink::Options per_chunk;
   per_chunk.commit_seconds = 0;
   per_chunk.cache_mib = 0;
+  DatabaseResultSink::Options time_only;
+  time_only.commit_mib = 0;
   DatabaseResultSink::Options normal;
   normal.disk_sync = DiskSync::kNormal;
-  return {{"per chunk", per_chunk}, {"default", DatabaseResultSink::Options()}, {"sync NORMAL", normal}};
+  return {{"per chunk", per_chunk},
+          {"1 s, no MiB bound", time_only},
+          {"default", DatabaseResultSink::Options()},
+          {"sync NORMAL", normal}};
 }
 
 FeatureMatches MakeMatches(size_t count, SplitMix64& rng) {

@@ -1,6 +1,6 @@
 // The writer's transactions and batched rows: DatabaseResultSink holds whole
-// chunks in one transaction until it has been open commit_seconds or is
-// flushed (another connection sees nothing before, everything after), and
+// chunks in one transaction until it has been open commit_seconds, holds
+// commit_mib of blobs or is flushed (another connection sees nothing before, everything after), and
 // the rows it writes several to a statement are those of one statement per
 // row, pairs stored swapped included, in both schemas' conventions.
 #include <gtest/gtest.h>
@@ -113,6 +113,45 @@ TEST_P(WriterTransactionsTest, ZeroSecondsCommitsEveryChunk) {
   sink.WriteChunk(MakeChunk(100, 10));
   EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 20);
   EXPECT_EQ(sink.commits(), 2u);
+}
+
+// 20 pairs with 4,000 matches each (8 of them inliers): 0.6 MiB of blobs.
+std::vector<PairResult> MakeLargeChunk(image_t first) {
+  std::vector<PairResult> results;
+  for (int k = 1; k <= 20; ++k) {
+    PairResult r;
+    r.pair = ImagePair{first, first + static_cast<image_t>(k)};
+    for (int m = 0; m < 4000; ++m) r.matches.push_back({static_cast<point2D_t>(m), static_cast<point2D_t>(m)});
+    r.geometry.inlier_matches.assign(r.matches.begin(), r.matches.begin() + 8);
+    r.geometry.config = kCalibrated;
+    results.push_back(std::move(r));
+  }
+  return results;
+}
+
+TEST_P(WriterTransactionsTest, ATransactionCommitsOnceItsBlobsReachCommitMib) {
+  DatabaseResultSink::Options options;
+  options.commit_seconds = 3600;
+  options.commit_mib = 1;
+  DatabaseResultSink sink(path_, options);
+  sink.WriteChunk(MakeLargeChunk(1));
+  EXPECT_EQ(sink.commits(), 0u) << "0.6 MiB is below the bound";
+  sink.WriteChunk(MakeLargeChunk(100));
+  EXPECT_EQ(sink.commits(), 1u) << "1.2 MiB reaches it";
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 40);
+  sink.WriteChunk(MakeLargeChunk(200));
+  EXPECT_EQ(sink.commits(), 1u) << "the count starts over after a commit";
+}
+
+TEST_P(WriterTransactionsTest, ZeroCommitMibGroupsByTimeAlone) {
+  DatabaseResultSink::Options options;
+  options.commit_seconds = 3600;
+  options.commit_mib = 0;
+  DatabaseResultSink sink(path_, options);
+  for (image_t first : {1, 100, 200}) sink.WriteChunk(MakeLargeChunk(first));
+  EXPECT_EQ(sink.commits(), 0u);
+  sink.Flush();
+  EXPECT_EQ(QueryInt(path_, "SELECT count(*) FROM matches"), 60);
 }
 
 // 150 pairs a chunk: two statements of 64 rows and 22 single rows.
