@@ -21,7 +21,10 @@
 #       (about 1.4 GB for 1500, 4 GB for 5000, twice during a run),
 #   GENERATOR [the first CASHASH whose generate_database knows
 #       --num_features_distribution]: the binary that generates the databases,
-#   EXTRA [""]: more exhaustive_matcher options for every run.
+#   EXTRA [""]: more exhaustive_matcher options for every run,
+#   TIME_LIMIT [0]: seconds after which a run is stopped (0: none); a run
+#       that fell back to the CPU can take hours, and its peak and fallback
+#       are known by then. Its wall time is then printed as ">LIMIT".
 # The CUDA context of each binary is measured first: its peak on a database
 # of 3 images of 2,000 features (enough matches for the exact rematch and
 # the verification kernels to run, so that the device memory the driver
@@ -39,6 +42,7 @@ SETS="${SETS:-1500}"
 CAPS="${CAPS:-1G 2G default}"
 WORK="${WORK:-/tmp/cashash_gpu_memory_cap}"
 EXTRA="${EXTRA:-}"
+TIME_LIMIT="${TIME_LIMIT:-0}"
 mkdir -p "$OUT_DIR" "$WORK"
 SUMMARY="$OUT_DIR/summary.txt"
 CSV="$OUT_DIR/results.csv"
@@ -95,20 +99,33 @@ run() {
   start=$(date +%s.%N)
   # shellcheck disable=SC2086
   "$bin" exhaustive_matcher --database_path "$copy" "${cap_args[@]}" $EXTRA > "$log" 2>&1 &
-  local pid=$!
+  local pid=$! stopped=0
+  if [ "$TIME_LIMIT" != 0 ]; then
+    rm -f "$OUT_DIR/$tag.stopped"
+    ( sleep "$TIME_LIMIT"; touch "$OUT_DIR/$tag.stopped"; kill -INT "$pid" 2> /dev/null
+      sleep 30; kill -KILL "$pid" 2> /dev/null ) &
+    local watchdog=$!
+  fi
   wait "$pid"
   local code=$?
   end=$(date +%s.%N)
+  if [ "$TIME_LIMIT" != 0 ]; then
+    kill "$watchdog" 2> /dev/null
+    wait "$watchdog" 2> /dev/null
+    [ -f "$OUT_DIR/$tag.stopped" ] && stopped=1
+  fi
   sleep 0.3
   kill "$sampler" 2> /dev/null
   wait "$sampler" 2> /dev/null
   rm -f "$copy" "$copy-wal" "$copy-shm"
   local fallback=no
   grep -qE "CPU fallback|continuing on|(matching|verifying) on the CPU" "$log" && fallback=yes
-  [ "$code" != 0 ] && fallback="exit $code"
-  local owner
+  [ "$code" != 0 ] && [ "$stopped" = 0 ] && fallback="exit $code"
+  local owner wall
   owner=$(grep -m1 "^GPU memory:" "$log" | sed 's/^GPU memory: //; s/,/;/g')
-  echo "$(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.1f", b - a }') $(peak_of "$samples" "$pid") $fallback|${owner:-}"
+  wall=$(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.1f", b - a }')
+  [ "$stopped" = 1 ] && wall=">$TIME_LIMIT"
+  echo "$wall $(peak_of "$samples" "$pid") $fallback|${owner:-}"
 }
 
 mib_of_cap() {  # "1G" -> 1024, "512M" -> 512, "default" -> the device's memory
