@@ -12,14 +12,20 @@ import argparse
 
 
 def read_rows(path):
-    rows = []
+    """The rows by column name, so that a column added to the table does not
+    shift the ones read."""
+    rows, header = [], None
     with open(path) as f:
         for line in f:
             cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            if len(cells) < 7 or not cells[0].replace(",", "").isdigit():
+            if header is None and "images" in cells:
+                header = cells
                 continue
-            rows.append({"images": int(cells[0].replace(",", "")), "retrieval_s": float(cells[4]),
-                         "command_s": float(cells[5])})
+            if header is None or not cells[0].replace(",", "").isdigit():
+                continue
+            row = dict(zip(header, cells))
+            rows.append({"images": int(cells[0].replace(",", "")), "retrieval_s": float(row["command: retrieval s"]),
+                         "command_s": float(row["command: wall s"])})
     return sorted(rows, key=lambda r: r["images"])
 
 
