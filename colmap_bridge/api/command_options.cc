@@ -128,8 +128,8 @@ void AddRunOptions(OptionTable* table, MatcherCommandOptions* o) {
              "Write matches and two_view_geometries rows for pairs without a match, as COLMAP does (0: record "
              "them in table cashash_empty_pairs only, so that a rerun skips them)");
   table->Add({"database_commit_seconds"}, &o->database_commit_seconds,
-             "Seconds a write transaction takes chunks before it commits (0: one transaction per chunk); a kill "
-             "loses the chunks not yet committed, which a rerun matches again");
+             "Seconds a write transaction takes chunks before it commits, or until they hold 16 MiB of matches (0: "
+             "one transaction per chunk); a kill loses the chunks not yet committed, which a rerun matches again");
   table->Add({"database_synchronous"}, &o->database_synchronous,
              "SQLite's synchronous setting for writing: FULL (safe), NORMAL (a power loss or OS crash may undo "
              "the last commits; the file stays valid) or OFF (a power loss or OS crash may damage the database; "
