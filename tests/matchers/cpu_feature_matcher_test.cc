@@ -11,11 +11,13 @@
 #include "cashash/matchers/exact_matcher.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/base/parallel_for.h"
+#include "cascade_options.h"
 #include "synthetic_sift.h"
 
 namespace cashash {
 namespace {
 
+using testing_support::CascadeOptions;
 using testing_support::RandomSift;
 
 // num_images views of one scene: each image sees a random subset of `scene`
@@ -67,7 +69,7 @@ class CpuMatcherTypes : public ::testing::TestWithParam<MatcherType> {};
 
 TEST_P(CpuMatcherTypes, DeterministicAcrossThreadCounts) {
   const std::vector<FeatureDescriptors> images = MakeImages(5, 800, 1);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   const SiftMatchingOptions s;
   const std::vector<FeatureMatches> reference = RunMatcher(images, s, o, 1);
@@ -81,7 +83,7 @@ TEST_P(CpuMatcherTypes, DeterministicAcrossThreadCounts) {
 
 TEST_P(CpuMatcherTypes, SameAsTheDirectMatchers) {
   const std::vector<FeatureDescriptors> images = MakeImages(3, 500, 2);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   const SiftMatchingOptions s;
   const std::vector<FeatureMatches> results = RunMatcher(images, s, o, 2);
@@ -105,7 +107,7 @@ TEST_P(CpuMatcherTypes, SameAsTheDirectMatchers) {
 
 TEST_P(CpuMatcherTypes, TruncatesToMaxNumMatches) {
   const std::vector<FeatureDescriptors> images = MakeImages(2, 600, 3);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   SiftMatchingOptions s;
   s.max_num_matches = 150;
@@ -136,7 +138,7 @@ TEST_P(CpuMatcherTypes, EmptyAndSingleFeatureImages) {
     many.data.insert(many.data.end(), r.begin(), r.end());
   }
   many.data.insert(many.data.end(), one.data.begin(), one.data.end());  // copy at row 30
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), o, ComputeMeanDescriptor({&many}));
   matcher->AddImage(1, empty);
@@ -152,7 +154,7 @@ TEST_P(CpuMatcherTypes, EmptyAndSingleFeatureImages) {
 
 TEST_P(CpuMatcherTypes, ReplaceRemoveAndUnknownImages) {
   const std::vector<FeatureDescriptors> images = MakeImages(2, 300, 5);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), o,
                                          ComputeMeanDescriptor({&images[0], &images[1]}));
@@ -175,8 +177,8 @@ TEST(CpuFeatureMatcher, RejectsInvalidOptions) {
   const MeanDescriptor mean{};
   SiftMatchingOptions bad_sift;
   bad_sift.max_ratio = 0;
-  EXPECT_THROW(CreateCpuFeatureMatcher(bad_sift, CasHashOptions(), mean), std::invalid_argument);
-  CasHashOptions bad_cascade;
+  EXPECT_THROW(CreateCpuFeatureMatcher(bad_sift, CascadeOptions(), mean), std::invalid_argument);
+  CasHashOptions bad_cascade = CascadeOptions();
   bad_cascade.top_k = 0;
   EXPECT_THROW(CreateCpuFeatureMatcher(SiftMatchingOptions(), bad_cascade, mean), std::invalid_argument);
 }
