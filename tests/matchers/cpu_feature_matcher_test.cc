@@ -220,9 +220,9 @@ TEST(MatchingOptions, MatcherTypeNames) {
   EXPECT_EQ(MatcherTypeToString(MatcherType::kCascade), "cascade");
   EXPECT_EQ(MatcherTypeToString(MatcherType::kBruteForce), "bruteforce");
   EXPECT_EQ(MatcherTypeToString(MatcherType::kAuto), "auto");
-  // The library's default is the cascade; runs default to auto
-  // (CommandOptions.MatcherAndTablesDefaultToAutoAndExplicitValuesWin).
-  EXPECT_EQ(CasHashOptions().matcher, MatcherType::kCascade);
+  // One set of defaults: auto, chosen for the run, for the library as for
+  // runs (CommandOptions.CasHashOptionsKeepOneSetOfDefaults).
+  EXPECT_EQ(CasHashOptions().matcher, MatcherType::kAuto);
   MatcherType parsed = MatcherType::kCascade;
   EXPECT_FALSE(MatcherTypeFromString("exhaustive", &parsed));
   EXPECT_EQ(parsed, MatcherType::kCascade);
