@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "cashash/base/device_memory_error.h"
@@ -495,15 +496,30 @@ TEST(GpuCascadeTest, SixtyFourSignatureBitsOfTheTableRuleAgreeWithCpu) {
   EXPECT_EQ(a.common, a.gpu);
 }
 
-// --CasHash.matcher auto is decided from the run's data before a matcher is
-// built (matcher_choice.h): the GPU factory refuses it, before touching a
-// device, so that no run can match with a choice nobody made.
-TEST(GpuCascadeTest, AutoIsRefusedUnresolved) {
+// The values a run chooses (matcher auto, tau 0, rematch threshold -1) are
+// decided from the run's data before a matcher is built (ResolveRun): the
+// GPU factory refuses them, naming the option, before touching a device, so
+// that no run can match with a choice nobody made.
+TEST(GpuCascadeTest, ValuesChosenForTheRunAreRefusedUndecided) {
   DescriptorSource source(6);
   const std::vector<FeatureDescriptors> images{source.Image(300)};
-  CasHashOptions cas = CascadeOptions();
-  cas.matcher = MatcherType::kAuto;
-  EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanOf(images), 0), std::invalid_argument);
+  CasHashOptions automatic = CascadeOptions();
+  automatic.matcher = MatcherType::kAuto;
+  CasHashOptions tau = CascadeOptions();
+  tau.tau = kTauChosen;
+  CasHashOptions rematch = CascadeOptions();
+  rematch.exact_rematch_min_matches = kRematchMinMatchesChosen;
+  const std::pair<CasHashOptions, const char*> cases[] = {{automatic, "--CasHash.matcher auto"},
+                                                          {tau, "--CasHash.tau 0"},
+                                                          {rematch, "--CasHash.exact_rematch_min_matches -1"}};
+  for (const auto& [cas, option] : cases) {
+    try {
+      cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanOf(images), 0);
+      ADD_FAILURE() << "built a GPU matcher with " << option;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(option), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace

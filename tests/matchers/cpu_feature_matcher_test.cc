@@ -183,6 +183,38 @@ TEST(CpuFeatureMatcher, RejectsInvalidOptions) {
   EXPECT_THROW(CreateCpuFeatureMatcher(SiftMatchingOptions(), bad_cascade, mean), std::invalid_argument);
 }
 
+// The values a run chooses (matcher auto, tau 0, rematch threshold -1, the
+// defaults) are valid options, but a matcher built directly refuses them,
+// naming the option, rather than guess: ResolveRun decides them for a run.
+TEST(CpuFeatureMatcher, RefusesValuesChosenForTheRun) {
+  const MeanDescriptor mean{};
+  struct Case {
+    const char* option;
+    void (*leave_to_the_run)(CasHashOptions*);
+  };
+  const Case cases[] = {
+      {"--CasHash.matcher auto", [](CasHashOptions* o) { o->matcher = MatcherType::kAuto; }},
+      {"--CasHash.tau 0", [](CasHashOptions* o) { o->tau = kTauChosen; }},
+      {"--CasHash.exact_rematch_min_matches -1",
+       [](CasHashOptions* o) { o->exact_rematch_min_matches = kRematchMinMatchesChosen; }},
+  };
+  for (const Case& c : cases) {
+    CasHashOptions options = CascadeOptions();
+    c.leave_to_the_run(&options);
+    EXPECT_EQ(options.Check(), "") << c.option;
+    EXPECT_NE(options.CheckDecided().find(c.option), std::string::npos) << options.CheckDecided();
+    try {
+      CreateCpuFeatureMatcher(SiftMatchingOptions(), options, mean);
+      ADD_FAILURE() << "built a matcher with " << c.option;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(c.option), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("ResolveRun"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(CascadeOptions().CheckDecided(), "");
+  EXPECT_NE(CasHashOptions().CheckDecided(), "");
+}
+
 TEST(MatchingOptions, Check) {
   EXPECT_EQ(SiftMatchingOptions().Check(), "");
   EXPECT_EQ(CasHashOptions().Check(), "");

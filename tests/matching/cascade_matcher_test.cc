@@ -247,6 +247,24 @@ TEST(CascadeMatch, RecallOnPlantedNearDuplicates) {
   EXPECT_TRUE(std::is_sorted(cascade.begin(), cascade.end()));
 }
 
+// tau 0 is chosen for the run (ResolveRun): the cascade's functions refuse
+// it rather than keep only the candidates of equal remap codes.
+TEST(CascadeMatch, RefusesATauLeftToTheRun) {
+  FeatureDescriptors a, b;
+  MakePair(200, 100, 10, 7, &a, &b);
+  CasHashOptions o = CascadeOptions();
+  const Hashed h = HashPair(a, b, o);
+  o.tau = kTauChosen;
+  CascadeScratch scratch;
+  try {
+    CascadeMatchPair(h.a, h.b, SiftMatchingOptions(), o, &scratch);
+    ADD_FAILURE() << "matched with tau 0";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("--CasHash.tau 0"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(CascadeMatchOneWay(h.a, h.b, SiftMatchingOptions(), o, &scratch), std::invalid_argument);
+}
+
 TEST(CascadeMatch, CrossCheckKeepsMutualMatchesOnly) {
   FeatureDescriptors a, b;
   MakePair(500, 300, 25, 6, &a, &b);
