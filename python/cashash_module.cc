@@ -237,10 +237,10 @@ void BindOptions(py::module_& m) {
       .def_readwrite("max_distance", &SiftMatchingOptions::max_distance)
       .def_readwrite("cross_check", &SiftMatchingOptions::cross_check)
       .def_readwrite("max_num_matches", &SiftMatchingOptions::max_num_matches);
-  // The user-facing defaults, those of MatchingOptions().cashash (matcher
-  // auto, tables, tau and the rematch threshold chosen for the run).
+  // CasHashOptions' own defaults, the one user-facing set (matcher auto,
+  // tables, tau and the rematch threshold chosen for the run).
   py::class_<CasHashOptions>(m, "CasHashOptions")
-      .def(py::init([]() { return MatcherCommandOptions().cashash; }))
+      .def(py::init<>())
       .def_property(
           "matcher", [](const CasHashOptions& o) { return MatcherTypeToString(o.matcher); },
           [](CasHashOptions& o, const std::string& name) {

@@ -81,6 +81,7 @@ std::vector<std::vector<bool>> RepeatedViews(const std::vector<FeatureDescriptor
   cashash.tau = 40;
   cashash.top_k = 10;
   cashash.random_seed = 0;
+  cashash.exact_rematch_min_matches = 0;  // no rematch: the cascade's matches mark the views
   std::unique_ptr<FeatureMatcher> matcher = CreateCpuFeatureMatcher(sift, cashash, ComputeMeanDescriptor(pointers));
   std::vector<ImagePair> pairs;
   for (size_t i = 0; i < images.size(); ++i) {

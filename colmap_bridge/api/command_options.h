@@ -20,10 +20,6 @@ namespace colmap {
 // The runs' exact rematch threshold where it is not given
 // (RematchMinMatchesRule, run_resolution.h).
 constexpr int kDefaultRematchMinMatches = 12;
-// CasHashOptions::exact_rematch_min_matches of a run's options: not given,
-// chosen for the run (12, or kBucketScreeningRematchMinMatches with the
-// bucket screening tables).
-constexpr int kRematchMinMatchesChosen = -1;
 
 // The user's options of a run: the command line parses into it, Python's
 // MatchingOptions is it, and its defaults are the one set of user-facing
@@ -33,19 +29,13 @@ constexpr int kRematchMinMatchesChosen = -1;
 struct MatcherCommandOptions {
   std::string database_path;
   SiftMatchingOptions sift;
-  // --CasHash.matcher defaults to auto here: decided for the run from its
-  // data (MatcherRule, run_resolution.h): the cascade, whose pairs that may
-  // verify are matched again exactly (threshold chosen for the run; on the
-  // CPU only those in a window of cascade match counts). tau 0: chosen for the run (ChooseCascadeTau), 32
-  // while the rematch decides. (A CasHashOptions of its own, as the
-  // library's matcher factories take it, is the cascade alone.)
-  CasHashOptions cashash = [] {
-    CasHashOptions options;
-    options.matcher = MatcherType::kAuto;
-    options.exact_rematch_min_matches = kRematchMinMatchesChosen;
-    options.tau = 0;
-    return options;
-  }();
+  // CasHashOptions' own defaults: matcher auto, tables, tau and the rematch
+  // threshold chosen for the run (matching_options.h). MatcherRule decides
+  // auto from the run's data: the cascade, whose pairs that may verify are
+  // matched again exactly (threshold chosen for the run; on the CPU only
+  // those in a window of cascade match counts); tau 32 while the rematch
+  // decides (ChooseCascadeTau).
+  CasHashOptions cashash;
   TwoViewGeometryOptions two_view;
   // Ga-CasHash two-stage epipolar-guided matching (GuidedMatching.*; the
   // guided_matcher command sets enabled).

@@ -67,10 +67,10 @@ std::unique_ptr<MatchingBackend> CreateBackendForOptions(const MatcherCommandOpt
 std::unique_ptr<MatchingBackend> CreateMatcherForRun(const ResolvedRun& run, const MeanDescriptor& mean,
                                                      const std::function<void(const std::string&)>& warning,
                                                      RunGpuResources* gpu) {
-  // ResolveRun decides auto (MatcherRule); a ResolvedRun is built by it only.
-  if (run.options.cashash.matcher == MatcherType::kAuto) {
-    throw std::logic_error("CreateMatcherForRun: CasHash.matcher auto was not resolved (ResolveRun decides it)");
-  }
+  // ResolveRun decides every value chosen for the run (auto by MatcherRule,
+  // tau, the rematch threshold); a ResolvedRun is built by it only.
+  const std::string undecided = run.options.cashash.CheckDecided();
+  if (!undecided.empty()) throw std::logic_error("CreateMatcherForRun: not resolved: " + undecided);
   return CreateBackendForOptions(run.options, run.gpu_indices, run.gpu_memory_budget_bytes, mean, warning, gpu);
 }
 

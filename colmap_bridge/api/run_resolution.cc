@@ -144,7 +144,7 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
     std::string text =
         DescribeTableShape(options.cashash, cashash, features, facts.rows_per_image.size(), goal, backend);
     text += "; tau " + std::to_string(cashash.tau);
-    if (requested_tau == 0) {
+    if (requested_tau == kTauChosen) {
       text += cashash.tau == kCascadeTauForScreening ? " (chosen: the exact rematch decides the pairs that may verify)"
                                                      : " (chosen: the cascade's own matches are kept)";
     }

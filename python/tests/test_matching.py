@@ -146,6 +146,17 @@ def test_match_retrieval_keeps_one_set_of_defaults():
             assert parameter.default is None, f"match_retrieval's {name} has a default of its own"
 
 
+def test_cashash_options_keep_one_set_of_defaults():
+    # CasHashOptions() is the C++ struct's defaults, those of the runs'
+    # MatchingOptions().cashash: matcher auto, tau and the rematch chosen.
+    library, run = cashash.CasHashOptions(), cashash.MatchingOptions().cashash
+    names = [name for name in dir(library) if not name.startswith("_")]
+    assert "tau" in names and "exact_rematch_min_matches" in names
+    for name in names:
+        assert getattr(library, name) == getattr(run, name), name
+    assert (library.matcher, library.tau, library.exact_rematch_min_matches) == ("auto", 0, -1)
+
+
 def test_database_errors_carry_cli_messages(tmp_path, scene_database):
     with pytest.raises(RuntimeError, match="database file not found: "):
         cashash.match_exhaustive(tmp_path / "missing.db")

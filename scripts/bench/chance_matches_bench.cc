@@ -35,10 +35,12 @@
 #include "cashash/base/parallel_for.h"
 #include "cashash/geometry/two_view_geometry.h"
 #include "colmap_bridge/database.h"
+#include "../../tests/support/cascade_options.h"
 
 namespace {
 
 using namespace cashash;
+using cashash::testing_support::CascadeOptions;
 
 struct Setting {
   int tables = 8, bits = 7, tau = 43, top_k = 16, rematch = 0;
@@ -152,7 +154,7 @@ int main(int argc, char** argv) {
     for (const auto& d : descriptors) pointers.push_back(&d);
     const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
     for (const Setting& s : ParseSettings(settings_text)) {
-      CasHashOptions options;
+      CasHashOptions options = CascadeOptions();
       options.num_tables = s.tables;
       options.bits_per_table = s.bits;
       options.tau = s.tau;

@@ -28,10 +28,12 @@
 #include "cashash/matching/cascade_matcher.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
+#include "../../tests/support/cascade_options.h"
 
 namespace {
 
 using namespace cashash;
+using cashash::testing_support::CascadeOptions;
 using Clock = std::chrono::steady_clock;
 
 double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
@@ -43,7 +45,7 @@ struct Args {
   int repeats = 3;
   int cpu_pairs = 16;
   int bf_pairs = 128;
-  int tables = 0, bits = 0, top_k = 0, tau = -1;  // 0 / -1: the shipped defaults
+  int tables = 0, bits = 0, top_k = 0, tau = -1;  // 0 / -1: CascadeOptions (tests/support)
 };
 
 Args Parse(int argc, char** argv) {
@@ -191,7 +193,7 @@ int main(int argc, char** argv) {
     row.features = features;
     row.pairs = pairs.size();
     SiftMatchingOptions sift;
-    CasHashOptions cas;
+    CasHashOptions cas = CascadeOptions();
     if (args.tables > 0) cas.num_tables = args.tables;
     if (args.bits > 0) cas.bits_per_table = args.bits;
     if (args.top_k > 0) cas.top_k = args.top_k;

@@ -32,10 +32,12 @@
 #include "cashash/matchers/feature_matcher.h"
 #include "cashash/matching/table_shape.h"
 #include "cashash/base/parallel_for.h"
+#include "../../tests/support/cascade_options.h"
 
 namespace {
 
 using namespace cashash;
+using cashash::testing_support::CascadeOptions;
 
 double CpuSeconds() {
   timespec t{};
@@ -109,7 +111,7 @@ std::vector<Setting> ParseSettings(const std::string& text, size_t features) {
   while (std::getline(all, item, ';')) {
     Setting s{};
     if (item.rfind("auto", 0) == 0) {
-      const CasHashOptions defaults;
+      const CasHashOptions defaults = CascadeOptions();
       s.tau = defaults.tau;
       s.top_k = defaults.top_k;
       if (item != "auto" && std::sscanf(item.c_str(), "auto,%d,%d", &s.tau, &s.top_k) != 2) {
@@ -237,7 +239,7 @@ int main(int argc, char** argv) {
               "bucket entries | within tau | ranked | hash CPU ms/image | pairs per CPU s | speed-up |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Setting& s : ParseSettings(settings_text, median_features)) {
-    CasHashOptions options;
+    CasHashOptions options = CascadeOptions();
     options.num_tables = s.tables;
     options.bits_per_table = s.bits;
     options.tau = s.tau;

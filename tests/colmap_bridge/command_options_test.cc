@@ -146,6 +146,44 @@ TEST(CommandOptions, MatcherAndTablesDefaultToAutoAndExplicitValuesWin) {
   EXPECT_EQ(auto_named.cashash.matcher, MatcherType::kAuto);
 }
 
+// CasHashOptions has one set of defaults: the runs' options take the
+// struct's own, field by field, so that the library, the command line and
+// Python cannot drift apart. A field added to CasHashOptions belongs here.
+TEST(CommandOptions, CasHashOptionsKeepOneSetOfDefaults) {
+  const CasHashOptions library;
+  const CasHashOptions run = MatcherCommandOptions().cashash;
+  EXPECT_EQ(library.matcher, run.matcher);
+  EXPECT_EQ(library.num_tables, run.num_tables);
+  EXPECT_EQ(library.bits_per_table, run.bits_per_table);
+  EXPECT_EQ(library.tau, run.tau);
+  EXPECT_EQ(library.top_k, run.top_k);
+  EXPECT_EQ(library.random_seed, run.random_seed);
+  EXPECT_EQ(library.exact_rematch_min_matches, run.exact_rematch_min_matches);
+  EXPECT_EQ(library.exact_rematch_max_matches, run.exact_rematch_max_matches);
+  // They are the values chosen for the run.
+  EXPECT_EQ(library.matcher, MatcherType::kAuto);
+  EXPECT_EQ(library.tau, kTauChosen);
+  EXPECT_EQ(library.exact_rematch_min_matches, kRematchMinMatchesChosen);
+  EXPECT_EQ(library.Check(), "");
+}
+
+// ResolveRun decides every value chosen for the run, on either device and
+// for every matcher, so that the matcher factories accept what it gives them.
+TEST(CommandOptions, AResolvedRunLeavesNothingToChoose) {
+  MatcherCommandOptions brute_force;
+  brute_force.cashash.matcher = MatcherType::kBruteForce;
+  MatcherCommandOptions guided;
+  guided.guided.enabled = true;
+  MatcherCommandOptions no_rematch;
+  no_rematch.cashash.exact_rematch_min_matches = 0;
+  for (const MatcherCommandOptions& options : {MatcherCommandOptions(), brute_force, guided, no_rematch}) {
+    for (const size_t features : {size_t{500}, size_t{8192}, size_t{32768}}) {
+      EXPECT_EQ(Resolve(options, {features, features}).options.cashash.CheckDecided(), "") << features;
+      EXPECT_EQ(ResolveOnGpu(options, {features, features}).options.cashash.CheckDecided(), "") << features;
+    }
+  }
+}
+
 TEST(CommandOptions, TauIsChosenForScreeningOnlyWhileTheExactRematchDecides) {
   MatcherCommandOptions defaults;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);

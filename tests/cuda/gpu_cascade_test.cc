@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "cashash/base/device_memory_error.h"
@@ -22,9 +23,12 @@
 #include "cashash_cuda/matchers/gpu_feature_matcher.h"
 #include "cashash_cuda/utils/cuda_check.cuh"
 #include "cashash_cuda/utils/device_memory.cuh"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
+
+using testing_support::CascadeOptions;
 
 // Descriptor source: synthetic SIFT-like rows (sparse, L2 norm ~512), the
 // same on every machine for the same seed.
@@ -136,7 +140,7 @@ TEST(GpuCascadeTest, AgreesWithCpuCascade) {
   DescriptorSource source(1);
   std::vector<FeatureDescriptors> images{source.Image(4000)};
   for (int i = 1; i < 6; ++i) images.push_back(source.Related(images[i - 1], 3000 + 500 * i, 0.5));
-  const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), CasHashOptions());
+  const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), CascadeOptions());
   EXPECT_GT(a.cpu, 1000u);  // the planted duplicates are found
   EXPECT_GE(a.value(), 0.995);
 }
@@ -149,7 +153,7 @@ TEST(GpuCascadeTest, AgreesWithoutCrossCheckAndOtherParameters) {
   images.push_back(source.Related(images[1], 3500, 0.3));
   SiftMatchingOptions sift;
   sift.cross_check = false;
-  CasHashOptions cas;
+  CasHashOptions cas = CascadeOptions();
   cas.num_tables = 8;
   cas.bits_per_table = 7;
   cas.top_k = 32;
@@ -170,7 +174,7 @@ TEST(GpuCascadeTest, SkewedBucketsAreNotTruncated) {
   for (size_t i = 0; i < 3000; ++i) std::copy(repeated.begin(), repeated.end(), a.data.begin() + 2 * i * kDescriptorDim);
   for (size_t i = 0; i < 2000; ++i) std::copy(repeated.begin(), repeated.end(), b.data.begin() + 2 * i * kDescriptorDim);
   const std::vector<FeatureDescriptors> images{a, b};
-  const Agreement agreement = CompareWithCpu(images, {{0, 1}, {1, 0}}, SiftMatchingOptions(), CasHashOptions());
+  const Agreement agreement = CompareWithCpu(images, {{0, 1}, {1, 0}}, SiftMatchingOptions(), CascadeOptions());
   EXPECT_GT(agreement.cpu, 500u);
   EXPECT_GE(agreement.value(), 0.995);
 }
@@ -186,8 +190,8 @@ TEST(GpuCascadeTest, EmptySingleAndLargeImages) {
   source.Perturb(images[1].row(0), images[2].data.data() + 777 * kDescriptorDim, 2.f);
   const std::vector<ImagePair> pairs{{0, 2}, {2, 0}, {0, 1}, {1, 2}, {2, 1}, {2, 3}};
   const MeanDescriptor mean = MeanOf(images);
-  auto cpu = CreateCpuFeatureMatcher(sift, CasHashOptions(), mean);
-  auto gpu = cuda::CreateGpuFeatureMatcher(sift, CasHashOptions(), mean, 0);
+  auto cpu = CreateCpuFeatureMatcher(sift, CascadeOptions(), mean);
+  auto gpu = cuda::CreateGpuFeatureMatcher(sift, CascadeOptions(), mean, 0);
   const auto cpu_matches = AddAndMatch(cpu.get(), images, pairs);
   const auto gpu_matches = AddAndMatch(gpu.get(), images, pairs);
   EXPECT_TRUE(gpu_matches[0].empty());
@@ -241,7 +245,7 @@ TEST(GpuCascadeTest, MemoryBudgetSplitsBatchesOrFailsClearly) {
   const MeanDescriptor mean = MeanOf(images);
   // The budgets below are sized for 7 tables x 8 bits (the per-image bucket
   // tables grow with the number of tables), not for whatever the defaults are.
-  CasHashOptions options;
+  CasHashOptions options = CascadeOptions();
   options.num_tables = 7;
   options.bits_per_table = 8;
   std::vector<FeatureMatches> unlimited;
@@ -280,7 +284,7 @@ TEST(GpuCascadeTest, TiledAndPerQueryKernelsGiveIdenticalMatches) {
     for (const int top_k : {10, 20}) {
       SiftMatchingOptions sift;
       sift.cross_check = cross_check;
-      CasHashOptions cas;
+      CasHashOptions cas = CascadeOptions();
       cas.top_k = top_k;
       std::vector<FeatureMatches> direct, tiled;
       {
@@ -311,7 +315,7 @@ TEST(GpuCascadeTest, BigBucketsSharedOutGiveThePerQueryKernelsMatches) {
   const std::vector<ImagePair> pairs = AllPairs(images.size());
   const MeanDescriptor mean = MeanOf(images);
   SiftMatchingOptions sift;
-  CasHashOptions cas;
+  CasHashOptions cas = CascadeOptions();
   cas.num_tables = 6;
   cas.bits_per_table = 9;
   cas.tau = 32;
@@ -351,7 +355,7 @@ TEST(GpuCascadeTest, BruteForceAgreesWithCpuBruteForce) {
   std::vector<FeatureDescriptors> images{source.Image(2000)};
   images.push_back(source.Related(images[0], 2500, 0.5));
   images.push_back(FeatureDescriptors());
-  CasHashOptions cas;
+  CasHashOptions cas = CascadeOptions();
   cas.matcher = MatcherType::kBruteForce;
   const Agreement a = CompareWithCpu(images, {{0, 1}, {1, 0}, {0, 2}}, SiftMatchingOptions(), cas);
   EXPECT_GT(a.cpu, 500u);
@@ -377,9 +381,9 @@ TEST(GpuCascadeTest, ExactMatchesOfTheCascadeEqualBruteForce) {
   const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 0}, {1, 2}, {0, 2}, {0, 3}};
   const MeanDescriptor mean = MeanOf(images);
-  CasHashOptions brute_force;
+  CasHashOptions brute_force = CascadeOptions();
   brute_force.matcher = MatcherType::kBruteForce;
-  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), mean, 0);
   auto gpu_brute_force = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean, 0);
   auto cpu_brute_force = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute_force, mean);
   AddAndMatch(cascade.get(), images, {});
@@ -407,7 +411,7 @@ TEST(GpuCascadeTest, HeldImagesAreMatchedLaterFromTheBlocksTheyHold) {
   DescriptorSource source(11);
   const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 2}, {0, 2}, {0, 3}};
-  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), MeanOf(images), 0);
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), MeanOf(images), 0);
   AddAndMatch(cascade.get(), images, {});
   const std::vector<FeatureMatches> exact = cascade->MatchExact(pairs);
   std::unique_ptr<ExactMatcher> held = cascade->HoldForExact(pairs);
@@ -439,7 +443,7 @@ TEST(GpuCascadeTest, TheRematchStageFromHeldImagesEqualsTheRematchAtOnce) {
   DescriptorSource source(13);
   const std::vector<FeatureDescriptors> images = ChainOfThreeAndAnEmptyImage(&source);
   const std::vector<ImagePair> pairs = {{0, 1}, {1, 2}, {0, 2}, {0, 3}};
-  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), MeanOf(images), 0);
+  auto cascade = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), MeanOf(images), 0);
   ExactRematchPolicy policy;
   policy.min_matches = 12;
   policy.where = RematchPlace::kMatchingThread;
@@ -464,10 +468,10 @@ TEST(GpuCascadeTest, TheRematchStageFromHeldImagesEqualsTheRematchAtOnce) {
 
 TEST(GpuCascadeTest, UnsupportedOptionsAreRejected) {
   SKIP_WITHOUT_CUDA_DEVICE();
-  CasHashOptions cas;
+  CasHashOptions cas = CascadeOptions();
   cas.top_k = 33;
   EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);
-  cas = CasHashOptions();
+  cas = CascadeOptions();
   cas.num_tables = 10;
   cas.bits_per_table = 8;
   EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanDescriptor{}, 0), std::invalid_argument);
@@ -483,7 +487,7 @@ TEST(GpuCascadeTest, SixtyFourSignatureBitsOfTheTableRuleAgreeWithCpu) {
   std::vector<FeatureDescriptors> images{source.Image(16384)};
   images.push_back(source.Related(images[0], 16384, 0.5));
   images.push_back(source.Related(images[1], 16384, 0.5));
-  CasHashOptions cas;
+  CasHashOptions cas = CascadeOptions();
   cas.num_tables = 8;
   cas.bits_per_table = 8;
   const Agreement a = CompareWithCpu(images, AllPairs(images.size()), SiftMatchingOptions(), cas);
@@ -492,15 +496,30 @@ TEST(GpuCascadeTest, SixtyFourSignatureBitsOfTheTableRuleAgreeWithCpu) {
   EXPECT_EQ(a.common, a.gpu);
 }
 
-// --CasHash.matcher auto is decided from the run's data before a matcher is
-// built (matcher_choice.h): the GPU factory refuses it, before touching a
-// device, so that no run can match with a choice nobody made.
-TEST(GpuCascadeTest, AutoIsRefusedUnresolved) {
+// The values a run chooses (matcher auto, tau 0, rematch threshold -1) are
+// decided from the run's data before a matcher is built (ResolveRun): the
+// GPU factory refuses them, naming the option, before touching a device, so
+// that no run can match with a choice nobody made.
+TEST(GpuCascadeTest, ValuesChosenForTheRunAreRefusedUndecided) {
   DescriptorSource source(6);
   const std::vector<FeatureDescriptors> images{source.Image(300)};
-  CasHashOptions cas;
-  cas.matcher = MatcherType::kAuto;
-  EXPECT_THROW(cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanOf(images), 0), std::invalid_argument);
+  CasHashOptions automatic = CascadeOptions();
+  automatic.matcher = MatcherType::kAuto;
+  CasHashOptions tau = CascadeOptions();
+  tau.tau = kTauChosen;
+  CasHashOptions rematch = CascadeOptions();
+  rematch.exact_rematch_min_matches = kRematchMinMatchesChosen;
+  const std::pair<CasHashOptions, const char*> cases[] = {{automatic, "--CasHash.matcher auto"},
+                                                          {tau, "--CasHash.tau 0"},
+                                                          {rematch, "--CasHash.exact_rematch_min_matches -1"}};
+  for (const auto& [cas, option] : cases) {
+    try {
+      cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cas, MeanOf(images), 0);
+      ADD_FAILURE() << "built a GPU matcher with " << option;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(option), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace

@@ -16,9 +16,12 @@
 #include "gpu_test_support.h"
 #include "cashash_cuda/utils/device_memory.cuh"
 #include "cashash_cuda/utils/gpu_resources.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
+
+using testing_support::CascadeOptions;
 
 TEST(GpuResources, BlocksAreDistinctAlignedAndReusedByClass) {
   SKIP_WITHOUT_CUDA_DEVICE();
@@ -127,7 +130,7 @@ TEST_P(GpuImages, ImagesAddedAgainAfterRemovalMatchAsBefore) {
   for (image_t i = 0; i < 6; ++i)
     for (image_t j = i + 1; j < 6; ++j) pairs.emplace_back(i, j);
 
-  CasHashOptions cashash;
+  CasHashOptions cashash = CascadeOptions();
   cashash.matcher = GetParam();
   auto matcher = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), cashash, mean, 0);
   for (image_t i = 0; i < 6; ++i) matcher->AddImage(i, images[i]);

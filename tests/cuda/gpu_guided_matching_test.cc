@@ -25,10 +25,12 @@
 #include "cashash_cuda/matching/guided_matching.h"
 #include "generated_street_pairs.h"
 #include "synthetic_guided.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
 
+using testing_support::CascadeOptions;
 using testing_support::GuidedScene;
 using testing_support::MakeGuidedScene;
 using testing_support::MakeRepeatedStructureScene;
@@ -82,7 +84,7 @@ void ExpectSameGuidedMatches(const std::vector<const ImageFeatures*>& images, co
   for (const ImageFeatures* f : images) descriptors.push_back(&f->descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
   const SiftMatchingOptions sift;
-  const CasHashOptions cashash;
+  const CasHashOptions cashash = CascadeOptions();
   auto cpu = CreateCpuFeatureMatcher(sift, cashash, mean);
   cuda::GpuMatcherConfig config;
   config.cascade_kernel = kernel != nullptr && std::string(kernel) == "direct" ? cuda::GpuCascadeKernel::kPerQuery
@@ -151,7 +153,7 @@ TEST(GpuGuidedMatching, UnboundedBandEqualsUnguidedMatching) {
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures& f : s.images) descriptors.push_back(&f.descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
-  auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean, 0);
+  auto gpu = cuda::CreateGpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), mean, 0);
   for (const ImageFeatures& f : s.images) gpu->AddImage(WithKeypoints(f));
   EXPECT_EQ(gpu->Match(pairs.pairs, pairs.Guides(1e9)), gpu->Match(pairs.pairs));
   // Too few positions for an image is refused, as is none.
@@ -179,7 +181,7 @@ struct GpuGuidedRig {
     const MeanDescriptor mean =
         ComputeMeanDescriptor({&source.images[0].descriptors, &source.images[1].descriptors});
     const SiftMatchingOptions sift;
-    const CasHashOptions cashash;
+    const CasHashOptions cashash = CascadeOptions();
     matcher = std::make_unique<GuidedFeatureMatcher>(
         cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0), cuda::CreateGpuFeatureMatcher(sift, cashash, mean, 0),
         cuda::CreateGpuFundamentalEstimator(TwoViewGeometryOptions(), 0), options, 32768, 0, -1);
@@ -238,7 +240,7 @@ TEST(GpuGuidedMatching, SameMatchesAsTheCpuOnAGeneratedStreet) {
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures& f : images) descriptors.push_back(&f.descriptors);
   const MeanDescriptor mean = ComputeMeanDescriptor(descriptors);
-  auto cpu = CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean);
+  auto cpu = CreateCpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), mean);
   for (size_t k = 0; k < images.size(); ++k) cpu->AddImage(images[k].image_id, images[k].descriptors);
   // F of every pair from the CPU's exhaustive matches.
   GuidedPairs pairs;

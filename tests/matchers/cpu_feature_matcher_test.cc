@@ -11,11 +11,13 @@
 #include "cashash/matchers/exact_matcher.h"
 #include "cashash/matching/matching_options.h"
 #include "cashash/base/parallel_for.h"
+#include "cascade_options.h"
 #include "synthetic_sift.h"
 
 namespace cashash {
 namespace {
 
+using testing_support::CascadeOptions;
 using testing_support::RandomSift;
 
 // num_images views of one scene: each image sees a random subset of `scene`
@@ -67,7 +69,7 @@ class CpuMatcherTypes : public ::testing::TestWithParam<MatcherType> {};
 
 TEST_P(CpuMatcherTypes, DeterministicAcrossThreadCounts) {
   const std::vector<FeatureDescriptors> images = MakeImages(5, 800, 1);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   const SiftMatchingOptions s;
   const std::vector<FeatureMatches> reference = RunMatcher(images, s, o, 1);
@@ -81,7 +83,7 @@ TEST_P(CpuMatcherTypes, DeterministicAcrossThreadCounts) {
 
 TEST_P(CpuMatcherTypes, SameAsTheDirectMatchers) {
   const std::vector<FeatureDescriptors> images = MakeImages(3, 500, 2);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   const SiftMatchingOptions s;
   const std::vector<FeatureMatches> results = RunMatcher(images, s, o, 2);
@@ -105,7 +107,7 @@ TEST_P(CpuMatcherTypes, SameAsTheDirectMatchers) {
 
 TEST_P(CpuMatcherTypes, TruncatesToMaxNumMatches) {
   const std::vector<FeatureDescriptors> images = MakeImages(2, 600, 3);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   SiftMatchingOptions s;
   s.max_num_matches = 150;
@@ -136,7 +138,7 @@ TEST_P(CpuMatcherTypes, EmptyAndSingleFeatureImages) {
     many.data.insert(many.data.end(), r.begin(), r.end());
   }
   many.data.insert(many.data.end(), one.data.begin(), one.data.end());  // copy at row 30
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), o, ComputeMeanDescriptor({&many}));
   matcher->AddImage(1, empty);
@@ -152,7 +154,7 @@ TEST_P(CpuMatcherTypes, EmptyAndSingleFeatureImages) {
 
 TEST_P(CpuMatcherTypes, ReplaceRemoveAndUnknownImages) {
   const std::vector<FeatureDescriptors> images = MakeImages(2, 300, 5);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.matcher = GetParam();
   auto matcher = CreateCpuFeatureMatcher(SiftMatchingOptions(), o,
                                          ComputeMeanDescriptor({&images[0], &images[1]}));
@@ -175,10 +177,42 @@ TEST(CpuFeatureMatcher, RejectsInvalidOptions) {
   const MeanDescriptor mean{};
   SiftMatchingOptions bad_sift;
   bad_sift.max_ratio = 0;
-  EXPECT_THROW(CreateCpuFeatureMatcher(bad_sift, CasHashOptions(), mean), std::invalid_argument);
-  CasHashOptions bad_cascade;
+  EXPECT_THROW(CreateCpuFeatureMatcher(bad_sift, CascadeOptions(), mean), std::invalid_argument);
+  CasHashOptions bad_cascade = CascadeOptions();
   bad_cascade.top_k = 0;
   EXPECT_THROW(CreateCpuFeatureMatcher(SiftMatchingOptions(), bad_cascade, mean), std::invalid_argument);
+}
+
+// The values a run chooses (matcher auto, tau 0, rematch threshold -1, the
+// defaults) are valid options, but a matcher built directly refuses them,
+// naming the option, rather than guess: ResolveRun decides them for a run.
+TEST(CpuFeatureMatcher, RefusesValuesChosenForTheRun) {
+  const MeanDescriptor mean{};
+  struct Case {
+    const char* option;
+    void (*leave_to_the_run)(CasHashOptions*);
+  };
+  const Case cases[] = {
+      {"--CasHash.matcher auto", [](CasHashOptions* o) { o->matcher = MatcherType::kAuto; }},
+      {"--CasHash.tau 0", [](CasHashOptions* o) { o->tau = kTauChosen; }},
+      {"--CasHash.exact_rematch_min_matches -1",
+       [](CasHashOptions* o) { o->exact_rematch_min_matches = kRematchMinMatchesChosen; }},
+  };
+  for (const Case& c : cases) {
+    CasHashOptions options = CascadeOptions();
+    c.leave_to_the_run(&options);
+    EXPECT_EQ(options.Check(), "") << c.option;
+    EXPECT_NE(options.CheckDecided().find(c.option), std::string::npos) << options.CheckDecided();
+    try {
+      CreateCpuFeatureMatcher(SiftMatchingOptions(), options, mean);
+      ADD_FAILURE() << "built a matcher with " << c.option;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(c.option), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("ResolveRun"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(CascadeOptions().CheckDecided(), "");
+  EXPECT_NE(CasHashOptions().CheckDecided(), "");
 }
 
 TEST(MatchingOptions, Check) {
@@ -218,9 +252,9 @@ TEST(MatchingOptions, MatcherTypeNames) {
   EXPECT_EQ(MatcherTypeToString(MatcherType::kCascade), "cascade");
   EXPECT_EQ(MatcherTypeToString(MatcherType::kBruteForce), "bruteforce");
   EXPECT_EQ(MatcherTypeToString(MatcherType::kAuto), "auto");
-  // The library's default is the cascade; runs default to auto
-  // (CommandOptions.MatcherAndTablesDefaultToAutoAndExplicitValuesWin).
-  EXPECT_EQ(CasHashOptions().matcher, MatcherType::kCascade);
+  // One set of defaults: auto, chosen for the run, for the library as for
+  // runs (CommandOptions.CasHashOptionsKeepOneSetOfDefaults).
+  EXPECT_EQ(CasHashOptions().matcher, MatcherType::kAuto);
   MatcherType parsed = MatcherType::kCascade;
   EXPECT_FALSE(MatcherTypeFromString("exhaustive", &parsed));
   EXPECT_EQ(parsed, MatcherType::kCascade);

@@ -8,9 +8,12 @@
 
 #include "cashash/base/device_memory_error.h"
 #include "synthetic_sift.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
+
+using testing_support::CascadeOptions;
 
 // Stands in for the GPU backend: wraps a CPU matcher and throws the given
 // error at the n-th call (AddImage, Match and MatchExact counted together).
@@ -91,7 +94,7 @@ std::vector<FeatureMatches> AddAndMatch(FeatureMatcher* matcher, const Scene& sc
 }
 
 std::unique_ptr<MatchingBackend> Cpu(const Scene& scene) {
-  return CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), scene.mean);
+  return CreateCpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), scene.mean);
 }
 
 TEST(FallbackFeatureMatcher, DeviceMemoryErrorsMoveTheRunToTheFallback) {

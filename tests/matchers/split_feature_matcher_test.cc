@@ -13,9 +13,12 @@
 #include <gtest/gtest.h>
 
 #include "synthetic_sift.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
+
+using testing_support::CascadeOptions;
 
 struct Scene {
   std::vector<FeatureDescriptors> images;
@@ -90,7 +93,7 @@ class RecordingMatcher : public MatchingBackend {
 };
 
 std::unique_ptr<MatchingBackend> Cpu(const Scene& scene) {
-  return CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), scene.mean);
+  return CreateCpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), scene.mean);
 }
 
 TEST(SplitFeatureMatcher, SlicesCoverEveryItemOnceWithSizesWithinOne) {

@@ -12,10 +12,12 @@
 #include "cashash/matching/descriptor_distance.h"
 #include "cashash/matchers/feature_matcher.h"
 #include "synthetic_sift.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
 
+using testing_support::CascadeOptions;
 using testing_support::RandomSift;
 
 // a: n random features; b: perturbed copies of a's first n_copies features
@@ -90,7 +92,7 @@ void ExpectValidCsr(const HashedFeatures& hashed, const BucketTables& tables) {
 TEST(BucketTables, EveryFeatureExactlyOncePerTable) {
   FeatureDescriptors a, b;
   MakePair(700, 300, 10, 1, &a, &b);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.num_tables = 5;
   o.bits_per_table = 6;
   const Hashed h = HashPair(a, b, o);
@@ -108,7 +110,7 @@ TEST(BucketTables, SkewedBucketsHoldEverything) {
     const std::vector<uint8_t> row = i % 10 == 0 ? RandomSift(&rng) : same;
     d.data.insert(d.data.end(), row.begin(), row.end());
   }
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.num_tables = 4;
   o.bits_per_table = 10;
   const CascadeProjections p = GenerateCascadeProjections(o);
@@ -175,7 +177,7 @@ TEST(CascadeMatch, OneWayFollowsTheDefinition) {
   MakePair(400, 250, 15, 3, &a, &b);
   for (const int top_k : {1, 2, 5, 10}) {
     for (const int tau : {20, 48, 128}) {
-      CasHashOptions o;
+      CasHashOptions o = CascadeOptions();
       o.num_tables = 4;
       o.bits_per_table = 5;
       o.top_k = top_k;
@@ -203,7 +205,7 @@ TEST(CascadeMatch, EveryCandidateRankedEqualsBruteForce) {
   // exactly the brute-force matches, under every toggle.
   FeatureDescriptors a, b;
   MakePair(300, 200, 20, 4, &a, &b);
-  CasHashOptions o;
+  CasHashOptions o = CascadeOptions();
   o.num_tables = 64;
   o.bits_per_table = 1;
   o.tau = 128;
@@ -229,7 +231,7 @@ TEST(CascadeMatch, EveryCandidateRankedEqualsBruteForce) {
 TEST(CascadeMatch, RecallOnPlantedNearDuplicates) {
   FeatureDescriptors a, b;
   MakePair(3000, 2000, 12, 5, &a, &b);
-  const CasHashOptions o;  // the defaults
+  const CasHashOptions o = CascadeOptions();
   const Hashed h = HashPair(a, b, o);
   const SiftMatchingOptions s;
   CascadeScratch scratch;
@@ -245,10 +247,28 @@ TEST(CascadeMatch, RecallOnPlantedNearDuplicates) {
   EXPECT_TRUE(std::is_sorted(cascade.begin(), cascade.end()));
 }
 
+// tau 0 is chosen for the run (ResolveRun): the cascade's functions refuse
+// it rather than keep only the candidates of equal remap codes.
+TEST(CascadeMatch, RefusesATauLeftToTheRun) {
+  FeatureDescriptors a, b;
+  MakePair(200, 100, 10, 7, &a, &b);
+  CasHashOptions o = CascadeOptions();
+  const Hashed h = HashPair(a, b, o);
+  o.tau = kTauChosen;
+  CascadeScratch scratch;
+  try {
+    CascadeMatchPair(h.a, h.b, SiftMatchingOptions(), o, &scratch);
+    ADD_FAILURE() << "matched with tau 0";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("--CasHash.tau 0"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(CascadeMatchOneWay(h.a, h.b, SiftMatchingOptions(), o, &scratch), std::invalid_argument);
+}
+
 TEST(CascadeMatch, CrossCheckKeepsMutualMatchesOnly) {
   FeatureDescriptors a, b;
   MakePair(500, 300, 25, 6, &a, &b);
-  const CasHashOptions o;
+  const CasHashOptions o = CascadeOptions();
   const Hashed h = HashPair(a, b, o);
   SiftMatchingOptions s;
   s.cross_check = false;
@@ -276,7 +296,7 @@ TEST(CascadeMatch, EmptyAndSingleFeatureImages) {
     many.data.insert(many.data.end(), r.begin(), r.end());
   }
   many.data.insert(many.data.end(), one.data.begin(), one.data.end());  // copy at row 20
-  const CasHashOptions o;
+  const CasHashOptions o = CascadeOptions();
   const CascadeProjections p = GenerateCascadeProjections(o);
   const MeanDescriptor mean = ComputeMeanDescriptor({&many});
   const CascadeImage e = BuildCascadeImage(empty, 0, p, mean);

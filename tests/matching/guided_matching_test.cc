@@ -13,10 +13,12 @@
 #include "cashash/matching/epipolar_band.h"
 #include "cashash/matchers/exact_matcher.h"
 #include "synthetic_guided.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
 
+using testing_support::CascadeOptions;
 using testing_support::GuidedScene;
 using testing_support::MakeGuidedScene;
 using testing_support::MakeRepeatedStructureScene;
@@ -162,7 +164,7 @@ HashedScene Hash(const GuidedScene& scene, const CasHashOptions& options) {
 
 TEST(GuidedCascade, AnUnboundedBandChangesNothing) {
   const GuidedScene scene = MakeGuidedScene(900, 11);
-  const CasHashOptions options;
+  const CasHashOptions options = CascadeOptions();
   const SiftMatchingOptions sift;
   const HashedScene h = Hash(scene, options);
   CascadeScratch scratch;
@@ -182,7 +184,7 @@ TEST(GuidedCascade, AnUnboundedBandChangesNothing) {
 
 TEST(GuidedCascade, TheBandRemovesDecoysAndRecoversTheirFeatures) {
   const GuidedScene scene = MakeGuidedScene(900, 12);
-  const CasHashOptions options;
+  const CasHashOptions options = CascadeOptions();
   SiftMatchingOptions sift;
   const HashedScene h = Hash(scene, options);
   CascadeScratch scratch;
@@ -225,7 +227,7 @@ TEST(GuidedCascade, TheBandRemovesDecoysAndRecoversTheirFeatures) {
 
 TEST(GuidedCascade, RejectsMissingGuidance) {
   const GuidedScene scene = MakeGuidedScene(50, 13);
-  const CasHashOptions options;
+  const CasHashOptions options = CascadeOptions();
   const HashedScene h = Hash(scene, options);
   CascadeScratch scratch;
   EpipolarGuidance guidance;
@@ -237,7 +239,7 @@ TEST(GuidedCascade, RejectsMissingGuidance) {
 
 TEST(GuidedCascade, CpuMatcherMatchesPairsGuided) {
   const GuidedScene scene = MakeGuidedScene(600, 14);
-  const CasHashOptions options;
+  const CasHashOptions options = CascadeOptions();
   const SiftMatchingOptions sift;
   const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
   auto matcher = CreateCpuFeatureMatcher(sift, options, mean);
@@ -311,7 +313,7 @@ std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options, const G
   rig->memory.Put(3, MakeUnrelatedImage(1500, 22));
   const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
   const SiftMatchingOptions sift;
-  const CasHashOptions cashash;
+  const CasHashOptions cashash = CascadeOptions();
   rig->matcher = std::make_unique<GuidedFeatureMatcher>(
       CreateCpuFeatureMatcher(sift, cashash, mean), CreateCpuFeatureMatcher(sift, cashash, mean),
       CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 2), options, 32768, 0, 2);
@@ -325,7 +327,7 @@ std::unique_ptr<GuidedRig> MakeRig(const GuidedMatchingOptions& options) {
 
 // The exact (brute-force) matches of the scene's pair.
 FeatureMatches ExactMatches(const GuidedScene& scene) {
-  CasHashOptions brute;
+  CasHashOptions brute = CascadeOptions();
   brute.matcher = MatcherType::kBruteForce;
   const MeanDescriptor mean = ComputeMeanDescriptor({&scene.image1.descriptors, &scene.image2.descriptors});
   auto exact = CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean);
@@ -492,19 +494,19 @@ TEST(GuidedFeatureMatcher, NeedsKeypointsAndTheRightBackend) {
   EXPECT_THROW(rig->matcher->AddImage(4, MakeUnrelatedImage(10, 1).descriptors), std::logic_error);
   EXPECT_THROW(rig->matcher->Match({{1, 4}}), std::out_of_range);
   EXPECT_THROW(rig->matcher->Match({{1, 2}}, {EpipolarGuide{}}), std::logic_error) << "it makes its own guides";
-  CasHashOptions brute;
+  CasHashOptions brute = CascadeOptions();
   brute.matcher = MatcherType::kBruteForce;
   const MeanDescriptor mean{};
   // Brute force matches exactly, but cannot search within the band.
   GuidedMatchingOptions paper;
   paper.restrict_search_to_band = true;
   EXPECT_THROW(GuidedFeatureMatcher(CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean),
-                                    CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean),
+                                    CreateCpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), mean),
                                     CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1), paper, 32768, 0,
                                     1),
                std::invalid_argument);
   EXPECT_NO_THROW(GuidedFeatureMatcher(CreateCpuFeatureMatcher(SiftMatchingOptions(), brute, mean),
-                                       CreateCpuFeatureMatcher(SiftMatchingOptions(), CasHashOptions(), mean),
+                                       CreateCpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), mean),
                                        CreateCpuFundamentalEstimator(TwoViewGeometryOptions(), 1),
                                        GuidedMatchingOptions(), 32768, 0, 1));
 }

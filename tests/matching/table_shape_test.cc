@@ -13,6 +13,7 @@
 
 #include "cashash/matchers/exact_matcher.h"
 #include "synthetic_sift.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
@@ -235,8 +236,7 @@ TEST(TableShape, MatcherFromOptionsAtZeroEqualsEightBySeven) {
     b.data.insert(b.data.end(), noisy.begin(), noisy.end());
   }
   const MeanDescriptor mean = ComputeMeanDescriptor({&a, &b});
-  CasHashOptions automatic;
-  automatic.matcher = MatcherType::kCascade;
+  const CasHashOptions automatic = testing_support::CascadeOptions();
   CasHashOptions explicit_shape = automatic;
   explicit_shape.num_tables = 8;
   explicit_shape.bits_per_table = 7;

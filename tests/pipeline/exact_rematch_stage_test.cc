@@ -16,9 +16,12 @@
 
 #include "cashash/base/device_memory_error.h"
 #include "synthetic_sift.h"
+#include "cascade_options.h"
 
 namespace cashash {
 namespace {
+
+using testing_support::CascadeOptions;
 
 // Answers pair (a, b) with a + b cascade matches whose idx2 is 1, or
 // exactly with a + b + 1 matches whose idx2 is 2, and records what it is
@@ -182,7 +185,7 @@ TEST(ExactRematchStage, RematchedPairsEqualBruteForceOnTheCpu) {
   const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
   SiftMatchingOptions sift;
   sift.num_threads = 1;
-  CasHashOptions cascade_options, brute_options;
+  CasHashOptions cascade_options = CascadeOptions(), brute_options = CascadeOptions();
   brute_options.matcher = MatcherType::kBruteForce;
   auto cascade = CreateCpuFeatureMatcher(sift, cascade_options, mean);
   auto brute_ref = CreateCpuFeatureMatcher(sift, brute_options, mean);
@@ -337,7 +340,7 @@ TEST(ExactRematchStage, HeldOnOtherThreadsEqualsTheRematchAtOnce) {
   const MeanDescriptor mean = ComputeMeanDescriptor(pointers);
   SiftMatchingOptions sift;
   sift.num_threads = 1;
-  const CasHashOptions cascade_options;
+  const CasHashOptions cascade_options = CascadeOptions();
   auto deferred_backend = CreateCpuFeatureMatcher(sift, cascade_options, mean);
   auto at_once_backend = CreateCpuFeatureMatcher(sift, cascade_options, mean);
   ExactRematchStage deferred(Policy(15, RematchPlace::kVerificationThread), deferred_backend.get());

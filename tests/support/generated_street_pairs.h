@@ -16,6 +16,7 @@
 #include "cashash/matching/mean_descriptor.h"
 #include "cashash/pipeline/verification_pairs_file.h"
 #include "colmap_bridge/database_pipeline_io.h"
+#include "cascade_options.h"
 #include "generated_database_support.h"
 #include "synthetic/database_generator.h"
 
@@ -50,15 +51,13 @@ inline GeneratedStreet GenerateStreet(const ScratchDir& dir, int num_images, int
 }
 
 // Every pair of the street with at least `min_matches` raw matches of the
-// CPU cascade (default matching options), in the layout of a verification
+// CPU cascade (default SIFT options, CascadeOptions), in the layout of a verification
 // pairs file: match k pairs point k of each image.
 inline std::vector<StoredVerificationPair> MatchedStreetPairs(const GeneratedStreet& street, size_t min_matches) {
   std::vector<const FeatureDescriptors*> descriptors;
   for (const ImageFeatures& image : street.images) descriptors.push_back(&image.descriptors);
-  CasHashOptions cascade;
-  cascade.matcher = MatcherType::kCascade;
   std::unique_ptr<FeatureMatcher> matcher =
-      CreateCpuFeatureMatcher(SiftMatchingOptions(), cascade, ComputeMeanDescriptor(descriptors));
+      CreateCpuFeatureMatcher(SiftMatchingOptions(), CascadeOptions(), ComputeMeanDescriptor(descriptors));
   std::vector<ImagePair> pairs;
   for (size_t i = 0; i < street.images.size(); ++i) {
     matcher->AddImage(street.images[i].image_id, street.images[i].descriptors);

@@ -48,6 +48,7 @@ std::string CheckGpuCascadeOptions(const CasHashOptions& options) {
 int CheckedDevice(const SiftMatchingOptions& sift_options, const CasHashOptions& options, int device) {
   std::string error = sift_options.Check();
   if (error.empty()) error = options.Check();
+  if (error.empty()) error = options.CheckDecided();
   if (error.empty()) error = CheckGpuCascadeOptions(options);
   if (!error.empty()) throw std::invalid_argument(error);
   std::string reason;

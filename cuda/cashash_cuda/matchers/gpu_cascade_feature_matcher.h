@@ -10,7 +10,8 @@
 namespace cashash {
 namespace cuda {
 
-// Throws std::invalid_argument for options the GPU path does not support and
+// Throws std::invalid_argument for options the GPU path does not support or
+// with a value still chosen for the run (CasHashOptions::CheckDecided), and
 // std::runtime_error when the device cannot be used.
 std::unique_ptr<MatchingBackend> CreateGpuCascadeMatcher(const SiftMatchingOptions& sift_options,
                                                          const CasHashOptions& cashash_options,

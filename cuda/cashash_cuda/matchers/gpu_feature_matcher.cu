@@ -247,11 +247,10 @@ bool CudaDeviceUsable(int gpu_index, std::string* reason) {
 std::unique_ptr<MatchingBackend> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                          const CasHashOptions& cashash_options,
                                                          const MeanDescriptor& mean, const GpuMatcherConfig& config) {
-  // Auto is decided from the run's data before any matcher is built
-  // (ChooseAutoMatcher, cashash/matching/matcher_choice.h).
-  if (cashash_options.matcher == MatcherType::kAuto) {
-    throw std::invalid_argument("CasHash.matcher auto must be resolved (ChooseAutoMatcher) before a matcher is built");
-  }
+  // Auto, tau and the rematch threshold chosen for the run are decided by
+  // the run before any matcher is built (CasHashOptions::CheckDecided).
+  const std::string undecided = cashash_options.CheckDecided();
+  if (!undecided.empty()) throw std::invalid_argument(undecided);
   if (cashash_options.matcher == MatcherType::kBruteForce) {
     return std::make_unique<GpuBruteForceMatcher>(sift_options, config);
   }

@@ -19,8 +19,9 @@ int NumCudaDevices();
 bool CudaDeviceUsable(int gpu_index, std::string* reason);
 
 // Throws std::runtime_error when the device cannot be used, and
-// std::invalid_argument for MatcherType::kAuto (decided first:
-// ChooseAutoMatcher, cashash/matching/matcher_choice.h).
+// std::invalid_argument for options with a value still chosen for the run
+// (matcher auto, tau 0, rematch threshold -1: CasHashOptions::CheckDecided;
+// a run decides them first, ResolveRun).
 std::unique_ptr<MatchingBackend> CreateGpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                          const CasHashOptions& cashash_options,
                                                          const MeanDescriptor& mean, const GpuMatcherConfig& config);

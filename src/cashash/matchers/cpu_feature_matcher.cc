@@ -192,11 +192,10 @@ class CpuFeatureMatcher : public MatchingBackend {
 std::unique_ptr<MatchingBackend> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                          const CasHashOptions& cashash_options,
                                                          const MeanDescriptor& mean) {
-  // Auto is decided from the run's data before any matcher is built
-  // (ChooseAutoMatcher, matcher_choice.h).
-  if (cashash_options.matcher == MatcherType::kAuto) {
-    throw std::invalid_argument("CasHash.matcher auto must be resolved (ChooseAutoMatcher) before a matcher is built");
-  }
+  // Auto, tau and the rematch threshold chosen for the run are decided by
+  // the run before any matcher is built (CasHashOptions::CheckDecided).
+  const std::string undecided = cashash_options.CheckDecided();
+  if (!undecided.empty()) throw std::invalid_argument(undecided);
   return std::make_unique<CpuFeatureMatcher>(sift_options, cashash_options, mean);
 }
 

@@ -43,9 +43,10 @@ class MatchingBackend : public FeatureMatcher, public ExactMatcher {
   using FeatureMatcher::FeatureMatcher;
 };
 
-// CPU backends (multi-threaded over pairs). MatcherType::kAuto is refused
-// (std::invalid_argument): it is decided first (ChooseAutoMatcher,
-// matcher_choice.h), as are the GPU backends'.
+// CPU backends (multi-threaded over pairs). Options with a value still
+// chosen for the run (matcher auto, tau 0, rematch threshold -1) are refused
+// with std::invalid_argument naming it (CasHashOptions::CheckDecided): a
+// run decides them first (ResolveRun), as for the GPU backends.
 std::unique_ptr<MatchingBackend> CreateCpuFeatureMatcher(const SiftMatchingOptions& sift_options,
                                                          const CasHashOptions& cashash_options,
                                                          const MeanDescriptor& mean);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <string>
 
 #include "cashash/matching/descriptor_distance.h"
 #include "cashash/matching/epipolar_band.h"
@@ -71,6 +72,14 @@ void CascadeScratch::Reset(size_t num_targets) {
 }
 
 namespace {
+
+// tau and the rest chosen for the run are decided before matching
+// (CasHashOptions::CheckDecided): a tau of 0 would keep only the candidates
+// of equal remap codes.
+void RequireDecided(const CasHashOptions& options) {
+  const std::string undecided = options.CheckDecided();
+  if (!undecided.empty()) throw std::invalid_argument(undecided);
+}
 
 inline int DescriptorDot(const uint8_t* a, const uint8_t* b) {
 #if defined(__AVX2__)
@@ -288,6 +297,7 @@ std::vector<int> CascadeMatchOneWay(const CascadeImage& query, const CascadeImag
                                     const SiftMatchingOptions& sift_options,
                                     const CasHashOptions& options, CascadeScratch* scratch,
                                     CascadeStats* stats) {
+  RequireDecided(options);
   std::vector<int> matches(query.num_features(), -1);
   if (query.num_features() == 0 || target.num_features() == 0) return matches;
   CascadeQuery matcher(query, target, sift_options, options, scratch, stats);
@@ -300,6 +310,7 @@ namespace {
 FeatureMatches MatchPairImpl(const CascadeImage& image1, const CascadeImage& image2,
                              const SiftMatchingOptions& sift_options, const CasHashOptions& options,
                              CascadeScratch* scratch, CascadeStats* stats, const EpipolarGuidance* guidance) {
+  RequireDecided(options);
   FeatureMatches matches;
   if (image1.num_features() == 0 || image2.num_features() == 0) return matches;
   std::vector<int> forward(image1.num_features(), -1);

@@ -82,7 +82,9 @@ class CascadeScratch {
 };
 
 // Best match in `target` of each feature of `query` (steps 4 and 5): one
-// entry per query feature, the target index or -1.
+// entry per query feature, the target index or -1. These functions throw
+// std::invalid_argument for options with a value still chosen for the run
+// (CasHashOptions::CheckDecided).
 std::vector<int> CascadeMatchOneWay(const CascadeImage& query, const CascadeImage& target,
                                     const SiftMatchingOptions& sift_options,
                                     const CasHashOptions& options, CascadeScratch* scratch,

@@ -53,8 +53,8 @@ struct MatcherChoiceInput {
   // to brute force; it is here for a rule that would.
   size_t features_per_image = 0;
   // The rematch threshold and window are left to the run, not typed by the
-  // user (colmap::MatcherCommandOptions: exact_rematch_min_matches at
-  // kRematchMinMatchesChosen and exact_rematch_max_matches at 0; ResolveRun
+  // user (exact_rematch_min_matches at kRematchMinMatchesChosen and
+  // exact_rematch_max_matches at 0, CasHashOptions' defaults; ResolveRun
   // passes the runs' threshold in `options`).
   bool rematch_from_rule = true;
   // Guided matching needs the cascade and screens by itself.

@@ -31,12 +31,13 @@ std::string CasHashOptions::Check() const {
   } else if (bits_per_table < 0 || bits_per_table > kMaxBitsPerTable) {
     error << "CasHash.bits_per_table must be 0 (from the feature counts) or in [1, " << kMaxBitsPerTable
           << "], got " << bits_per_table;
-  } else if (tau < 0 || tau > kRemapBits) {
-    error << "CasHash.tau must be in [0, " << kRemapBits << "], got " << tau;
+  } else if (tau < kTauChosen || tau > kRemapBits) {
+    error << "CasHash.tau must be 0 (chosen for the run) or in [1, " << kRemapBits << "], got " << tau;
   } else if (top_k < 1) {
     error << "CasHash.top_k must be >= 1, got " << top_k;
-  } else if (exact_rematch_min_matches < 0) {
-    error << "CasHash.exact_rematch_min_matches must be >= 0 (0 = off), got " << exact_rematch_min_matches;
+  } else if (exact_rematch_min_matches < kRematchMinMatchesChosen) {
+    error << "CasHash.exact_rematch_min_matches must be -1 (chosen for the run) or >= 0 (0 = off), got "
+          << exact_rematch_min_matches;
   } else if (exact_rematch_max_matches < 0) {
     error << "CasHash.exact_rematch_max_matches must be >= 0 (0 = no upper bound), got "
           << exact_rematch_max_matches;
@@ -45,6 +46,21 @@ std::string CasHashOptions::Check() const {
           << exact_rematch_min_matches << "), got " << exact_rematch_max_matches;
   }
   return error.str();
+}
+
+std::string CasHashOptions::CheckDecided() const {
+  if (matcher == MatcherType::kAuto) {
+    return "--CasHash.matcher auto is chosen per run by ResolveRun; name cascade or bruteforce to build a matcher "
+           "directly";
+  }
+  if (tau == kTauChosen) {
+    return "--CasHash.tau 0 is chosen per run by ResolveRun; give a value > 0 to build a matcher directly";
+  }
+  if (exact_rematch_min_matches == kRematchMinMatchesChosen) {
+    return "--CasHash.exact_rematch_min_matches -1 is chosen per run by ResolveRun; give 0 (off) or a threshold to "
+           "build a matcher directly";
+  }
+  return "";
 }
 
 bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches) {

@@ -31,12 +31,29 @@ struct SiftMatchingOptions {
 // same database and options write the same rows on every run.
 enum class MatcherType { kCascade, kBruteForce, kAuto };
 
+// CasHashOptions::tau and CasHashOptions::exact_rematch_min_matches values
+// that mean "chosen for the run": ResolveRun (colmap_bridge/api/
+// run_resolution.h) decides them from the run's data and options.
+constexpr int kTauChosen = 0;
+constexpr int kRematchMinMatchesChosen = -1;
+
+// The defaults are the user-facing ones, one set for every user of the
+// struct: the command line and Python (MatcherCommandOptions::cashash is a
+// default CasHashOptions) and the library alike. Values "chosen for the run"
+// (matcher auto, 0 tables, tau kTauChosen, rematch threshold
+// kRematchMinMatchesChosen) depend on the run's data, device and the other
+// options, so only a run can decide them: ResolveRun does, before any
+// matcher is built. A matcher built from a CasHashOptions directly
+// (CreateCpuFeatureMatcher, CreateGpuFeatureMatcher, the cascade's
+// functions) refuses options whose matcher, tau or rematch threshold is
+// still chosen (CheckDecided) rather than guess a value: the caller names
+// it. (MatchImagePair without a matcher of the caller's decides them for
+// the one pair it matches, pair_matching.h.) Tables left at 0 take the
+// 8,192-feature shape in a matcher built directly (num_tables).
 struct CasHashOptions {
-  // auto | cascade | bruteforce ("--CasHash.matcher"). Runs (the command
-  // line, MatchExhaustive, the Python module) default to auto
-  // (MatcherCommandOptions); a CasHashOptions of its own, as the library's
-  // matcher factories take it, to the cascade.
-  MatcherType matcher = MatcherType::kCascade;
+  // auto | cascade | bruteforce ("--CasHash.matcher"). auto: chosen for the
+  // run (MatcherRule, run_resolution.h).
+  MatcherType matcher = MatcherType::kAuto;
   // Number of first-level hash tables and bits per table (bucket count is
   // 2^bits_per_table per table). What users check is how many of the exact
   // matcher's *verified* inliers survive, and that follows the raw recall
@@ -75,8 +92,10 @@ struct CasHashOptions {
   // That is tau for the cascade's own matches (kCascadeTauForPrecision). When
   // the exact rematch decides every pair that may verify, the cascade only
   // screens, and a tighter tau screens as well for less
-  // (kCascadeTauForScreening); the commands choose between them (0 there).
-  int tau = 43;
+  // (kCascadeTauForScreening). Which of the two applies depends on the
+  // run's rematch, so the default is kTauChosen (0): chosen for the run
+  // (ChooseCascadeTau). A value > 0 is kept.
+  int tau = kTauChosen;
   int top_k = 16;
   // Seed of the random projections; the same seed gives the same matches.
   uint64_t random_seed = 0;
@@ -84,12 +103,14 @@ struct CasHashOptions {
   // exact brute force, whose matches replace the cascade's
   // (exact_rematch_feature_matcher.h): the cascade screens, exact matching
   // decides the pairs that may verify. 0 = off (the cascade's matches are
-  // kept). Runs leave it to the run (MatcherCommandOptions: -1, resolved
-  // by ResolveRun to 12, or 8 with the bucket screening tables): with the
-  // cascade keeping 94 % of the exact matches (its worst real set), a pair
-  // with min_num_inliers = 15 exact matches falls below 12 cascade matches
-  // with probability about 1 %. Unused by brute force and guided matching.
-  int exact_rematch_min_matches = 0;
+  // kept). The default, kRematchMinMatchesChosen (-1), is chosen for the
+  // run: 12, or 8 with the bucket screening tables (RematchMinMatchesRule,
+  // run_resolution.h), since the threshold follows the run's tables and
+  // device. With the cascade keeping 94 % of the exact matches (its worst
+  // real set), a pair with min_num_inliers = 15 exact matches falls below
+  // 12 cascade matches with probability about 1 %. Unused by brute force
+  // and guided matching.
+  int exact_rematch_min_matches = kRematchMinMatchesChosen;
   // When > 0, only pairs with fewer cascade matches than this are matched
   // again exactly (a window [exact_rematch_min_matches, this)): the pairs
   // near min_num_inliers, whose verification a few missed matches can
@@ -98,7 +119,14 @@ struct CasHashOptions {
   // 0 = no upper bound. The CPU's auto rule sets it (matcher_choice.h).
   int exact_rematch_max_matches = 0;
 
+  // "" when valid, else a message naming the option. The values chosen for
+  // the run are valid.
   std::string Check() const;
+  // "" when nothing a matcher reads is left to the run: the matcher is
+  // named (not auto), tau > 0 and the rematch threshold >= 0. Else a
+  // message naming the first option still chosen. The matcher factories
+  // and the cascade's functions throw std::invalid_argument with it.
+  std::string CheckDecided() const;
 };
 
 // tau where the cascade's matches are kept: its precision then matters (see
@@ -125,7 +153,7 @@ constexpr int kCascadeTauForScreening = 32;
 // keeps the cascade's matches above it: the cascade does not only screen.
 bool CascadeOnlyScreens(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches = 0);
 
-// The tau a run uses when its options leave it at 0 (the commands'
+// The tau a run uses when its options leave it at kTauChosen (the
 // default): kCascadeTauForScreening where CascadeOnlyScreens, else
 // kCascadeTauForPrecision.
 int ChooseCascadeTau(int exact_rematch_min_matches, bool guided, int exact_rematch_max_matches = 0);

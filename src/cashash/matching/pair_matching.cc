@@ -75,9 +75,12 @@ PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDesc
 
   std::unique_ptr<FeatureMatcher> own_matcher;
   if (matcher == nullptr) {
-    // Auto decided as a run's is (ChooseAutoMatcher): this matcher keeps the
-    // cascade's own matches, so the rematch counts as set (to none) and
-    // auto is the cascade. Tables at 0: chosen for the larger of the two
+    // The values chosen for the run are decided for this one pair with the
+    // runs' rules. This matcher keeps the cascade's own matches: a rematch
+    // threshold left chosen is none, auto is the cascade
+    // (ChooseAutoMatcher) and tau left chosen is the one for precision
+    // (kCascadeTauForPrecision, as ChooseCascadeTau gives without a
+    // rematch). Tables at 0: chosen for the larger of the two
     // images.
     const size_t features =
         TypicalFeatureCount({descriptors1.rows(), descriptors2.rows()}, options.sift.max_num_matches);
@@ -85,8 +88,10 @@ PairMatchingResult MatchImagePair(const Keypoints& keypoints1, const FeatureDesc
     input.on_gpu = false;
     input.features_per_image = features;
     input.rematch_from_rule = false;
-    const CasHashOptions cashash =
-        ResolveTableShape(ApplyMatcherChoice(options.cashash, ChooseAutoMatcher(options.cashash, input)), features);
+    CasHashOptions cashash = options.cashash;
+    if (cashash.exact_rematch_min_matches == kRematchMinMatchesChosen) cashash.exact_rematch_min_matches = 0;
+    cashash = ResolveTableShape(ApplyMatcherChoice(cashash, ChooseAutoMatcher(cashash, input)), features);
+    if (cashash.tau == kTauChosen) cashash.tau = kCascadeTauForPrecision;
     own_matcher = CreateCpuFeatureMatcher(options.sift, cashash, ComputeMeanDescriptor({&descriptors1, &descriptors2}));
     matcher = own_matcher.get();
   }

@@ -42,8 +42,10 @@ Camera GuessCamera(const Keypoints& keypoints, uint64_t width = 0, uint64_t heig
 // per descriptor row), verifies the matches geometrically. A null camera is
 // guessed with GuessCamera. `matcher` may be a backend the caller keeps (a
 // GPU one, or one reused over many pairs); its image ids 0 and 1 are
-// replaced. Null: a CPU matcher hashing with the mean of the two images
-// (MatcherType::kAuto decided by ChooseAutoMatcher: the cascade).
+// replaced. Null: a CPU matcher hashing with the mean of the two images,
+// with the values chosen for the run decided for this pair, whose cascade
+// matches are kept (auto: the cascade, by ChooseAutoMatcher; tau
+// kCascadeTauForPrecision; no rematch; tables for its features).
 // `after_matching`, where given, may change the pair's matches before they
 // are verified (a run's exact rematch, pipeline/exact_rematch_stage.h).
 // Throws std::invalid_argument for bad options or mismatched row counts.
