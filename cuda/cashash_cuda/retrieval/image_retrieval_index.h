@@ -17,8 +17,8 @@
 // whose CPU scores are that close may rank the other way round.
 //
 // Tiles: the accumulator holds one 32-bit score per image; where the
-// images outnumber what a block's shared memory holds (about 57,000 on an
-// H100), the images are cut into tiles, each block keeps its tile's best
+// images outnumber what a block's shared memory holds (about 57,800 on an
+// H100 or H200), the images are cut into tiles, each block keeps its tile's best
 // k, and the tiles' lists are merged on the host.
 //
 // Memory: the postings (8 bytes each), the word offsets (8 bytes per word of
