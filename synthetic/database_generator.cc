@@ -418,6 +418,10 @@ std::string CheckGeneratorPaths(const DatabaseGeneratorOptions& o) {
 
 std::string CheckGeneratorCounts(const DatabaseGeneratorOptions& o) {
   if (o.num_images < 1 || o.num_images > 2147483646) return "--num_images must be between 1 and 2147483646";
+  if (o.revisit_images < 0 || o.revisit_images >= o.num_images) {
+    return "--revisit_images must be between 0 and --num_images - 1 (" + std::to_string(o.num_images - 1) + "), got " +
+           std::to_string(o.revisit_images);
+  }
   if (o.num_features < 1 || o.num_features > (1 << 24)) return "--num_features must be between 1 and 16777216";
   if (o.num_features_distribution != "equal" && o.num_features_distribution != "extraction") {
     return "--num_features_distribution must be equal or extraction, got '" + o.num_features_distribution + "'";
@@ -502,6 +506,7 @@ GeneratorSummary GenerateDatabase(const DatabaseGeneratorOptions& options,
   scene_options.image_height = options.image_height;
   scene_options.focal_length = options.focal_length_factor * std::max(options.image_width, options.image_height);
   scene_options.random_seed = options.random_seed;
+  scene_options.revisit_images = options.revisit_images;
   scene_options.points_per_cell = 1;
   const int64_t num_cells = SyntheticStreetScene(scene_options).num_cells();
   if (options.num_points > 0) {

@@ -8,6 +8,11 @@
 // on clutter, sky, cars). Images are generated and written one at a time:
 // memory does not grow with the number of images.
 //
+// With revisit_images K > 0 the street returns to its start: the last K
+// images drive its first K places again (SyntheticStreetScene), seeing the
+// same points with descriptor and keypoint noise of their own, so that a
+// sequence ordered along the path has loops to close.
+//
 // Feature counts: by default every image has num_features. With
 // num_features_distribution "extraction" they look like a SIFT extraction
 // (COLMAP's feature_extractor, whose --SiftExtraction.max_num_features caps
@@ -28,6 +33,10 @@ struct DatabaseGeneratorOptions {
   std::string database_path;         // created; must not exist
   std::string source_database_path;  // COLMAP database with SIFT features
   int num_images = 0;
+  // The last revisit_images images return to the start of the street, each
+  // near the pose of image k - (num_images - revisit_images); 0 = a street
+  // that never comes back (as before: the same database for a seed).
+  int revisit_images = 0;
   int num_features = 8192;  // per image: exactly ("equal"), or the cap ("extraction")
   // "equal": every image has num_features. "extraction": a share
   // num_features_at_cap_share of the images has num_features, the others
@@ -79,6 +88,10 @@ struct GeneratorProgress {
 
 struct GeneratorSummary {
   int num_images = 0;
+  // The last revisit_images images return to the start of the street, each
+  // near the pose of image k - (num_images - revisit_images); 0 = a street
+  // that never comes back (as before: the same database for a seed).
+  int revisit_images = 0;
   int64_t num_features = 0;      // all images together
   size_t min_features = 0;       // of one image
   size_t max_features = 0;

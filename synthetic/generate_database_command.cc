@@ -22,6 +22,10 @@ int RunGenerateDatabase(int argc, const char* const* argv) {
       "source_database_path", po::value(&o.source_database_path),
       "COLMAP database with SIFT features whose descriptors are sampled (only read)")(
       "num_images", po::value(&o.num_images), "Images (cameras along a street)")(
+      "revisit_images", po::value(&o.revisit_images)->default_value(o.revisit_images),
+      "The last this many images drive the start of the street again (each near the pose of image k - "
+      "(num_images - revisit_images), seeing the same points), so that sequential matching has loops to close; "
+      "0 = a street that never comes back")(
       "num_features", po::value(&o.num_features)->default_value(o.num_features),
       "Features per image: exactly (equal), or the extractor's cap (extraction)")(
       "num_features_distribution", po::value(&o.num_features_distribution)->default_value(o.num_features_distribution),

@@ -47,13 +47,17 @@ SyntheticStreetScene::SyntheticStreetScene(const SyntheticStreetSceneOptions& op
   }
   if (!(options.focal_length > 0)) throw std::invalid_argument("synthetic scene: focal_length must be > 0");
   if (options.points_per_cell < 1) throw std::invalid_argument("synthetic scene: points_per_cell must be >= 1");
+  if (options.revisit_images < 0 || options.revisit_images >= options.num_images) {
+    throw std::invalid_argument("synthetic scene: revisit_images must be in [0, num_images)");
+  }
   // The street extends past the first and last camera by what they see
   // sideways, jitter included.
   const double tan_half_width = 0.5 * options.image_width / options.focal_length +
                                 std::tan(Radians(kYawJitterDegrees));
   const double margin = kMaxDepth * tan_half_width + 1.0;
   street_begin_ = -margin;
-  const double street_end = (options.num_images - 1) * kCameraSpacing + margin;
+  const int num_places = options.num_images - options.revisit_images;
+  const double street_end = (num_places - 1) * kCameraSpacing + margin;
   num_cells_ = static_cast<int64_t>(std::ceil(street_end - street_begin_));
 }
 
@@ -86,8 +90,15 @@ Eigen::Matrix3d SyntheticStreetScene::Rotation(int image_index) const {
   return camera_from_world;
 }
 
+int SyntheticStreetScene::StreetPlace(int image_index) const {
+  const int num_places = options_.num_images - options_.revisit_images;
+  return image_index < num_places ? image_index : image_index - num_places;
+}
+
 Eigen::Vector3d SyntheticStreetScene::Centre(int image_index) const {
   // A stream of its own, so that changing the rotation jitter keeps centres.
+  // The stream is the image's, not its place's: a revisiting image stands
+  // near, not exactly at, the pose of the image it returns to.
   SplitMix64 rng(DeriveSeed(options_.random_seed ^ kCameraTag, ~static_cast<uint64_t>(image_index)));
   // One draw a statement: the order of a call's arguments is unspecified, and
   // clang and g++ differ. Depth, then height, then along the street keeps
@@ -95,7 +106,7 @@ Eigen::Vector3d SyntheticStreetScene::Centre(int image_index) const {
   const double depth_jitter = Uniform(rng, -kDepthJitter, kDepthJitter);
   const double height_jitter = Uniform(rng, -kPositionJitter, kPositionJitter);
   const double along_jitter = Uniform(rng, -kPositionJitter, kPositionJitter);
-  return Eigen::Vector3d(image_index * kCameraSpacing + along_jitter, height_jitter, depth_jitter);
+  return Eigen::Vector3d(StreetPlace(image_index) * kCameraSpacing + along_jitter, height_jitter, depth_jitter);
 }
 
 Eigen::Vector3d SyntheticStreetScene::DrawPoint(int64_t cell, SplitMix64& rng) const {

@@ -10,6 +10,13 @@
 // Points are laid out in unit-long cells along the street and generated from
 // the seed and the cell index alone, so observing an image touches only the
 // cells it sees: memory does not grow with the number of images.
+//
+// With revisit_images K > 0 the street returns to its start: the last K
+// images drive its beginning again, image k >= N - K at the place of image
+// k - (N - K), so that they see the same cells, hence the same points, as
+// the images there, from poses of their own (the usual jitter, drawn for k),
+// the way a second drive past the same houses does. They give sequential
+// matching loops to close. The street is as long as its N - K places.
 #pragma once
 
 #include <cstdint>
@@ -29,6 +36,9 @@ struct SyntheticStreetSceneOptions {
   double focal_length = 1920;  // pixels
   int64_t points_per_cell = 0;   // 3D points per unit of street length
   uint64_t random_seed = 0;
+  // The last revisit_images images stand at the first places again; in
+  // [0, num_images).
+  int revisit_images = 0;
 };
 
 // One 3D point as seen by one image, before keypoint noise.
@@ -41,12 +51,18 @@ struct PointObservation {
 
 class SyntheticStreetScene {
  public:
-  // Throws std::invalid_argument on non-positive sizes or counts.
+  // Throws std::invalid_argument on non-positive sizes or counts, or a
+  // revisit_images outside [0, num_images).
   explicit SyntheticStreetScene(const SyntheticStreetSceneOptions& options);
 
   int num_images() const { return options_.num_images; }
   int64_t num_cells() const { return num_cells_; }
   int64_t num_points() const { return num_cells_ * options_.points_per_cell; }
+
+  // The place along the street image k (0-based) stands at, in
+  // [0, num_images - revisit_images): k, or for the revisiting images the
+  // place of the image they return to.
+  int StreetPlace(int image_index) const;
 
   // Pose of image k (0-based): x_camera = R * (x_world - centre). Cameras
   // look along +z with x to the right and y down, as COLMAP's.
