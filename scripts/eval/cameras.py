@@ -121,7 +121,13 @@ def match_command(matcher, cashash_binary, database):
 
 def largest_model(sparse_dir, work_dir, log):
     """Converts every model the mapper wrote to TXT; returns the cameras of the largest."""
-    best = {}
+    return largest_model_info(sparse_dir, work_dir, log)[0]
+
+
+def largest_model_info(sparse_dir, work_dir, log):
+    """Converts every model the mapper wrote to TXT; returns (cameras of the
+    largest, its number of 3D points, registered images of every model)."""
+    best, points, per_model = {}, 0, []
     for model_dir in sorted(glob.glob(os.path.join(sparse_dir, "*"))):
         if not os.path.isdir(model_dir):
             continue
@@ -130,30 +136,45 @@ def largest_model(sparse_dir, work_dir, log):
         tools.run_tool(["colmap", "model_converter", "--input_path", model_dir, "--output_path", text_dir,
                         "--output_type", "TXT"], log, nice=0)
         cameras = read_model_images(os.path.join(text_dir, "images.txt"))
+        per_model.append(len(cameras))
         if len(cameras) > len(best):
             best = cameras
-    return best
+            with open(os.path.join(text_dir, "points3D.txt")) as f:
+                points = sum(1 for line in f if line.strip() and not line.startswith("#"))
+    return best, points, per_model
 
 
-def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log, extra_flags=()):
-    """Copies the feature database, matches with matcher, maps, aligns. Returns the summary."""
+def map_and_align(scene_dir, database, work_dir, log):
+    """`colmap mapper` (defaults, 2 threads) on a matched database into
+    work_dir/sparse; aligns the largest model to the ground truth.
+
+    Returns camera_errors' summary with mapper_wall_s, points3D (of the
+    largest model) and registered_per_model (every model the mapper wrote)."""
     os.makedirs(work_dir, exist_ok=True)
     # A model of an earlier run (another setting) must not be read as this one's.
     for stale in glob.glob(os.path.join(work_dir, "txt_*")) + [os.path.join(work_dir, "sparse")]:
         if os.path.isdir(stale):
             shutil.rmtree(stale)
-    database = os.path.join(work_dir, "database.db")
-    tools.copy_database(source_db, database)
-    match_wall, match_cpu, _ = tools.run_tool(match_command(matcher, cashash_binary, database) + list(extra_flags),
-                                              log)
     sparse = os.path.join(work_dir, "sparse")
     os.makedirs(sparse, exist_ok=True)
     map_wall, _, _ = tools.run_tool(["colmap", "mapper", "--database_path", database, "--image_path",
                                      os.path.join(scene_dir, "images"), "--output_path", sparse,
                                      "--Mapper.num_threads", "2"], log)
-    model = largest_model(sparse, work_dir, log)
+    model, points, per_model = largest_model_info(sparse, work_dir, log)
     summary = camera_errors(read_gt_cameras(scene_dir), model)
-    summary.update({"match_wall_s": match_wall, "match_cpu_s": match_cpu, "mapper_wall_s": map_wall})
+    summary.update({"mapper_wall_s": map_wall, "points3D": points, "registered_per_model": per_model})
+    return summary
+
+
+def reconstruct(scene_dir, source_db, matcher, cashash_binary, work_dir, log, extra_flags=()):
+    """Copies the feature database, matches with matcher, maps, aligns. Returns the summary."""
+    os.makedirs(work_dir, exist_ok=True)
+    database = os.path.join(work_dir, "database.db")
+    tools.copy_database(source_db, database)
+    match_wall, match_cpu, _ = tools.run_tool(match_command(matcher, cashash_binary, database) + list(extra_flags),
+                                              log)
+    summary = map_and_align(scene_dir, database, work_dir, log)
+    summary.update({"match_wall_s": match_wall, "match_cpu_s": match_cpu})
     return summary
 
 

@@ -17,8 +17,17 @@ of each that retrieval verified, and the best share any choice of
 num_images neighbours per image could reach (each image's num_images pairs
 with most exhaustive inliers, united).
 
+With --mapper 1, `colmap mapper` (defaults, 2 threads) reconstructs both
+databases of every set that has Strecha ground truth (DATA/<set>/
+gt_dense_cameras: fountain-P11, herzjesu-P25), --mapper_runs times each
+(the mapper is random), and a second table gives per run and matcher the
+pairs matched, the verified pairs, the registered images, the points and
+the median / max camera centre error in mm after similarity alignment of
+the largest model to the ground truth (scripts/eval/cameras.py, as
+docs/ACCURACY.md), with retrieval's errors over exhaustive's.
+
     scripts/eval/retrieval_recall.py --cashash build-cpu/colmap_bridge/cashash \\
-        --data ../shared/data --work /tmp/retrieval_eval [--sets herzjesu-P25,street]
+        --data ../shared/data --work /tmp/retrieval_eval [--sets herzjesu-P25,street] [--mapper 1]
 """
 import argparse
 import os
@@ -27,6 +36,8 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # scripts/, for eval.cameras
 
 PF = 2147483647
 REAL_SETS = ["fountain-P11", "herzjesu-P25", "sceaux_castle", "sacre_coeur"]
@@ -147,6 +158,37 @@ def evaluate(args, name, db, exh):
     return row
 
 
+def camera_rows(args, name, runs):
+    """Maps the exhaustive and the retrieval database of a set with ground
+    truth; returns the rows of the camera table (one per run and matcher)."""
+    from eval import cameras
+    scene_dir = os.path.join(args.data, name)
+    databases = [("exhaustive", os.path.join(args.work, name + ".exh.db")),
+                 ("retrieval", os.path.join(args.work, name + ".retr.db"))]
+    rows = []
+    for run_index in range(runs):
+        errors = {}
+        for matcher, db in databases:
+            got, tried = inliers(db)
+            verified = sum(1 for rows_ in got.values() if rows_ >= args.min_inliers)
+            work_dir = "%s.map%d" % (db[:-len(".db")], run_index + 1)
+            s = cameras.map_and_align(scene_dir, db, work_dir, os.path.join(work_dir, "mapper.log"))
+            errors[matcher] = (s.get("position_median"), s.get("position_max"))
+            models = s["registered_per_model"]
+            ratio = ""
+            if matcher == "retrieval" and None not in errors["exhaustive"] + errors["retrieval"]:
+                ratio = "%.3f / %.3f" % (errors["retrieval"][0] / errors["exhaustive"][0],
+                                         errors["retrieval"][1] / errors["exhaustive"][1])
+            rows.append([name, str(run_index + 1), matcher, str(len(tried)), str(verified),
+                         "%d / %d" % (s["registered"], s["gt_images"]),
+                         str(len(models)) + ("" if len(models) == 1 else " (largest used: %s)" % models),
+                         str(s["points3D"]),
+                         "%.1f / %.1f" % (1000 * errors[matcher][0], 1000 * errors[matcher][1])
+                         if errors[matcher][0] is not None else "n/a", ratio])
+            print("mapped: %s run %d %s" % (name, run_index + 1, matcher), file=sys.stderr)
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cashash", required=True)
@@ -155,6 +197,10 @@ def main():
     parser.add_argument("--work", required=True, help="folder for the databases (reused when present)")
     parser.add_argument("--sets", default=",".join(REAL_SETS + ["street"]))
     parser.add_argument("--min_inliers", type=int, default=15)
+    parser.add_argument("--mapper", type=int, choices=(0, 1), default=0,
+                        help="also map both databases of the sets with DATA/<set>/gt_dense_cameras and "
+                        "report camera errors")
+    parser.add_argument("--mapper_runs", type=int, default=1, help="mapper runs per database (it is random)")
     parser.add_argument("extra", nargs="*", help="more retrieval_matcher options (after --)")
     args = parser.parse_args()
     os.makedirs(args.work, exist_ok=True)
@@ -169,6 +215,19 @@ def main():
     print("|" + "---|" * len(header))
     for row in rows:
         print("| " + " | ".join(row) + " |")
+    if args.mapper:
+        camera_table = []
+        for name in args.sets.split(","):
+            if name != "street" and os.path.isdir(os.path.join(args.data, name, "gt_dense_cameras")):
+                camera_table += camera_rows(args, name, args.mapper_runs)
+        header = ["set", "run", "matcher", "pairs matched", "verified pairs (>= %d inliers)" % args.min_inliers,
+                  "registered", "models", "points", "centre error median / max (mm)",
+                  "retrieval / exhaustive: median / max"]
+        print()
+        print("| " + " | ".join(header) + " |")
+        print("|" + "---|" * len(header))
+        for row in camera_table:
+            print("| " + " | ".join(row) + " |")
 
 
 if __name__ == "__main__":
