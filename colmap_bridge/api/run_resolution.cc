@@ -57,8 +57,10 @@ void ResolveSchedule(const RunFacts& facts, ResolvedRun* run) {
   run->notes.push_back(
       "Schedule: blocks of " + std::to_string(sizes.block_size) + " images, groups of " +
       std::to_string(sizes.blocks_per_group) + " blocks (" + std::to_string(num_blocks) + " blocks, " +
-      std::to_string(num_groups) + " groups); host memory " + FormatMemorySize(sizes.predicted_host_bytes) + " of " +
-      FormatMemorySize(limits.max_host_bytes) +
+      std::to_string(num_groups) + " groups); host memory " + FormatMemorySize(sizes.predicted_host_bytes) +
+      (sizes.kept_host_bytes > 0 ? " (and up to " + FormatMemorySize(sizes.kept_host_bytes) + " for kept images)"
+                                 : std::string()) +
+      " of " + FormatMemorySize(limits.max_host_bytes) +
       (limits.max_gpu_bytes > 0 ? ", GPU memory for images " + FormatMemorySize(sizes.predicted_gpu_bytes) + " of " +
                                       FormatMemorySize(limits.max_gpu_bytes)
                                 : std::string()));

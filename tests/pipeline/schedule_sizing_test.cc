@@ -48,6 +48,33 @@ TEST(ScheduleSizing, AmpleMemoryKeepsColmapBlocksAndOneGroup) {
   EXPECT_TRUE(sizes.warning.empty());
 }
 
+TEST(ScheduleSizing, KeptImagesHostMemoryIsPlannedWithinTheHostCap) {
+  // The host copies of the images a GPU run keeps come on top of the cache
+  // and the pipeline: the schedule names them, bounded by the images there
+  // are and, with the prediction, by the host cap.
+  const std::vector<size_t> features(5000, 8192);
+  const size_t host_copy = 8192 * 128 + 1024;
+  ScheduleLimits limits;
+  limits.max_host_bytes = 16 * kGiB;
+  limits.max_gpu_bytes = 139 * kGiB;
+  const ScheduleSizes all = ChooseScheduleSizes(features, limits);
+  // Every image beyond the 200 in use (4 blocks of 50), once.
+  EXPECT_EQ(all.kept_host_bytes, (5000 - 4 * all.block_size) * host_copy);
+  EXPECT_LE(all.predicted_host_bytes + all.kept_host_bytes, limits.max_host_bytes);
+  // A tighter host cap, which the cache's three groups of 2,000 images do
+  // not fill, keeps fewer copies, still within it.
+  limits.max_host_bytes = 12 * kGiB;
+  const ScheduleSizes few = ChooseScheduleSizes(features, limits);
+  EXPECT_GT(few.kept_host_bytes, 0u);
+  EXPECT_LT(few.kept_host_bytes, all.kept_host_bytes);
+  EXPECT_LE(few.predicted_host_bytes + few.kept_host_bytes, limits.max_host_bytes);
+  // On the CPU the kept images are the matcher's own, within the cap too.
+  limits.max_gpu_bytes = 0;
+  limits.max_host_bytes = 16 * kGiB;
+  const ScheduleSizes cpu = ChooseScheduleSizes(features, limits);
+  EXPECT_LE(cpu.predicted_host_bytes + cpu.kept_host_bytes, limits.max_host_bytes);
+}
+
 TEST(ScheduleSizing, GpuRunKeepsEveryImageWhenTheDeviceHoldsThem) {
   // 5000 images of 8192 features, 16 GiB of host memory, a 139 GiB GPU: the
   // device holds every image's tables (3.1 MB each) and the host the CPU

@@ -98,10 +98,16 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   // Nothing holds more images than the run has.
   const size_t num_images = features_per_image.size();
   auto images = [num_images](size_t count) { return std::min(count, num_images); };
-  // Host bytes besides the cache for blocks of bs images.
+  // What the host keeps of an image the GPU matcher holds: the copy of its
+  // descriptors that the CPU fallback matches from (a third of the device
+  // layout at 8 tables).
+  const size_t host_copy =
+      std::min(largest, static_cast<size_t>(std::max(1, limits.max_num_matches))) * kDescriptorDim + 1024;
+  // Host bytes besides the cache for blocks of bs images: the pipeline's, and
+  // the matcher's images in use (on the GPU their host copies).
   auto fixed_host = [&](size_t bs) {
     return images(kPipelineBlocks * bs) * sizes.host_bytes_per_image +
-           (gpu ? 0 : images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image);
+           images(kMatcherBlocks * bs) * (gpu ? host_copy : sizes.matcher_bytes_per_image);
   };
   // The cache with groups of one block.
   auto group_bytes = [&](size_t bs) { return images(kCacheGroups * bs) * sizes.host_bytes_per_image; };
@@ -148,19 +154,16 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   sizes.predicted_gpu_bytes = gpu ? images(kMatcherBlocks * bs) * sizes.matcher_bytes_per_image : 0;
   // Kept images cost matcher memory: on the CPU backend host memory; on the
   // GPU device memory, plus on the host only the copy of their descriptors
-  // that the CPU fallback keeps (a third of the device layout at 8 tables).
+  // that the CPU fallback keeps (host_copy).
   // Counting the device layout against host memory too (as before) kept
   // 2.7k of 5000 images of 8192 features under --max_host_memory 16G, and
   // the block order then re-hashed nearly every image for every block pair
   // (184k hashings in 9.6M pairs, 41 % of the run on an H200).
   const size_t in_use_images = images(kMatcherBlocks * bs);
   const size_t in_use = in_use_images * sizes.matcher_bytes_per_image;
-  const size_t host_copy =
-      std::min(largest, static_cast<size_t>(std::max(1, limits.max_num_matches))) * kDescriptorDim + 1024;
-  size_t host_left = limits.max_host_bytes - std::min(limits.max_host_bytes, sizes.predicted_host_bytes);
+  const size_t host_left = limits.max_host_bytes - std::min(limits.max_host_bytes, sizes.predicted_host_bytes);
   size_t keep_images = 0;
   if (gpu) {
-    host_left -= std::min(host_left, in_use_images * host_copy);
     const size_t gpu_left = gpu_for_images - std::min(gpu_for_images, in_use);
     keep_images = std::min(host_left / host_copy, gpu_left / sizes.matcher_bytes_per_image);
   } else {
@@ -173,6 +176,11 @@ ScheduleSizes ChooseScheduleSizes(const std::vector<size_t>& features_per_image,
   }
   sizes.matcher_keep_bytes =
       in_use + static_cast<size_t>(0.8 * static_cast<double>(keep_images * sizes.matcher_bytes_per_image));
+  // What the kept images beyond those in use (which predicted_host_bytes
+  // counts) hold on the host.
+  const size_t kept_images =
+      std::min(static_cast<size_t>(0.8 * static_cast<double>(keep_images)), num_images - in_use_images);
+  sizes.kept_host_bytes = kept_images * (gpu ? host_copy : sizes.matcher_bytes_per_image);
   return sizes;
 }
 

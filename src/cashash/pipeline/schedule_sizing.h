@@ -71,13 +71,19 @@ struct ScheduleSizes {
   int blocks_per_group = 0;
   size_t host_bytes_per_image = 0;     // features of the largest image
   size_t matcher_bytes_per_image = 0;  // what the matcher keeps of it (on the GPU: its block's size class)
-  size_t predicted_host_bytes = 0;     // cache + pipeline (+ matcher on CPU)
+  size_t predicted_host_bytes = 0;     // cache + pipeline + the matcher's images in use (on the GPU their host copies)
   size_t predicted_gpu_bytes = 0;      // images held by the GPU matcher
   // What the matcher may keep of images the pipeline has let go, so that
   // they are not hashed again (RetainingFeatureMatcher): the images in use
   // plus 80 % of what both caps leave over; on the CPU backend at most the
   // images of the groups the cache holds.
   size_t matcher_keep_bytes = 0;
+  // Host memory of the images the matcher keeps beyond those in use, on top
+  // of predicted_host_bytes and within max_host_bytes with it: on the GPU
+  // the CPU fallback's copy of each kept image's descriptors, on the CPU the
+  // kept images themselves. Printed with the schedule, so that a peak above
+  // predicted_host_bytes is no surprise.
+  size_t kept_host_bytes = 0;
   std::string warning;                 // set when a user block size exceeds the GPU cap
 };
 
