@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "cashash/matching/table_shape.h"
 
@@ -102,6 +103,29 @@ MatcherChoice MatcherRule(const MatcherCommandOptions& options, bool on_gpu, siz
   return ChooseAutoMatcher(cashash, input);
 }
 
+namespace {
+
+// COLMAP's GPU matcher clamps an image's features to max_num_matches and
+// says so; both of cashash's backends read only that many rows of an image,
+// so a run names how many images lose features and how to keep them (empty
+// when none does).
+std::string ClampedFeaturesWarning(const std::vector<size_t>& rows_per_image, int max_num_matches) {
+  const size_t cap = static_cast<size_t>(std::max(1, max_num_matches));
+  size_t clamped = 0;
+  size_t largest = 0;
+  for (size_t rows : rows_per_image) {
+    if (rows > cap) ++clamped;
+    largest = std::max(largest, rows);
+  }
+  if (clamped == 0) return std::string();
+  return std::to_string(clamped) + " of " + std::to_string(rows_per_image.size()) +
+         " images have more features than --FeatureMatching.max_num_matches " + std::to_string(cap) + " (up to " +
+         std::to_string(largest) + "); only the first " + std::to_string(cap) +
+         " of each are matched, as COLMAP's GPU matcher does; raise --FeatureMatching.max_num_matches to match them all";
+}
+
+}  // namespace
+
 ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& facts) {
   ResolvedRun run;
   run.options = options;
@@ -161,6 +185,8 @@ ResolvedRun ResolveRun(const MatcherCommandOptions& options, const RunFacts& fac
   run.rematch = RematchPolicyRule(run.options, bucket_screen, run.gpu_indices.size());
   run.gpu_index = facts.gpu_indices.empty() ? -1 : facts.gpu_indices.front();
   run.warnings.insert(run.warnings.begin(), facts.device_warnings.begin(), facts.device_warnings.end());
+  const std::string clamped = ClampedFeaturesWarning(facts.rows_per_image, options.sift.max_num_matches);
+  if (!clamped.empty()) run.warnings.push_back(clamped);
   if (!options.max_gpu_memory.empty()) {
     ParseMemorySize(options.max_gpu_memory, &run.gpu_memory_budget_bytes);  // checked with the options
   }

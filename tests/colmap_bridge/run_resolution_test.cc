@@ -263,6 +263,23 @@ TEST(RunResolution, MpiRanksSizeWithTheSmallestMemoryOfAll) {
   EXPECT_EQ(run.max_gpu_bytes, 20 * kGiB);
 }
 
+TEST(RunResolution, ImagesAboveTheMatchCapAreNamedWithTheOption) {
+  // Only the first max_num_matches rows of an image are read: the run says
+  // how many images lose features, and which option keeps them.
+  RunFacts facts = Facts(10, 40000, true);
+  facts.rows_per_image[3] = 20000;
+  const ResolvedRun clamped = ResolveRun(MatcherCommandOptions(), facts);
+  ASSERT_EQ(clamped.warnings.size(), 1u);
+  EXPECT_NE(clamped.warnings[0].find("9 of 10 images have more features than --FeatureMatching.max_num_matches 32768 "
+                                     "(up to 40000)"),
+            std::string::npos)
+      << clamped.warnings[0];
+  MatcherCommandOptions raised;
+  raised.sift.max_num_matches = 40960;
+  EXPECT_TRUE(ResolveRun(raised, facts).warnings.empty());
+  EXPECT_TRUE(ResolveRun(MatcherCommandOptions(), Facts(10, 32768, true)).warnings.empty());
+}
+
 TEST(RunResolution, NotesSayWhatWasChosenInOrder) {
   MatcherCommandOptions guided;
   guided.guided.enabled = true;
