@@ -88,10 +88,6 @@ struct GeneratorProgress {
 
 struct GeneratorSummary {
   int num_images = 0;
-  // The last revisit_images images return to the start of the street, each
-  // near the pose of image k - (num_images - revisit_images); 0 = a street
-  // that never comes back (as before: the same database for a seed).
-  int revisit_images = 0;
   int64_t num_features = 0;      // all images together
   size_t min_features = 0;       // of one image
   size_t max_features = 0;

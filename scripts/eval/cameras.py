@@ -120,11 +120,6 @@ def match_command(matcher, cashash_binary, database):
 
 
 def largest_model(sparse_dir, work_dir, log):
-    """Converts every model the mapper wrote to TXT; returns the cameras of the largest."""
-    return largest_model_info(sparse_dir, work_dir, log)[0]
-
-
-def largest_model_info(sparse_dir, work_dir, log):
     """Converts every model the mapper wrote to TXT; returns (cameras of the
     largest, its number of 3D points, registered images of every model)."""
     best, points, per_model = {}, 0, []
@@ -160,7 +155,7 @@ def map_and_align(scene_dir, database, work_dir, log):
     map_wall, _, _ = tools.run_tool(["colmap", "mapper", "--database_path", database, "--image_path",
                                      os.path.join(scene_dir, "images"), "--output_path", sparse,
                                      "--Mapper.num_threads", "2"], log)
-    model, points, per_model = largest_model_info(sparse, work_dir, log)
+    model, points, per_model = largest_model(sparse, work_dir, log)
     summary = camera_errors(read_gt_cameras(scene_dir), model)
     summary.update({"mapper_wall_s": map_wall, "points3D": points, "registered_per_model": per_model})
     return summary

@@ -165,12 +165,15 @@ def camera_rows(args, name, runs):
     scene_dir = os.path.join(args.data, name)
     databases = [("exhaustive", os.path.join(args.work, name + ".exh.db")),
                  ("retrieval", os.path.join(args.work, name + ".retr.db"))]
+    counts = {}  # the databases do not change between mapper runs
+    for matcher, db in databases:
+        got, tried = inliers(db)
+        counts[matcher] = (len(tried), sum(1 for rows_ in got.values() if rows_ >= args.min_inliers))
     rows = []
     for run_index in range(runs):
         errors = {}
         for matcher, db in databases:
-            got, tried = inliers(db)
-            verified = sum(1 for rows_ in got.values() if rows_ >= args.min_inliers)
+            tried, verified = counts[matcher]
             work_dir = "%s.map%d" % (db[:-len(".db")], run_index + 1)
             s = cameras.map_and_align(scene_dir, db, work_dir, os.path.join(work_dir, "mapper.log"))
             errors[matcher] = (s.get("position_median"), s.get("position_max"))
@@ -179,7 +182,7 @@ def camera_rows(args, name, runs):
             if matcher == "retrieval" and None not in errors["exhaustive"] + errors["retrieval"]:
                 ratio = "%.3f / %.3f" % (errors["retrieval"][0] / errors["exhaustive"][0],
                                          errors["retrieval"][1] / errors["exhaustive"][1])
-            rows.append([name, str(run_index + 1), matcher, str(len(tried)), str(verified),
+            rows.append([name, str(run_index + 1), matcher, str(tried), str(verified),
                          "%d / %d" % (s["registered"], s["gt_images"]),
                          str(len(models)) + ("" if len(models) == 1 else " (largest used: %s)" % models),
                          str(s["points3D"]),
@@ -187,6 +190,13 @@ def camera_rows(args, name, runs):
                          if errors[matcher][0] is not None else "n/a", ratio])
             print("mapped: %s run %d %s" % (name, run_index + 1, matcher), file=sys.stderr)
     return rows
+
+
+def print_table(header, rows):
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
 
 
 def main():
@@ -211,10 +221,7 @@ def main():
         print("done: " + name, file=sys.stderr)
     header = ["set", "images", "num_images", "pairs matched", ">= 50 inliers: verified", "best possible",
               ">= 15 inliers: verified", "best possible", "verified, not by exhaustive"]
-    print("| " + " | ".join(header) + " |")
-    print("|" + "---|" * len(header))
-    for row in rows:
-        print("| " + " | ".join(row) + " |")
+    print_table(header, rows)
     if args.mapper:
         camera_table = []
         for name in args.sets.split(","):
@@ -224,10 +231,7 @@ def main():
                   "registered", "models", "points", "centre error median / max (mm)",
                   "retrieval / exhaustive: median / max"]
         print()
-        print("| " + " | ".join(header) + " |")
-        print("|" + "---|" * len(header))
-        for row in camera_table:
-            print("| " + " | ".join(row) + " |")
+        print_table(header, camera_table)
 
 
 if __name__ == "__main__":
