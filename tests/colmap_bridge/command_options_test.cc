@@ -220,11 +220,12 @@ TEST(CommandOptions, TheRematchThresholdFollowsTheBucketScreeningTablesUnlessGiv
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_EQ(defaults.cashash.exact_rematch_min_matches, kRematchMinMatchesChosen);
   EXPECT_EQ(defaults.cashash.exact_rematch_max_matches, 0);
-  // Three screening tables from 8,192 features find fewer of a pair's true
+  // Three screening tables from 4,096 features find fewer of a pair's true
   // matches: the threshold measured for them. Below, the 8 x 8 screen keeps 12.
+  EXPECT_EQ(threshold(defaults, 4096), kBucketScreeningRematchMinMatches);
   EXPECT_EQ(threshold(defaults, 8192), kBucketScreeningRematchMinMatches);
   EXPECT_EQ(threshold(defaults, 16384), kBucketScreeningRematchMinMatches);
-  EXPECT_EQ(threshold(defaults, 4096), kDefaultRematchMinMatches);
+  EXPECT_EQ(threshold(defaults, 4095), kDefaultRematchMinMatches);
   std::vector<std::string> said;
   ResolveOnGpu(defaults, {8192, 8192}, &said);
   ASSERT_FALSE(said.empty());
@@ -266,7 +267,8 @@ TEST(CommandOptions, TheRematchRunsOnTheMatchingThreadWithTheBucketScreen) {
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.matcher", "cascade"}, &defaults), ParseOutcome::kRun);
   EXPECT_TRUE(on_matching_thread(defaults, 8192));
   EXPECT_TRUE(on_matching_thread(defaults, 16384));
-  EXPECT_FALSE(on_matching_thread(defaults, 4096));  // 8 x 8 tables: deferred
+  EXPECT_TRUE(on_matching_thread(defaults, 4096));
+  EXPECT_FALSE(on_matching_thread(defaults, 4095));  // 8 x 8 tables: deferred
   // The bucket screen with a threshold of the user's: the screen decides.
   MatcherCommandOptions typed;
   ASSERT_EQ(Parse({"--database_path", "x", "--CasHash.exact_rematch_min_matches", "12"}, &typed), ParseOutcome::kRun);

@@ -95,7 +95,9 @@ const std::vector<Row>& Table() {
        "cascade", 3, 9, kCascade, kBucket, 0, kMatching, kDefaultBlockSize, 0},
       {"GPU defaults, 16,384 features", {}, none, GpuFacts(2, 16384, false), "cascade", 3, 10, kCascade, kBucket, 0,
        kMatching, kDefaultBlockSize, 0},
-      {"GPU defaults, 4,096 features: 8 x 8, deferred rematch from 12", {}, none, GpuFacts(2, 4096, false), "cascade",
+      {"GPU defaults, 4,096 features: the bucket screen's 3 x 8", {}, none, GpuFacts(2, 4096, false), "cascade", 3,
+       8, kCascade, kBucket, 0, kMatching, kDefaultBlockSize, 0},
+      {"GPU defaults, 2,048 features: 8 x 8, deferred rematch from 12", {}, none, GpuFacts(2, 2048, false), "cascade",
        8, 8, kCascade, kRuns, 0, kVerification, kDefaultBlockSize, 0},
       {"GPU, an explicit 12 stays 12", {"--CasHash.exact_rematch_min_matches", "12"},
        [](MatcherCommandOptions* o) { o->cashash.exact_rematch_min_matches = 12; }, GpuFacts(2, 8192, false),
@@ -230,7 +232,7 @@ TEST(RunResolution, TableOfOptionsAndFactsGivesTheResolvedRun) {
 // rematch is shared out over the devices as its cascade is.
 TEST(RunResolution, SeveralGpusRematchOnTheMatchingThread) {
   MatcherCommandOptions options = FromCommandLine({}, "exhaustive_matcher");
-  RunFacts one = GpuFacts(2, 4096, false);
+  RunFacts one = GpuFacts(2, 2048, false);
   EXPECT_EQ(ResolveRun(options, one).rematch.where, RematchPlace::kVerificationThread);
   RunFacts two = one;
   two.gpu_indices = {0, 1};

@@ -156,16 +156,16 @@ TEST(TableShape, AScreeningCascadeTakesSmallerBuckets) {
   const auto screening = [](size_t features, int tables = 0, int bits = 0) {
     return ChooseTableShape(features, tables, bits, TableShapeGoal::kScreening);
   };
-  // Below 8,192 features: one bit more than recall while the collision
+  // Below 4,096 features: one bit more than recall while the collision
   // floor holds, 8 x 8 where recall takes 8 x 7.
-  for (size_t features : {size_t{100}, size_t{2048}, size_t{8191}}) {
+  for (size_t features : {size_t{100}, size_t{2048}, size_t{4095}}) {
     EXPECT_EQ(screening(features).num_tables, 8) << features;
     EXPECT_EQ(screening(features).bits_per_table, 8) << features;
   }
-  // From 8,192 on: 3 tables, buckets of about 16 features, at most 3 x 10
+  // From 4,096 on: 3 tables, buckets of 16-31 features, at most 3 x 10
   // (kBucketScreeningMaxBits, the widest measured).
   const std::vector<std::pair<size_t, int>> bits_by_size = {
-      {0, 9}, {8192, 9}, {12500, 9}, {16384, 10}, {32768, 10}, {size_t{1} << 20, 10}};
+      {0, 9}, {4096, 8}, {7028, 8}, {8191, 8}, {8192, 9}, {12500, 9}, {16384, 10}, {32768, 10}, {size_t{1} << 20, 10}};
   for (const auto& [features, bits] : bits_by_size) {
     EXPECT_EQ(screening(features).num_tables, 3) << features;
     EXPECT_EQ(screening(features).bits_per_table, bits) << features;
@@ -176,8 +176,8 @@ TEST(TableShape, AScreeningCascadeTakesSmallerBuckets) {
   EXPECT_EQ(3 * 8192 / (1 << 9), 48);
   EXPECT_EQ(3 * 16384 / (1 << 10), 48);
   // The rematch threshold of this shape applies to it alone: not below
-  // 8,192 features, not for recall, not where tables or bits were set.
-  EXPECT_FALSE(IsBucketScreeningShape(8191, 0, 0, TableShapeGoal::kScreening));
+  // 4,096 features, not for recall, not where tables or bits were set.
+  EXPECT_FALSE(IsBucketScreeningShape(4095, 0, 0, TableShapeGoal::kScreening));
   EXPECT_FALSE(IsBucketScreeningShape(8192, 0, 0, TableShapeGoal::kRecall));
   EXPECT_FALSE(IsBucketScreeningShape(8192, 3, 0, TableShapeGoal::kScreening));
   EXPECT_FALSE(IsBucketScreeningShape(8192, 0, 9, TableShapeGoal::kScreening));

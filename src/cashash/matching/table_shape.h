@@ -63,10 +63,13 @@ constexpr int kMinShapeBits = kTableShapeReferenceBits;
 // kBucketScreeningFeatures (TableShapeGoal): admits 8 x 8 (0.954).
 constexpr double kScreeningCollisionFloor = 0.89;
 // From this size on a screening shape is kBucketScreeningTables tables whose
-// buckets hold about kBucketScreeningBucket features (bits = log2(n / 16),
-// at most kBucketScreeningMaxBits): 3 x 9 at 8,192 features, 3 x 10 from
-// 16,384, about 48 candidates per query up to 16,384 features.
-constexpr size_t kBucketScreeningFeatures = 8192;
+// buckets hold kBucketScreeningBucket features or up to twice as many (bits
+// = floor(log2(n / 16)), at most kBucketScreeningMaxBits): 3 x 8 from 4,096
+// features, 3 x 9 from 8,192, 3 x 10 from 16,384; 48-96 candidates per
+// query up to 32,767 features, where 8 x 8 visits 128-256. Real extractions
+// capped at 8,192 have medians of 5,000-7,200 features, so the rule starts
+// where their buckets first reach 16 features.
+constexpr size_t kBucketScreeningFeatures = 4096;
 constexpr int kBucketScreeningTables = 3;
 constexpr size_t kBucketScreeningBucket = 16;
 // The widest bucket screening tables: the largest width measured (16,384
@@ -89,14 +92,14 @@ constexpr int kBucketScreeningRematchMinMatches = 8;
 // (guided matching, no exact rematch), so the shape holds the reference's
 // collision probability. kScreening: the exact rematch decides which pairs
 // may verify and gives their matches, so the cascade only has to find its
-// threshold of matches on the pairs that verify. Below 8,192 features the
+// threshold of matches on the pairs that verify. Below 4,096 features the
 // shape takes one bit more than kRecall's (half the candidates per query)
 // while its collision probability stays at kScreeningCollisionFloor or
-// above; from 8,192 on, 3 tables of buckets of about 16 features
+// above; from 4,096 on, 3 tables of buckets of 16-31 features
 // (kBucketScreeningFeatures). CascadeOnlyScreens says which goal a run has.
 // The screening shapes keep brute force's verified pairs and inlier matches
-// on generated streets while the cascade's matching time falls. Buckets of
-// about 16 features start at 8,192 because at 2,048 features smaller
+// on generated streets and the real sets while the cascade's matching time
+// falls. Buckets of at least 16 features because at 2,048 features smaller
 // buckets were slower (more buckets per pair). Three tables need the
 // rematch from 8 matches (kBucketScreeningRematchMinMatches): from 12, six
 // tables lost 1-2 verified pairs on noisy streets, three from 8 none
